@@ -1,0 +1,1 @@
+"""The distributed camouflage algorithm (SPEC.md), free of ROS."""

@@ -1,0 +1,81 @@
+"""The parameters of one camouflage run, as one validated, typed object."""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+PROFILES = ("paper", "droplet")
+
+# SPEC section 2: steps per phase and Young's inhibitor weight, per profile.
+PROFILE_DEFAULTS: dict[str, dict[str, Any]] = {
+    "paper": {"consensus_steps": 35, "formation_steps": 10, "w2_stripes": -0.75, "w2_mottled": -0.75},
+    "droplet": {"consensus_steps": 10, "formation_steps": 20, "w2_stripes": -0.75, "w2_mottled": -0.60},
+}
+
+MAX_SIDE = 8192          # robots per row or column; ids stay far inside uint32
+MAX_STEPS = 100_000
+
+
+class ParameterError(ValueError):
+    """A parameter outside its allowed range; the message names it and the range."""
+
+
+@dataclass(frozen=True)
+class CamoParams:
+    """One run's parameters. Fields left as None take the profile's defaults."""
+
+    profile: str = "paper"
+    rows: int = 8
+    cols: int = 8
+    threshold: float = 50.0
+    consensus_steps: int | None = None
+    formation_steps: int | None = None
+    w2_stripes: float | None = None
+    w2_mottled: float | None = None
+    seed: int = 0
+    rho_meas: float = 0.0
+    rho_comm: float = 0.0
+    w1: float = field(default=1.0, init=False)
+
+    def __post_init__(self) -> None:
+        if self.profile not in PROFILES:
+            raise ParameterError(f"profile must be one of {', '.join(PROFILES)} (got {self.profile!r})")
+        for name, value in PROFILE_DEFAULTS[self.profile].items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, value)
+        _int_in("rows", self.rows, 1, MAX_SIDE)
+        _int_in("cols", self.cols, 1, MAX_SIDE)
+        _int_in("consensus_steps", self.consensus_steps, 0, MAX_STEPS)
+        _int_in("formation_steps", self.formation_steps, 0, MAX_STEPS)
+        _int_in("seed", self.seed, 0, 2**64 - 1)
+        _float_in("threshold", self.threshold, 0.0, 1020.0)
+        _float_in("rho_meas", self.rho_meas, 0.0, 1.0)
+        _float_in("rho_comm", self.rho_comm, 0.0, 1.0)
+        _float_in("w2_stripes", self.w2_stripes, -100.0, 100.0)
+        _float_in("w2_mottled", self.w2_mottled, -100.0, 100.0)
+        for name in ("threshold", "rho_meas", "rho_comm", "w2_stripes", "w2_mottled"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+
+    @property
+    def count(self) -> int:
+        return self.rows * self.cols
+
+    def with_(self, **changes: Any) -> "CamoParams":
+        return replace(self, **changes)
+
+    def as_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        data.pop("w1")
+        return data
+
+
+def _int_in(name: str, value: Any, low: int, high: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ParameterError(f"{name} must be an integer in {low}..{high} (got {value!r})")
+
+
+def _float_in(name: str, value: Any, low: float, high: float) -> None:
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if not ok or not math.isfinite(value) or not low <= value <= high:
+        raise ParameterError(f"{name} must be a number in [{low:g}, {high:g}] (got {value!r})")

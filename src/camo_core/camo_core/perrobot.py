@@ -1,0 +1,57 @@
+"""Driver (a): the whole run as the swarm computes it, one RobotCore per cell.
+
+Slow (a Python loop over robots and slots) but built from exactly the calls a
+robot node makes, so it is the bridge between the nodes and the vectorised
+simulator: tests require all three to agree bit for bit.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .params import CamoParams
+from .result import RunResult, mean_p
+from .robot import RobotCore
+
+
+def run_per_robot(params: CamoParams, raw_sensed: np.ndarray, exempt: np.ndarray | None = None) -> RunResult:
+    """`raw_sensed`: rows x cols block means before noise; `exempt`: real readings (no noise)."""
+    start = time.perf_counter()
+    rows, cols = params.rows, params.cols
+    robots = [RobotCore(params, i, j) for i in range(rows) for j in range(cols)]
+
+    for robot in robots:
+        robot.discover([n is not None for n in robot.neighbors])
+    for robot in robots:
+        robot.sense(raw_sensed[robot.row, robot.col], bool(exempt[robot.row, robot.col]) if exempt is not None else False)
+    for robot in robots:
+        robot.decide_vote([None if n is None else robots[n].sensed for n in robot.neighbors[:4]])
+    votes = np.array([r.vote for r in robots]).reshape(rows, cols)
+    initial = np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols)
+
+    trace = [mean_p(np.array([r.p for r in robots]).T)]
+    for step in range(params.consensus_steps):
+        sent = [(r.p, r.degree) for r in robots]
+        for robot in robots:
+            robot.consensus(step, [None if n is None else sent[n] for n in robot.neighbors[:8]])
+        trace.append(mean_p(np.array([r.p for r in robots]).T))
+    for robot in robots:
+        robot.finish_consensus()
+
+    for step in range(params.formation_steps):
+        sent_states = [r.state for r in robots]
+        for robot in robots:
+            robot.form(step, [None if n is None else sent_states[n] for n in robot.neighbors])
+
+    return RunResult(
+        params=params,
+        sensed=np.array([r.sensed for r in robots]).reshape(rows, cols),
+        votes=votes,
+        p=np.array([r.p for r in robots]).reshape(rows, cols, 3),
+        selected=np.array([r.pattern for r in robots]).reshape(rows, cols),
+        initial=initial,
+        final=np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols),
+        consensus_trace=np.array(trace),
+        elapsed_s=time.perf_counter() - start,
+    )

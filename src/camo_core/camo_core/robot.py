@@ -1,0 +1,104 @@
+"""One robot's view of a camouflage run: what it knows, holds and decides.
+
+Both drivers use this class: the per-robot reference driver (`perrobot.py`) and
+the ROS 2 robot node. It takes what was *delivered* to the robot, applies the
+simulated link (SPEC section 3: a message is lost by a deterministic draw keyed
+on sender, receiver and step) and calls the rules of `rules.py`.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from . import rng, rules
+from .grid import CONSENSUS_SLOTS, DESCRIPTOR_SLOTS, NUM_SLOTS, neighbor_ids, robot_id
+from .params import CamoParams
+from .sensing import noisy_value
+
+Vote = tuple[Sequence[float], int]
+
+
+@dataclass
+class RobotCore:
+    params: CamoParams
+    row: int
+    col: int
+    # Filled in as the phases go by.
+    known: list[bool] = field(default_factory=lambda: [False] * NUM_SLOTS)
+    sensed: float = float("nan")
+    vote: int = rules.MOTTLED
+    p: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    pattern: int | None = None
+    state: int = 0
+
+    def __post_init__(self) -> None:
+        if not (0 <= self.row < self.params.rows and 0 <= self.col < self.params.cols):
+            raise ValueError(
+                f"cell ({self.row}, {self.col}) is outside the {self.params.rows}x{self.params.cols} grid"
+            )
+        self.id = robot_id(self.row, self.col, self.params.cols)
+        self.neighbors: list[int | None] = neighbor_ids(self.row, self.col, self.params.rows, self.params.cols)
+
+    # ---- the simulated link -------------------------------------------------
+
+    def arrives(self, stream: int, step: int, slot: int) -> bool:
+        """Does the message of `stream`/`step` from slot's robot survive the link?"""
+        src = self.neighbors[slot]
+        return src is not None and not rng.lost(self.params.seed, stream, step, src, self.id, self.params.rho_comm)
+
+    def _filter(self, stream: int, step: int, delivered: Sequence, slots: range) -> list:
+        return [
+            delivered[s] if delivered[s] is not None and self.known[s] and self.arrives(stream, step, s) else None
+            for s in slots
+        ]
+
+    # ---- phase 0: discovery -------------------------------------------------
+
+    def discover(self, heard: Sequence[bool]) -> None:
+        """`heard[s]`: a hello from slot s was delivered. Known = delivered and not lost."""
+        self.known = [bool(heard[s]) and self.arrives(rng.STREAM_HELLO, 0, s) for s in range(NUM_SLOTS)]
+
+    @property
+    def degree(self) -> int:
+        return sum(self.known[s] for s in CONSENSUS_SLOTS)
+
+    @property
+    def known_mask(self) -> int:
+        return sum(1 << s for s in range(NUM_SLOTS) if self.known[s])
+
+    # ---- phase 1: sensing and the local vote ----------------------------------
+
+    def sense(self, raw: float, exempt_from_noise: bool = False) -> float:
+        """Keep the sensed value, after measurement error unless it is a real reading."""
+        self.sensed = float(raw) if exempt_from_noise else noisy_value(self.params.seed, self.id, raw, self.params.rho_meas)
+        self.state = rules.initial_state(self.sensed)
+        return self.sensed
+
+    def decide_vote(self, colors: Sequence[float | None]) -> int:
+        """`colors[s]` for slots 0-3: the delivered neighbour values (None if none)."""
+        received = self._filter(rng.STREAM_COLOR, 0, colors, DESCRIPTOR_SLOTS)
+        self.vote = rules.vote(self.sensed, received, self.params)
+        self.p = rules.one_hot(self.vote)
+        return self.vote
+
+    # ---- phase 2: consensus -------------------------------------------------
+
+    def consensus(self, step: int, votes: Sequence[Vote | None]) -> tuple[float, float, float]:
+        """`votes[s]` for slots 0-7: (p, degree) delivered for `step`, or None."""
+        received = self._filter(rng.STREAM_CONSENSUS, step, votes, CONSENSUS_SLOTS)
+        self.p = rules.consensus_step(self.p, self.degree, received)
+        return self.p
+
+    def finish_consensus(self) -> int:
+        self.pattern = rules.select_pattern(self.p)
+        return self.pattern
+
+    # ---- phase 3: pattern formation ------------------------------------------
+
+    def form(self, step: int, states: Sequence[int | None]) -> int:
+        """`states[s]` for slots 0-11: neighbour states delivered for `step`, or None."""
+        if self.pattern is None:
+            self.finish_consensus()
+        received = self._filter(rng.STREAM_STATE, step, states, range(NUM_SLOTS))
+        self.state = rules.formation_step(self.state, self.pattern, received, self.params)
+        return self.state

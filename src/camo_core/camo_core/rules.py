@@ -1,0 +1,145 @@
+"""The per-robot rules of SPEC section 2, as pure functions of what one robot has.
+
+A robot node calls these with what it received; the per-robot driver of the
+reference simulator calls them for every cell. Missing messages are None.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from .params import CamoParams
+
+HORIZONTAL, VERTICAL, MOTTLED = 0, 1, 2
+PATTERN_NAMES = ("horizontal", "vertical", "mottled")
+
+# Slot pairs that stand in for each other when one is missing (SPEC 2.2, 2.4).
+_OPPOSITE_CARDINAL = {0: 2, 2: 0, 1: 3, 3: 1, 8: 10, 10: 8, 9: 11, 11: 9}
+# Diagonals: mirror across the robot's row, then across its column, then point-opposite.
+DIAGONAL_FALLBACKS: dict[int, tuple[int, int, int]] = {
+    4: (5, 7, 6),
+    5: (4, 6, 7),
+    6: (7, 5, 4),
+    7: (6, 4, 5),
+}
+
+# SPEC 2.4: activator and inhibitor slots per pattern (the robot itself is an activator).
+ACTIVATORS: dict[int, tuple[int, ...]] = {
+    HORIZONTAL: (1, 3, 9, 11),
+    VERTICAL: (0, 2, 8, 10),
+    MOTTLED: (0, 1, 2, 3),
+}
+INHIBITORS: dict[int, tuple[int, ...]] = {
+    HORIZONTAL: (0, 2, 4, 5, 6, 7),
+    VERTICAL: (1, 3, 4, 5, 6, 7),
+    MOTTLED: (4, 5, 6, 7, 8, 9, 10, 11),
+}
+
+
+# ---- phase 1: pattern descriptor ------------------------------------------------
+
+def reflect_four(own: float, received: Sequence[float | None]) -> tuple[float, float, float, float]:
+    """T, R, B, L: a missing side takes the opposite side, else the robot's own value."""
+    filled = []
+    for slot in range(4):
+        value = received[slot]
+        if value is None:
+            value = received[(slot + 2) % 4]
+        filled.append(own if value is None else value)
+    return filled[0], filled[1], filled[2], filled[3]
+
+
+def vote(own: float, received: Sequence[float | None], params: CamoParams) -> int:
+    """The local pattern vote from the robot's value and slots 0-3's values."""
+    top, right, bottom, left = reflect_four(own, received)
+    if params.profile == "paper":
+        px = left + right - 2 * own
+        py = top + bottom - 2 * own
+        horizontal_score, vertical_score = abs(py) - abs(px), abs(px) - abs(py)
+    else:
+        dx = abs(own - right) + abs(own - left)
+        dy = abs(own - top) + abs(own - bottom)
+        horizontal_score, vertical_score = dy - dx, dx - dy
+    if horizontal_score > params.threshold:
+        return HORIZONTAL
+    if vertical_score > params.threshold:
+        return VERTICAL
+    return MOTTLED
+
+
+def one_hot(pattern: int) -> tuple[float, float, float]:
+    p = [0.0, 0.0, 0.0]
+    p[pattern] = 1.0
+    return p[0], p[1], p[2]
+
+
+# ---- phase 2: consensus ---------------------------------------------------------
+
+def consensus_step(
+    p_own: Sequence[float],
+    degree: int,
+    received: Sequence[tuple[Sequence[float], int] | None],
+) -> tuple[float, float, float]:
+    """One Metropolis step. `received[k]` is (p, degree) from slot k (0-7), or None.
+
+    Float64 accumulation order is part of the spec: neighbour terms and weights in
+    slot order, then the self term last; a lost message's weight stays home.
+    """
+    acc = [0.0, 0.0, 0.0]
+    weight_sum = 0.0
+    for slot in range(8):
+        message = received[slot]
+        if message is None:
+            continue
+        p_other, degree_other = message
+        w = 1.0 / (1.0 + max(degree, degree_other))
+        for k in range(3):
+            acc[k] = acc[k] + w * p_other[k]
+        weight_sum = weight_sum + w
+    keep = 1.0 - weight_sum
+    return acc[0] + keep * p_own[0], acc[1] + keep * p_own[1], acc[2] + keep * p_own[2]
+
+
+def select_pattern(p: Sequence[float]) -> int:
+    """The strictly largest entry of p; any tie for the largest goes to mottled."""
+    h, v, m = p
+    if h > v and h > m:
+        return HORIZONTAL
+    if v > h and v > m:
+        return VERTICAL
+    return MOTTLED
+
+
+# ---- phase 3: pattern formation -------------------------------------------------
+
+def initial_state(sensed: float) -> int:
+    """Dark (1) where the sensed grey value is below 127."""
+    return 1 if sensed < 127 else 0
+
+
+def fill_states(received: Sequence[int | None]) -> list[int]:
+    """Mirror rules for missing slots 0-11; fills read only values that arrived."""
+    filled = []
+    for slot in range(12):
+        value = received[slot]
+        if value is None:
+            candidates = DIAGONAL_FALLBACKS.get(slot) or (_OPPOSITE_CARDINAL[slot],)
+            value = next((received[c] for c in candidates if received[c] is not None), 0)
+        filled.append(value)
+    return filled
+
+
+def w2_for(pattern: int, params: CamoParams) -> float:
+    return params.w2_mottled if pattern == MOTTLED else params.w2_stripes
+
+
+def formation_step(state: int, pattern: int, received: Sequence[int | None], params: CamoParams) -> int:
+    """Young's rule for one robot; the robot itself is an activator, on or off."""
+    filled = fill_states(received)
+    on_activators = state + sum(filled[s] for s in ACTIVATORS[pattern])
+    on_inhibitors = sum(filled[s] for s in INHIBITORS[pattern])
+    s = params.w1 * on_activators + w2_for(pattern, params) * on_inhibitors
+    if s > 0:
+        return 1
+    if params.profile == "droplet" and s == 0:
+        return state
+    return 0

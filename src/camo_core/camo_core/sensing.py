@@ -1,0 +1,90 @@
+"""SPEC section 2.1: what each robot senses of the projected background."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from . import rng
+
+
+class ImageError(ValueError):
+    """An image that cannot be used: missing, unreadable or too small."""
+
+
+def load_image(path: str | Path) -> np.ndarray:
+    """Read an image as uint8, grey (H x W) or BGR (H x W x 3); alpha is dropped."""
+    path = Path(path)
+    if not path.is_file():
+        raise ImageError(f"image not found: {path}")
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None or image.size == 0:
+        raise ImageError(f"cannot read image (not an image OpenCV understands, or corrupt): {path}")
+    if image.dtype != np.uint8:
+        # 16-bit or float images: bring to 0..255 the way OpenCV's IMREAD_COLOR does.
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image.ndim == 3 and image.shape[2] == 4:
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    return image
+
+
+def to_gray(image: np.ndarray, profile: str) -> np.ndarray:
+    """Grey values 0..255 as float64.
+
+    paper: BT.601 luma exactly as cv2.cvtColor(BGR2GRAY) rounds it;
+    droplet: 0.5 R + 0.5 G (fw rgb_weights), unrounded. A grey image is used as is.
+    """
+    if image.ndim == 2:
+        return image.astype(np.float64)
+    if profile == "paper":
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY).astype(np.float64)
+    bgr = image.astype(np.float64)
+    return 0.5 * bgr[:, :, 2] + 0.5 * bgr[:, :, 1]
+
+
+def rgb_to_gray(r: float, g: float, b: float, profile: str) -> float:
+    """One colour reading (a Droplet's get_rgb) to grey, with the profile's weights."""
+    if profile == "paper":
+        return 0.299 * r + 0.587 * g + 0.114 * b
+    return 0.5 * r + 0.5 * g
+
+
+def block_means(gray: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """Mean grey value of the image block each robot covers (rows x cols float64)."""
+    height, width = gray.shape[:2]
+    if height < rows or width < cols:
+        raise ImageError(f"image of {width}x{height} pixels is smaller than the {cols}x{rows} robot grid")
+    return cv2.resize(gray.astype(np.float64), (cols, rows), interpolation=cv2.INTER_AREA)
+
+
+def sense_image(image: np.ndarray, rows: int, cols: int, profile: str) -> np.ndarray:
+    return block_means(to_gray(image, profile), rows, cols)
+
+
+def noisy_value(seed: int, robot: int, value: float, rho_meas: float) -> float:
+    """One robot's sensed value after measurement error (scalar)."""
+    if rho_meas > 0.0 and rng.uniform(seed, rng.STREAM_SENSOR_REPLACED, 0, robot, 0) < rho_meas:
+        return float(math.floor(256 * rng.uniform(seed, rng.STREAM_SENSOR_VALUE, 0, robot, 0)))
+    return float(value)
+
+
+def apply_noise(sensed: np.ndarray, seed: int, rho_meas: float, exempt: np.ndarray | None = None) -> np.ndarray:
+    """The whole grid's sensed values after measurement error (vectorised).
+
+    `exempt` marks robots whose readings are real (a bridged Droplet): never replaced.
+    """
+    out = np.array(sensed, dtype=np.float64, copy=True)
+    if rho_meas <= 0.0:
+        return out
+    ids = np.arange(out.size, dtype=np.uint64).reshape(out.shape)
+    zero = np.uint64(0)
+    replaced = rng.uniform_array(seed, rng.STREAM_SENSOR_REPLACED, 0, ids, zero) < rho_meas
+    if exempt is not None:
+        replaced &= ~exempt
+    noise = np.floor(256 * rng.uniform_array(seed, rng.STREAM_SENSOR_VALUE, 0, ids, zero))
+    out[replaced] = noise[replaced]
+    return out
