@@ -30,12 +30,12 @@ def run_per_robot(params: CamoParams, raw_sensed: np.ndarray, exempt: np.ndarray
     votes = np.array([r.vote for r in robots]).reshape(rows, cols)
     initial = np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols)
 
-    trace = [mean_p(np.array([r.p for r in robots]).T)]
+    trace = [mean_p(np.array([r.p for r in robots]))]
     for step in range(params.consensus_steps):
         sent = [(r.p, r.degree) for r in robots]
         for robot in robots:
             robot.consensus(step, [None if n is None else sent[n] for n in robot.neighbors[:8]])
-        trace.append(mean_p(np.array([r.p for r in robots]).T))
+        trace.append(mean_p(np.array([r.p for r in robots])))
     for robot in robots:
         robot.finish_consensus()
 

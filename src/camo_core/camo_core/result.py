@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from . import kernels
 from .params import CamoParams
 from .rules import MOTTLED, PATTERN_NAMES
 
@@ -15,10 +16,9 @@ SUMMARY_KEYS = (
 )
 
 
-def mean_p(planes: np.ndarray) -> np.ndarray:
-    """Mean p over robots from 3 planes (3 x ...), one summation order for every driver."""
-    flat = np.ascontiguousarray(planes, dtype=np.float64).reshape(3, -1)
-    return flat.mean(axis=1)
+def mean_p(p: np.ndarray) -> np.ndarray:
+    """Mean p over robots (p: ... x 3), summed in robot-id order by every driver."""
+    return kernels.mean_p(np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3))
 
 
 @dataclass
@@ -59,7 +59,7 @@ class RunResult:
             "rho_comm": params.rho_comm,
             "pattern": self.majority_pattern,
             "votes": self.selection_counts,
-            "mean_p": mean_p(p.reshape(-1, 3).T).tolist(),
+            "mean_p": mean_p(p).tolist(),
             "sensed": self.sensed.tolist(),
             "initial": self.initial.astype(int).tolist(),
             "final": self.final.astype(int).tolist(),

@@ -1,0 +1,71 @@
+"""The paper's simulation figure for one run, and the error-analysis figure."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .result import RunResult  # noqa: E402
+
+PATTERN_COLORS = {"horizontal": "tab:blue", "vertical": "tab:green", "mottled": "tab:orange"}
+
+
+def run_figure(result: RunResult, image: np.ndarray | None, path: str | Path, title: str = "") -> Path:
+    """One row of five panels: input, sensed grid, consensus curves, initial and final states."""
+    fig, axes = plt.subplots(1, 5, figsize=(17, 3.6))
+    if image is not None:
+        shown = image if image.ndim == 2 else image[:, :, ::-1]
+        axes[0].imshow(shown, cmap="gray", vmin=0, vmax=255)
+    axes[0].set_title("input image")
+    axes[1].imshow(result.sensed, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+    axes[1].set_title(f"sensed ({result.params.rows}x{result.params.cols})")
+    trace = result.consensus_trace
+    for k, name in enumerate(PATTERN_COLORS):
+        axes[2].plot(range(len(trace)), trace[:, k], label=f"p_{name[0]} ({name})", color=PATTERN_COLORS[name])
+    axes[2].axhline(0.5, color="red", linewidth=1.2)
+    axes[2].set_ylim(-0.02, 1.02)
+    axes[2].set_xlabel("consensus step")
+    axes[2].set_ylabel("mean p over robots")
+    axes[2].legend(fontsize=7, loc="best")
+    axes[2].set_title(f"consensus: {result.majority_pattern}")
+    for ax, states, label in ((axes[3], result.initial, "initial state"), (axes[4], result.final, "generated pattern")):
+        shown = np.where(states == 1, 0, 255).astype(float)
+        if result.alive is not None:
+            shown[~result.alive] = 128
+        ax.imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        ax.set_title(label)
+    for ax in (axes[0], axes[1], axes[3], axes[4]):
+        ax.set_xticks([])
+        ax.set_yticks([])
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def errors_figure(rows: list[dict], random_level: float, path: str | Path, title: str = "") -> Path:
+    """Mean total absolute difference against error probability, one line per mode."""
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for mode, label in (("measurement", "measurement error only"), ("communication", "communication error only"),
+                        ("both", "both, equal probability")):
+        data = [r for r in rows if r["mode"] == mode]
+        ax.errorbar([r["rho"] for r in data], [r["mean_diff"] for r in data], yerr=[r["std_diff"] for r in data],
+                    marker="o", capsize=3, label=label)
+    ax.axhline(random_level, color="gray", linestyle="--", label=f"random pattern ({random_level:g})")
+    ax.set_xlabel("error probability")
+    ax.set_ylabel("total absolute difference to error-free pattern")
+    ax.legend()
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

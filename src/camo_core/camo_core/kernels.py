@@ -1,0 +1,197 @@
+"""Compiled per-step kernels of the whole-grid simulator (numba).
+
+Each robot's arithmetic is exactly that of `rules.py`, in the same float64
+order (no fast-math, so no reassociation or fused multiply-add); only the loop
+over robots is compiled, and rows run in parallel. The link's loss draws are
+SPEC section 3's hash, computed in place from (prefix, sender, receiver).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .grid import NEIGHBOR_OFFSETS
+from .rules import ACTIVATORS, DIAGONAL_FALLBACKS, HORIZONTAL, INHIBITORS, MOTTLED, VERTICAL
+
+DI = np.array([o[0] for o in NEIGHBOR_OFFSETS], dtype=np.int64)
+DJ = np.array([o[1] for o in NEIGHBOR_OFFSETS], dtype=np.int64)
+# Fallback slots per slot (-1: none), in the order SPEC 2.4 tries them.
+_OPPOSITE = {0: 2, 2: 0, 1: 3, 3: 1, 8: 10, 10: 8, 9: 11, 11: 9}
+FALLBACK = np.full((12, 3), -1, dtype=np.int64)
+for _s in range(12):
+    _chain = DIAGONAL_FALLBACKS.get(_s) or (_OPPOSITE[_s],)
+    FALLBACK[_s, :len(_chain)] = _chain
+# ROLE[pattern, slot]: 1 activator, -1 inhibitor, 0 unused.
+ROLE = np.zeros((3, 12), dtype=np.int64)
+for _k in range(3):
+    ROLE[_k, list(ACTIVATORS[_k])] = 1
+    ROLE[_k, list(INHIBITORS[_k])] = -1
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
+_INV_2_53 = 1.0 / float(1 << 53)
+ALL_SLOTS = (1 << 12) - 1
+# w = 1 / (1 + max degree), computed once per possible degree: the same float64 as rules.py.
+METROPOLIS = np.array([1.0 / (1.0 + d) for d in range(9)])
+
+
+@njit(cache=True, inline="always")
+def _mix(x):
+    x = x + _GOLDEN
+    x = (x ^ (x >> _S30)) * _M1
+    x = (x ^ (x >> _S27)) * _M2
+    return x ^ (x >> _S31)
+
+
+@njit(cache=True, inline="always")
+def _arrives(prefix, src, dst, rho):
+    if rho <= 0.0:
+        return True
+    h = _mix(_mix(prefix ^ np.uint64(src)) ^ np.uint64(dst))
+    return float(h >> _S11) * _INV_2_53 >= rho
+
+
+@njit(cache=True, parallel=True)
+def consensus_step(p, out, known, degree, prefix, rho):
+    """One Metropolis step for every robot: p (rows x cols x 3) -> out."""
+    rows, cols = degree.shape
+    for i in prange(rows):
+        for j in range(cols):
+            me = i * cols + j
+            a0 = 0.0
+            a1 = 0.0
+            a2 = 0.0
+            w_sum = 0.0
+            d = degree[i, j]
+            for s in range(8):
+                if (known[i, j] >> s) & 1 == 0:
+                    continue
+                ni = i + DI[s]
+                nj = j + DJ[s]
+                if not _arrives(prefix, ni * cols + nj, me, rho):
+                    continue
+                dn = degree[ni, nj]
+                w = METROPOLIS[d if d > dn else dn]
+                a0 = a0 + w * p[ni, nj, 0]
+                a1 = a1 + w * p[ni, nj, 1]
+                a2 = a2 + w * p[ni, nj, 2]
+                w_sum = w_sum + w
+            keep = 1.0 - w_sum
+            out[i, j, 0] = a0 + keep * p[i, j, 0]
+            out[i, j, 1] = a1 + keep * p[i, j, 1]
+            out[i, j, 2] = a2 + keep * p[i, j, 2]
+
+
+@njit(cache=True, inline="always")
+def _state_in(state, known, i, j, s, prefix, rho):
+    """State received from slot s of robot (i, j), or -1 if nothing arrived."""
+    if (known[i, j] >> s) & 1 == 0:
+        return -1
+    rows, cols = state.shape
+    ni = i + DI[s]
+    nj = j + DJ[s]
+    if not _arrives(prefix, ni * cols + nj, i * cols + j, rho):
+        return -1
+    return np.int64(state[ni, nj])
+
+
+@njit(cache=True, parallel=True)
+def formation_step(state, out, known, selected, prefix, rho, w1, w2_stripes, w2_mottled, keep_on_zero):
+    """One step of Young's rule for every robot: state (rows x cols uint8) -> out."""
+    rows, cols = state.shape
+    for i in prange(rows):
+        for j in range(cols):
+            pattern = selected[i, j]
+            on_act = np.int64(state[i, j])
+            on_inh = np.int64(0)
+            if rho <= 0.0 and known[i, j] == ALL_SLOTS:
+                # Fast path: every slot known and nothing lost, so no slot needs filling.
+                for s in range(12):
+                    role = ROLE[pattern, s]
+                    if role > 0:
+                        on_act += state[i + DI[s], j + DJ[s]]
+                    elif role < 0:
+                        on_inh += state[i + DI[s], j + DJ[s]]
+            else:
+                on_act, on_inh = _counts_with_fill(state, known, i, j, pattern, prefix, rho, on_act, on_inh)
+            w2 = w2_mottled if pattern == MOTTLED else w2_stripes
+            strength = w1 * on_act + w2 * on_inh
+            if strength > 0:
+                out[i, j] = 1
+            elif keep_on_zero and strength == 0:
+                out[i, j] = state[i, j]
+            else:
+                out[i, j] = 0
+
+
+@njit(cache=True, inline="always")
+def _counts_with_fill(state, known, i, j, pattern, prefix, rho, on_act, on_inh):
+    """Activator and inhibitor counts where slots may be missing (SPEC 2.4 mirror rules)."""
+    for s in range(12):
+                role = ROLE[pattern, s]
+                if role == 0:
+                    continue
+                v = _state_in(state, known, i, j, s, prefix, rho)
+                f = 0
+                while v < 0 and f < 3 and FALLBACK[s, f] >= 0:
+                    v = _state_in(state, known, i, j, FALLBACK[s, f], prefix, rho)
+                    f += 1
+                if v > 0:
+                    if role > 0:
+                        on_act += v
+                    else:
+                        on_inh += v
+    return on_act, on_inh
+
+
+@njit(cache=True, parallel=True)
+def vote_all(sensed, known, prefix, rho, paper_profile, threshold, votes):
+    """The local one-hot vote of every robot (SPEC 2.2), as rules.vote computes it."""
+    rows, cols = sensed.shape
+    for i in prange(rows):
+        side = np.empty(4)
+        for j in range(cols):
+            own = sensed[i, j]
+            me = i * cols + j
+            got = np.zeros(4, dtype=np.bool_)
+            for s in range(4):
+                if (known[i, j] >> s) & 1:
+                    ni = i + DI[s]
+                    nj = j + DJ[s]
+                    if _arrives(prefix, ni * cols + nj, me, rho):
+                        got[s] = True
+                        side[s] = sensed[ni, nj]
+            fill = np.empty(4)
+            for s in range(4):
+                o = (s + 2) % 4
+                fill[s] = side[s] if got[s] else (side[o] if got[o] else own)
+            top, right, bottom, left = fill[0], fill[1], fill[2], fill[3]
+            if paper_profile:
+                px = left + right - 2 * own
+                py = top + bottom - 2 * own
+                h_score = abs(py) - abs(px)
+                v_score = abs(px) - abs(py)
+            else:
+                dx = abs(own - right) + abs(own - left)
+                dy = abs(own - top) + abs(own - bottom)
+                h_score = dy - dx
+                v_score = dx - dy
+            if h_score > threshold:
+                votes[i, j] = HORIZONTAL
+            elif v_score > threshold:
+                votes[i, j] = VERTICAL
+            else:
+                votes[i, j] = MOTTLED
+
+
+@njit(cache=True)
+def mean_p(p_flat):
+    """Mean of p over robots, summed in robot-id order: one order for every driver."""
+    n = p_flat.shape[0]
+    total = np.zeros(3)
+    for r in range(n):
+        for k in range(3):
+            total[k] = total[k] + p_flat[r, k]
+    return total / n
