@@ -1,0 +1,243 @@
+"""One robot of the swarm as an rclpy node.
+
+It talks only to the robots in its 12 neighbour slots, over per-robot topics,
+and goes through SPEC's phases by itself: hello, sense, colour, vote,
+consensus, pattern formation. There is no clock master: a robot moves on when,
+for every neighbour it knows, the message for this step has arrived or will be
+dropped by the simulated link (a deterministic draw, so known in advance), or
+when the step's deadline passes. A neighbour that misses a deadline is not
+waited for again until it speaks again. The rules themselves are
+camo_core's RobotCore; this class only moves messages.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import Image
+
+from camo_core import rng
+from camo_core.grid import NUM_SLOTS
+from camo_core.params import CamoParams, ParameterError
+from camo_core.robot import RobotCore
+from camo_core.sensing import sense_image
+from camo_msgs.msg import Color, Hello, RobotStatus, State, Vote
+from camo_projector.image_msg import from_msg
+from camo_projector.qos import BACKGROUND_TOPIC, LATCHED
+
+from .topics import STATUS_TOPIC, history_qos, robot_topic
+
+DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = (RobotStatus.PHASE_DISCOVERY, RobotStatus.PHASE_SENSING,
+                                                  RobotStatus.PHASE_CONSENSUS, RobotStatus.PHASE_FORMATION,
+                                                  RobotStatus.PHASE_DONE)
+_TYPES = {"hello": Hello, "color": Color, "vote": Vote, "state": State}
+
+
+class RobotNode(Node):
+    def __init__(self, params: CamoParams, row: int, col: int, step_timeout: float = 10.0,
+                 discovery_timeout: float = 30.0, **node_kwargs) -> None:
+        self.core = RobotCore(params, row, col)        # raises ValueError for a cell outside the grid
+        super().__init__(f"robot_{row}_{col}", namespace="/camo", **node_kwargs)
+        self.params = params
+        self.step_timeout = step_timeout
+        self.discovery_timeout = discovery_timeout
+        depth = max(params.consensus_steps, params.formation_steps) + 4
+        qos = history_qos(depth)
+        me = self.core.id
+        self.pub = {kind: self.create_publisher(t, robot_topic(me, kind), qos) for kind, t in _TYPES.items()}
+        self.status_pub = self.create_publisher(RobotStatus, STATUS_TOPIC, history_qos(depth * 2 + 8))
+        for slot, neighbor in enumerate(self.core.neighbors):
+            if neighbor is None:
+                continue
+            for kind, msg_type in _TYPES.items():
+                if kind == "color" and slot >= 4:
+                    continue
+                if kind == "vote" and slot >= 8:
+                    continue
+                self.create_subscription(msg_type, robot_topic(neighbor, kind),
+                                         lambda msg, s=slot, k=kind: self._on_message(k, s, msg), qos)
+        self.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
+        # What has been delivered, by (kind, step, slot); early messages wait here for their step.
+        self.inbox: dict[tuple[str, int, int], object] = {}
+        self.silent: set[int] = set()
+        self.image = None
+        self.phase = DISCOVERY
+        self.step = 0
+        self.wait_started = time.monotonic()
+        self.create_timer(0.05, self._advance)
+        self._send("hello", Hello(sender_id=me, row=row, col=col, phase=DISCOVERY, step=0))
+
+    @property
+    def done(self) -> bool:
+        return self.phase == DONE
+
+    # ---- receiving ------------------------------------------------------------
+
+    def _on_message(self, kind: str, slot: int, msg) -> None:
+        self.silent.discard(slot)          # it speaks again: wait for it again
+        payload = {"hello": True, "color": getattr(msg, "value", None),
+                   "vote": (tuple(getattr(msg, "p", ())), getattr(msg, "degree", 0)),
+                   "state": getattr(msg, "state", None)}[kind]
+        self.inbox[(kind, msg.step, slot)] = payload
+        self._advance()
+
+    def _on_background(self, msg: Image) -> None:
+        if self.image is None:
+            self.image = from_msg(msg)
+            self._advance()
+
+    # ---- sending --------------------------------------------------------------
+
+    def _send(self, kind: str, msg) -> None:
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = "camo"
+        msg.sender_id = self.core.id
+        self.pub[kind].publish(msg)
+
+    def _report(self) -> None:
+        core = self.core
+        status = RobotStatus(sender_id=core.id, row=core.row, col=core.col, phase=self.phase, step=self.step,
+                             sensed=core.sensed, p=list(core.p), state=core.state, alive=True,
+                             known_slots=core.known_mask,
+                             pattern=RobotStatus.PATTERN_NONE if core.pattern is None else core.pattern)
+        status.header.stamp = self.get_clock().now().to_msg()
+        status.header.frame_id = "camo"
+        self.status_pub.publish(status)
+
+    # ---- stepping -------------------------------------------------------------
+
+    def _waiting_for(self, kind: str, stream: int, step: int, slots, known_only: bool = True) -> list[int]:
+        """Slots whose message for `step` is still to come: expected, not dropped, not silent."""
+        return [s for s in slots
+                if self.core.neighbors[s] is not None and (self.core.known[s] or not known_only)
+                and s not in self.silent and (kind, step, s) not in self.inbox
+                and self.core.arrives(stream, step, s)]
+
+    def _ready(self, pending: list[int], timeout: float) -> bool:
+        if not pending:
+            return True
+        if time.monotonic() - self.wait_started < timeout:
+            return False
+        self.silent.update(pending)
+        self.get_logger().warning(f"step deadline passed; neighbours in slots {pending} are silent")
+        return True
+
+    def _next(self, phase: int, step: int = 0) -> None:
+        self.phase, self.step = phase, step
+        self.wait_started = time.monotonic()
+
+    def _take(self, kind: str, step: int, slots) -> list:
+        return [self.inbox.pop((kind, step, s), None) for s in slots]
+
+    def _advance(self) -> None:
+        while True:
+            if self.phase == DISCOVERY:
+                if not self._ready(self._waiting_for("hello", rng.STREAM_HELLO, 0, range(NUM_SLOTS), False),
+                                   self.discovery_timeout):
+                    return
+                heard = self._take("hello", 0, range(NUM_SLOTS))
+                self.core.discover([h is not None for h in heard])
+                self._next(SENSING)
+            elif self.phase == SENSING:
+                if self.image is None:
+                    return
+                if math.isnan(self.core.sensed):
+                    raw = sense_image(self.image, self.params.rows, self.params.cols, self.params.profile)
+                    self.core.sense(raw[self.core.row, self.core.col])
+                    self._send("color", Color(phase=SENSING, step=0, value=self.core.sensed))
+                    self.wait_started = time.monotonic()
+                if not self._ready(self._waiting_for("color", rng.STREAM_COLOR, 0, range(4)), self.step_timeout):
+                    return
+                self.core.decide_vote(self._take("color", 0, range(4)))
+                self._next(CONSENSUS)
+                self._report()
+                self._send_vote()
+            elif self.phase == CONSENSUS:
+                if self.step == self.params.consensus_steps:
+                    self.core.finish_consensus()
+                    self._next(FORMATION)
+                    self._report()
+                    self._send_state()
+                    continue
+                if not self._ready(self._waiting_for("vote", rng.STREAM_CONSENSUS, self.step, range(8)),
+                                   self.step_timeout):
+                    return
+                self.core.consensus(self.step, self._take("vote", self.step, range(8)))
+                self._next(CONSENSUS, self.step + 1)
+                self._report()
+                if self.step < self.params.consensus_steps:
+                    self._send_vote()
+            elif self.phase == FORMATION:
+                if self.step == self.params.formation_steps:
+                    self._next(DONE, self.step)
+                    self._report()
+                    self.get_logger().debug("done")
+                    return
+                if not self._ready(self._waiting_for("state", rng.STREAM_STATE, self.step, range(NUM_SLOTS)),
+                                   self.step_timeout):
+                    return
+                self.core.form(self.step, self._take("state", self.step, range(NUM_SLOTS)))
+                self._next(FORMATION, self.step + 1)
+                self._report()
+                if self.step < self.params.formation_steps:
+                    self._send_state()
+            else:
+                return
+
+    def _send_vote(self) -> None:
+        self._send("vote", Vote(phase=CONSENSUS, step=self.step, p=list(self.core.p), degree=self.core.degree))
+
+    def _send_state(self) -> None:
+        self._send("state", State(phase=FORMATION, step=self.step, state=self.core.state))
+
+
+def params_from_node(node: Node) -> tuple[CamoParams, int, int, float]:
+    """Read a standalone robot's ROS parameters into CamoParams (raises ParameterError)."""
+    spec = {"rows": 8, "cols": 8, "row": 0, "col": 0, "profile": "paper", "seed": 0, "rho_meas": 0.0,
+            "rho_comm": 0.0, "threshold": 50.0, "consensus_steps": -1, "formation_steps": -1,
+            "step_timeout": 10.0}
+    values = {name: node.declare_parameter(name, default).value for name, default in spec.items()}
+    params = CamoParams(profile=values["profile"], rows=values["rows"], cols=values["cols"],
+                        threshold=values["threshold"], seed=values["seed"], rho_meas=values["rho_meas"],
+                        rho_comm=values["rho_comm"],
+                        consensus_steps=None if values["consensus_steps"] < 0 else values["consensus_steps"],
+                        formation_steps=None if values["formation_steps"] < 0 else values["formation_steps"])
+    if not (0 <= values["row"] < params.rows and 0 <= values["col"] < params.cols):
+        raise ParameterError(f"cell ({values['row']}, {values['col']}) is outside the "
+                             f"{params.rows}x{params.cols} grid")
+    if not values["step_timeout"] > 0:
+        raise ParameterError(f"step_timeout must be positive (got {values['step_timeout']})")
+    return params, values["row"], values["col"], values["step_timeout"]
+
+
+def main(args=None) -> int:
+    """A single robot in its own process: parameters rows, cols, row, col, profile, seed, rho_*, ..."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        reader = Node("robot_parameters", start_parameter_services=False)
+        try:
+            params, row, col, timeout = params_from_node(reader)
+        finally:
+            reader.destroy_node()
+        node = RobotNode(params, row, col, step_timeout=timeout)
+        while rclpy.ok():
+            rclpy.spin_once(node, timeout_sec=0.5)
+    except (ParameterError, ValueError) as exc:
+        print(f"robot_node: error: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

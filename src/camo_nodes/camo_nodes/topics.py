@@ -1,0 +1,16 @@
+"""Topic names and QoS of the swarm, in one place for robots, monitor and recorder."""
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+STATUS_TOPIC = "/swarm/status"
+PATTERN_TOPIC = "/swarm/pattern"
+KINDS = ("hello", "color", "vote", "state")
+
+
+def robot_topic(robot_id: int, kind: str) -> str:
+    return f"/camo/robot_{robot_id}/{kind}"
+
+
+def history_qos(depth: int) -> QoSProfile:
+    """Reliable and transient-local: a neighbour that starts late still gets every step's message."""
+    return QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)

@@ -1,0 +1,1 @@
+"""The projector: publishes the background the swarm stands on."""

@@ -1,0 +1,78 @@
+"""The projector: publishes the background image the swarm stands on (latched).
+
+Parameters: `image` (a file) or `pattern` (desert, forest, leopard). Setting
+either while running publishes the new background, and the swarm camouflages
+again on it.
+"""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rcl_interfaces.msg import SetParametersResult
+from sensor_msgs.msg import Image
+
+from camo_core.backgrounds import background
+from camo_core.sensing import ImageError, load_image
+
+from .image_msg import to_msg
+from .qos import BACKGROUND_TOPIC, LATCHED
+
+
+def load(image_path: str, pattern: str) -> np.ndarray:
+    return load_image(image_path) if image_path else background(pattern or "forest")
+
+
+class ProjectorNode(Node):
+    def __init__(self, **kwargs) -> None:
+        super().__init__("projector", **kwargs)
+        self.declare_parameter("image", "")
+        self.declare_parameter("pattern", "forest")
+        self.publisher = self.create_publisher(Image, BACKGROUND_TOPIC, LATCHED)
+        self.image = load(self.get_parameter("image").value, self.get_parameter("pattern").value)
+        self.add_on_set_parameters_callback(self._on_set)
+        self.publish()
+
+    def publish(self) -> None:
+        msg = to_msg(self.image)
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.publisher.publish(msg)
+        self.get_logger().info(f"projecting a {msg.width}x{msg.height} {msg.encoding} background")
+
+    def _on_set(self, params) -> SetParametersResult:
+        values = {p.name: p.value for p in params}
+        if not {"image", "pattern"} & set(values):
+            return SetParametersResult(successful=True)
+        path = values.get("image", "")
+        pattern = values.get("pattern", self.get_parameter("pattern").value)
+        try:
+            self.image = load(path, pattern)
+        except (ImageError, ValueError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.publish()
+        return SetParametersResult(successful=True)
+
+
+def main(args=None) -> int:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = ProjectorNode()
+        rclpy.spin(node)
+    except (ImageError, ValueError) as exc:
+        print(f"projector_node: error: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
