@@ -18,7 +18,7 @@ from camo_msgs.msg import RobotStatus
 from camo_projector.image_msg import from_msg, to_msg
 from camo_projector.qos import BACKGROUND_TOPIC, LATCHED
 
-from .topics import PATTERN_TOPIC, STATUS_TOPIC, history_qos
+from .topics import PATTERN_TOPIC, STATUS_TOPIC, status_listener_qos
 
 
 class MonitorNode(Node):
@@ -38,8 +38,7 @@ class MonitorNode(Node):
         self.finished = np.zeros(n, bool)
         self.last_heard = np.full(n, time.monotonic())
         self.image = None
-        depth = 2 * max(params.consensus_steps, params.formation_steps) + 16
-        self.create_subscription(RobotStatus, STATUS_TOPIC, self._on_status, history_qos(depth))
+        self.create_subscription(RobotStatus, STATUS_TOPIC, self._on_status, status_listener_qos())
         self.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
         self.pattern_pub = self.create_publisher(Image, PATTERN_TOPIC, 10)
         self.create_timer(0.2, self._publish_pattern)

@@ -49,7 +49,9 @@ class RobotNode(Node):
         qos = history_qos(depth)
         me = self.core.id
         self.pub = {kind: self.create_publisher(t, robot_topic(me, kind), qos) for kind, t in _TYPES.items()}
-        self.status_pub = self.create_publisher(RobotStatus, STATUS_TOPIC, history_qos(depth * 2 + 8))
+        # Every status of a round stays available to a monitor or recorder that joins late.
+        statuses = params.consensus_steps + params.formation_steps + 8
+        self.status_pub = self.create_publisher(RobotStatus, STATUS_TOPIC, history_qos(statuses))
         for slot, neighbor in enumerate(self.core.neighbors):
             if neighbor is None:
                 continue
@@ -68,7 +70,7 @@ class RobotNode(Node):
         self.phase = DISCOVERY
         self.step = 0
         self.wait_started = time.monotonic()
-        self.create_timer(0.05, self._advance)
+        self.create_timer(0.05, self._on_timer)
         self._send("hello", Hello(sender_id=me, row=row, col=col, phase=DISCOVERY, step=0))
 
     @property
@@ -76,6 +78,10 @@ class RobotNode(Node):
         return self.phase == DONE
 
     # ---- receiving ------------------------------------------------------------
+
+    def _on_timer(self) -> None:
+        if self.context.ok():          # not while the process is shutting down
+            self._advance()
 
     def _on_message(self, kind: str, slot: int, msg) -> None:
         self.silent.discard(slot)          # it speaks again: wait for it again

@@ -39,7 +39,9 @@ def main(argv: list[str] | None = None) -> int:
                              start_parameter_services=False, enable_rosout=False)
             nodes.append(node)
             executor.add_node(node)
-        executor.spin()
+        # spin_once in a loop: EventsExecutor.spin() busy-waits and starves its timers here.
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.2)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

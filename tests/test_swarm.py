@@ -1,0 +1,75 @@
+"""The distributed swarm: ROS 2 robot nodes in several processes agree with the reference simulator."""
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from conftest import ROOT, run_camo
+
+_next_domain = [0]
+
+
+def domain() -> int:
+    """A ROS domain of its own for each run, so parallel test processes do not hear each other."""
+    _next_domain[0] += 1
+    return 1 + (os.getpid() * 7 + _next_domain[0]) % 200
+
+
+def camo_run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "camo_nodes.launcher", *args, "--domain-id", str(domain())],
+                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+
+
+def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:
+    swarm = camo_run(*options, "--procs", str(procs), "--out", str(tmp_path / "run"))
+    assert swarm.returncode == 0, swarm.stderr[-2000:]
+    sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    load = lambda name: json.loads((tmp_path / name / "summary.json").read_text())  # noqa: E731
+    return load("run"), load("sim")
+
+
+CASES = [
+    (["--pattern", "forest", "--profile", "paper"], 1),
+    (["--pattern", "desert", "--profile", "droplet", "--rows", "5", "--cols", "7", "--rho-meas", "0.1",
+      "--rho-comm", "0.1", "--seed", "3"], 2),
+    (["--pattern", "leopard", "--profile", "paper", "--rows", "6", "--cols", "4", "--rho-meas", "0.3",
+      "--rho-comm", "0.3", "--seed", "11"], 2),
+    (["--pattern", "forest", "--profile", "droplet", "--rows", "4", "--cols", "4", "--rho-comm", "0.3",
+      "--seed", "5"], 1),
+    (["--pattern", "desert", "--profile", "paper", "--rows", "7", "--cols", "3", "--rho-meas", "0.1",
+      "--seed", "8"], 2),
+]
+
+
+@pytest.mark.parametrize("options, procs", CASES)
+def test_swarm_equals_reference_simulator(tmp_path, options, procs):
+    swarm, sim = summaries(tmp_path, options, procs)
+    for key in sim:
+        if key != "elapsed_s":
+            assert swarm[key] == sim[key], key
+    assert (tmp_path / "run" / "figure.png").stat().st_size > 10_000
+
+
+def test_robot_with_cell_outside_grid_exits_with_one_line():
+    out = subprocess.run([sys.executable, "-m", "camo_nodes.robot_node", "--ros-args", "-p", "rows:=4",
+                          "-p", "cols:=4", "-p", "row:=9", "-p", "col:=0"], capture_output=True, text=True,
+                         timeout=60, env={**os.environ, "ROS_DOMAIN_ID": str(domain())})
+    assert out.returncode == 2
+    assert "outside the 4x4 grid" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_robot_with_negative_rho_exits_with_one_line():
+    out = subprocess.run([sys.executable, "-m", "camo_nodes.robot_node", "--ros-args", "-p", "rho_comm:=-0.5"],
+                         capture_output=True, text=True, timeout=60,
+                         env={**os.environ, "ROS_DOMAIN_ID": str(domain())})
+    assert out.returncode == 2
+    assert "rho_comm must be" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_run_rejects_bad_options_in_one_line(tmp_path):
+    out = camo_run("--procs", "0", "--out", str(tmp_path))
+    assert out.returncode == 2 and "--procs" in out.stderr and len(out.stderr.strip().splitlines()) == 1
