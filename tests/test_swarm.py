@@ -73,3 +73,57 @@ def test_robot_with_negative_rho_exits_with_one_line():
 def test_run_rejects_bad_options_in_one_line(tmp_path):
     out = camo_run("--procs", "0", "--out", str(tmp_path))
     assert out.returncode == 2 and "--procs" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_switching_the_background_makes_the_same_swarm_camouflage_again(tmp_path):
+    out = camo_run("--pattern", "forest", "--then", "desert", "--procs", "2", "--out", str(tmp_path / "run"))
+    assert out.returncode == 0, out.stderr[-2000:]
+    first = json.loads((tmp_path / "run" / "round_0" / "summary.json").read_text())
+    second = json.loads((tmp_path / "run" / "round_1" / "summary.json").read_text())
+    assert (first["pattern"], second["pattern"]) == ("vertical", "horizontal")
+    sim = run_camo("sim", "--pattern", "desert", "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0
+    reference = json.loads((tmp_path / "sim" / "summary.json").read_text())
+    assert second["final"] == reference["final"] and second["mean_p"] == reference["mean_p"]
+
+
+def test_two_runs_on_different_domains_do_not_disturb_each_other(tmp_path):
+    runs = []
+    for k, pattern in enumerate(("forest", "desert")):
+        runs.append(subprocess.Popen(
+            [sys.executable, "-m", "camo_nodes.launcher", "--pattern", pattern,
+             "--procs", "1", "--domain-id", str(domain()), "--out", str(tmp_path / pattern)],
+            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True))
+    for proc in runs:
+        _, err = proc.communicate(timeout=240)
+        assert proc.returncode == 0, err[-2000:]
+    for pattern, expected in (("forest", "vertical"), ("desert", "horizontal")):
+        summary = json.loads((tmp_path / pattern / "summary.json").read_text())
+        assert summary["pattern"] == expected
+        assert sum(summary["votes"].values()) == 64 and "dead" not in summary
+
+
+def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
+    out_dir = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.launcher", "--pattern", "forest", "--procs", "1",
+         "--own-process", "2,3", "--own-process", "5,6", "--step-timeout", "2",
+         "--consensus-steps", "200", "--domain-id", str(domain()), "--out", str(out_dir)],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    victims = []
+    deadline = time.monotonic() + 120
+    for line in proc.stderr:
+        if "consensus" in line and (out_dir / "processes.json").exists():
+            processes = json.loads((out_dir / "processes.json").read_text())
+            victims = [int(pid) for pid, cells in processes.items() if cells in ([19], [46])]
+            for pid in victims:
+                os.kill(pid, 9)
+            break
+        assert time.monotonic() < deadline, "the swarm never reached consensus"
+    assert len(victims) == 2
+    rest, _ = proc.communicate(timeout=240)
+    assert proc.returncode == 0, rest
+    summary = json.loads((out_dir / "summary.json").read_text())
+    assert sorted(summary["dead"]) == [[2, 3], [5, 6]]
+    assert summary["final"][2][3] is None and summary["final"][5][6] is None
+    assert summary["pattern"] == "vertical" and summary["votes"]["vertical"] == 62

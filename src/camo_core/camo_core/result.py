@@ -50,7 +50,7 @@ class RunResult:
     def summary(self) -> dict[str, Any]:
         p = self.p if self.alive is None else self.p[self.alive]
         params = self.params
-        return {
+        summary = {
             "rows": params.rows,
             "cols": params.cols,
             "profile": params.profile,
@@ -66,3 +66,11 @@ class RunResult:
             "consensus_trace": self.consensus_trace.tolist(),
             "elapsed_s": round(float(self.elapsed_s), 6),
         }
+        if self.alive is not None:
+            # A swarm run in which robots died: their cells hold null, and they are listed.
+            dead = ~self.alive
+            for key in ("initial", "final"):
+                summary[key] = [[None if dead[i, j] else v for j, v in enumerate(row)]
+                                for i, row in enumerate(summary[key])]
+            summary["dead"] = [[int(i), int(j)] for i, j in zip(*np.nonzero(dead))]
+        return summary

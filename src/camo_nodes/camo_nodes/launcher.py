@@ -20,8 +20,11 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from camo_core import cli, figures
+from camo_core.backgrounds import BACKGROUNDS
 from camo_core.params import ParameterError
-from camo_core.sensing import ImageError
+from camo_core.sensing import ImageError, load_image
+from camo_projector.qos import LOAD_TOPIC
+from std_msgs.msg import String
 
 from .monitor_node import MonitorNode
 from .swarm_worker import events_executor
@@ -35,7 +38,25 @@ def build_parser() -> cli.Parser:
     parser.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited, else 0)")
     parser.add_argument("--step-timeout", type=float, default=10.0,
                         help="seconds a robot waits for a silent neighbour before moving on (default 10)")
+    parser.add_argument("--own-process", action="append", default=[], metavar="ROW,COL",
+                        help="run this robot alone in a process of its own (repeatable)")
+    parser.add_argument("--then", action="append", default=[], metavar="BACKGROUND",
+                        help="after the camouflage finishes, project this built-in name or image file and "
+                             "camouflage again (repeatable); each round writes round_<k>/")
     return parser
+
+
+def parse_cells(texts: list[str], params) -> list[int]:
+    cells = []
+    for text in texts:
+        try:
+            row, col = (int(x) for x in text.split(","))
+        except ValueError:
+            raise cli.UsageError(f"--own-process takes ROW,COL (got {text!r})") from None
+        if not (0 <= row < params.rows and 0 <= col < params.cols):
+            raise cli.UsageError(f"--own-process {text}: outside the {params.rows}x{params.cols} grid")
+        cells.append(row * params.cols + col)
+    return cells
 
 
 def split_cells(count: int, procs: int) -> list[list[int]]:
@@ -48,8 +69,9 @@ def split_cells(count: int, procs: int) -> list[list[int]]:
 class Swarm:
     """The processes of one run: projector and workers."""
 
-    def __init__(self, args: argparse.Namespace, params, env: dict) -> None:
+    def __init__(self, args: argparse.Namespace, params, env: dict, alone: list[int]) -> None:
         self.procs: list[subprocess.Popen] = []
+        self.cells: dict[int, list[int]] = {}      # pid -> robot ids
         python = sys.executable
         projector = [python, "-m", "camo_projector.projector_node", "--ros-args", "--log-level", "warn"]
         if args.image:
@@ -57,18 +79,26 @@ class Swarm:
         else:
             projector += ["-p", f"pattern:={args.pattern or args.default_pattern}"]
         self._start(projector, env)
-        for cells in split_cells(params.count, args.procs):
-            self._start([python, "-m", "camo_nodes.swarm_worker", "--params", json.dumps(params.as_dict()),
-                         "--cells", ",".join(map(str, cells)), "--step-timeout", str(args.step_timeout),
-                         "--ros-args", "--log-level", "error"], env)
+        shared = [i for i in range(params.count) if i not in alone]
+        groups = [[i] for i in alone] + (split_cells(len(shared), args.procs) if shared else [])
+        for group in groups[len(alone):]:
+            group[:] = [shared[k] for k in group]
+        for cells in groups:
+            proc = self._start([python, "-m", "camo_nodes.swarm_worker", "--params", json.dumps(params.as_dict()),
+                                "--cells", ",".join(map(str, cells)), "--step-timeout", str(args.step_timeout),
+                                "--ros-args", "--log-level", "error"], env)
+            self.cells[proc.pid] = cells
 
-    def _start(self, command: list[str], env: dict) -> None:
+    def _start(self, command: list[str], env: dict) -> subprocess.Popen:
         # Own process group: the terminal's Ctrl-C reaches us, and we stop them in order.
-        self.procs.append(subprocess.Popen(command, env=env, start_new_session=True))
+        proc = subprocess.Popen(command, env=env, start_new_session=True)
+        self.procs.append(proc)
+        return proc
 
     def failed(self) -> str | None:
+        """The projector or a worker exited with an error (a robot killed by a signal is a fault, not this)."""
         for proc in self.procs:
-            if proc.poll() not in (None, 0):
+            if proc.poll() is not None and proc.returncode > 0:
                 return f"a swarm process exited with code {proc.returncode}: {' '.join(proc.args[:3])}"
         return None
 
@@ -85,13 +115,15 @@ class Swarm:
                 proc.wait()
 
 
-def write_outputs(monitor: MonitorNode, folder: Path, label: str, image) -> None:
-    result = monitor.result()
-    cli.write_summary(result.summary(), folder)
+def write_outputs(monitor: MonitorNode, round_index: int, folder: Path, label: str, image) -> dict:
+    result = monitor.result(round_index)
+    summary = result.summary()
+    cli.write_summary(summary, folder)
     params = monitor.params
     figures.run_figure(result, image, folder / "figure.png",
                        title=f"{label}: {params.rows}x{params.cols} robot nodes, {params.profile} profile, "
                              f"seed {params.seed}, rho_meas {params.rho_meas:g}, rho_comm {params.rho_comm:g}")
+    return summary
 
 
 def run(args: argparse.Namespace) -> int:
@@ -100,8 +132,14 @@ def run(args: argparse.Namespace) -> int:
         raise cli.UsageError(f"--procs must be an integer in 1..256 (got {args.procs})")
     if args.step_timeout <= 0:
         raise cli.UsageError(f"--step-timeout must be positive (got {args.step_timeout})")
+    alone = parse_cells(args.own_process, params)
     image, label = cli.image_from(args)
     cli.sense_image(image, params.rows, params.cols, params.profile)      # a too-small image fails here
+    labels = [label]
+    for then in args.then:
+        if then not in BACKGROUNDS:
+            cli.sense_image(load_image(then), params.rows, params.cols, params.profile)
+        labels.append(then)
     folder = cli.out_dir(args)
     env = dict(os.environ)
     if args.domain_id is not None:
@@ -112,23 +150,38 @@ def run(args: argparse.Namespace) -> int:
     os.environ.update(env)
 
     rclpy.init(args=["--ros-args", "--log-level", "warn"])
-    swarm = Swarm(args, params, env)
-    monitor = MonitorNode(params, silence_timeout=max(3 * args.step_timeout, 30.0))
+    swarm = Swarm(args, params, env, alone)
+    (folder / "processes.json").write_text(json.dumps({str(pid): cells for pid, cells in swarm.cells.items()}))
+    monitor = MonitorNode(params, silence_timeout=max(3 * args.step_timeout, 5.0))
+    loader = monitor.create_publisher(String, LOAD_TOPIC, 10)
     executor = events_executor()
     executor.add_node(monitor)
     code = 0
-    last_print = 0.0
+    round_index = 0
+    written: list[dict] = []
     try:
-        while not monitor.complete:
-            executor.spin_once(timeout_sec=0.1)
-            now = time.monotonic()
-            if now - last_print > 1.0:
-                print(f"camo run: {monitor.progress_line()}", file=sys.stderr)
-                last_print = now
-            problem = swarm.failed()
-            if problem:
-                raise RuntimeError(problem)
-        print(f"camo run: {monitor.progress_line()}", file=sys.stderr)
+        for round_index, round_label in enumerate(labels):
+            if round_index > 0:
+                loader.publish(String(data=round_label))
+            last_print = 0.0
+            while not monitor.complete(round_index):
+                executor.spin_once(timeout_sec=0.1)
+                now = time.monotonic()
+                if now - last_print > 1.0:
+                    print(f"camo run: {monitor.progress_line(round_index)}", file=sys.stderr)
+                    last_print = now
+                problem = swarm.failed()
+                if problem:
+                    raise RuntimeError(problem)
+            print(f"camo run: {monitor.progress_line(round_index)}", file=sys.stderr)
+            round_folder = folder if len(labels) == 1 else folder / f"round_{round_index}"
+            round_folder.mkdir(exist_ok=True)
+            shown = monitor.images[round_index] if len(monitor.images) > round_index else image
+            summary = write_outputs(monitor, round_index, round_folder, round_label, shown)
+            written.append(summary)
+            counts = ", ".join(f"{k} {v}" for k, v in summary["votes"].items())
+            dead = f"; dead robots {summary['dead']}" if summary.get("dead") else ""
+            print(f"pattern: {summary['pattern']} ({counts}){dead}; wrote {round_folder}/summary.json and figure.png")
     except (KeyboardInterrupt, ExternalShutdownException):
         print("camo run: interrupted; stopping the swarm and writing what it has", file=sys.stderr)
         code = 130
@@ -137,16 +190,16 @@ def run(args: argparse.Namespace) -> int:
         code = 1
     finally:
         swarm.stop()
-        try:
-            write_outputs(monitor, folder, label, monitor.image if monitor.image is not None else image)
-        except Exception as exc:  # noqa: BLE001 - a partial run may lack what a figure needs
-            (folder / "statuses_incomplete.txt").write_text(f"{monitor.progress_line()}\n{exc}\n")
+        if len(written) < len(labels):
+            partial = folder if len(labels) == 1 else folder / f"round_{round_index}"
+            partial.mkdir(exist_ok=True)
+            try:
+                write_outputs(monitor, round_index, partial, labels[round_index] + " (incomplete)", image)
+                print(f"camo run: wrote what the swarm had reported to {partial}/", file=sys.stderr)
+            except Exception as exc:  # noqa: BLE001 - a run stopped early may lack what a figure needs
+                print(f"camo run: nothing to write yet ({exc})", file=sys.stderr)
         monitor.destroy_node()
         rclpy.try_shutdown()
-    if code == 0:
-        result = json.loads((folder / "summary.json").read_text())
-        print(f"pattern: {result['pattern']} ({', '.join(f'{k} {v}' for k, v in result['votes'].items())}); "
-              f"wrote {folder}/summary.json and figure.png")
     return code
 
 

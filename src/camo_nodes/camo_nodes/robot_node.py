@@ -63,15 +63,18 @@ class RobotNode(Node):
                 self.create_subscription(msg_type, robot_topic(neighbor, kind),
                                          lambda msg, s=slot, k=kind: self._on_message(k, s, msg), qos)
         self.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
-        # What has been delivered, by (kind, step, slot); early messages wait here for their step.
-        self.inbox: dict[tuple[str, int, int], object] = {}
+        # What has been delivered, by (round, kind, step, slot); early messages wait here for their step.
+        self.inbox: dict[tuple[int, str, int, int], object] = {}
         self.silent: set[int] = set()
         self.image = None
+        self.image_stamp = None
+        self.next_image = None        # a background that arrived mid-round: camouflaged next
+        self.round = 0
         self.phase = DISCOVERY
         self.step = 0
         self.wait_started = time.monotonic()
         self.create_timer(0.05, self._on_timer)
-        self._send("hello", Hello(sender_id=me, row=row, col=col, phase=DISCOVERY, step=0))
+        self._send("hello", Hello(phase=DISCOVERY, step=0, row=row, col=col))
 
     @property
     def done(self) -> bool:
@@ -85,16 +88,38 @@ class RobotNode(Node):
 
     def _on_message(self, kind: str, slot: int, msg) -> None:
         self.silent.discard(slot)          # it speaks again: wait for it again
-        payload = {"hello": True, "color": getattr(msg, "value", None),
-                   "vote": (tuple(getattr(msg, "p", ())), getattr(msg, "degree", 0)),
-                   "state": getattr(msg, "state", None)}[kind]
-        self.inbox[(kind, msg.step, slot)] = payload
+        if msg.round < self.round:
+            return
+        if kind == "hello":
+            payload = True
+        elif kind == "color":
+            payload = msg.value
+        elif kind == "vote":
+            payload = (tuple(msg.p), msg.degree)
+        else:
+            payload = msg.state
+        self.inbox[(msg.round, kind, msg.step, slot)] = payload
         self._advance()
 
     def _on_background(self, msg: Image) -> None:
+        stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if stamp == self.image_stamp:
+            return
+        self.image_stamp = stamp
         if self.image is None:
             self.image = from_msg(msg)
-            self._advance()
+        else:
+            self.next_image = from_msg(msg)
+        self._advance()
+
+    def _start_next_round(self) -> None:
+        """Camouflage again on the new background: same rules, a fresh robot state."""
+        self.round += 1
+        self.image, self.next_image = self.next_image, None
+        self.core = RobotCore(self.params, self.core.row, self.core.col)
+        self.inbox = {key: value for key, value in self.inbox.items() if key[0] >= self.round}
+        self._next(DISCOVERY)
+        self._send("hello", Hello(phase=DISCOVERY, step=0, row=self.core.row, col=self.core.col))
 
     # ---- sending --------------------------------------------------------------
 
@@ -102,13 +127,14 @@ class RobotNode(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.header.frame_id = "camo"
         msg.sender_id = self.core.id
+        msg.round = self.round
         self.pub[kind].publish(msg)
 
     def _report(self) -> None:
         core = self.core
         status = RobotStatus(sender_id=core.id, row=core.row, col=core.col, phase=self.phase, step=self.step,
                              sensed=core.sensed, p=list(core.p), state=core.state, alive=True,
-                             known_slots=core.known_mask,
+                             known_slots=core.known_mask, round=self.round,
                              pattern=RobotStatus.PATTERN_NONE if core.pattern is None else core.pattern)
         status.header.stamp = self.get_clock().now().to_msg()
         status.header.frame_id = "camo"
@@ -120,7 +146,7 @@ class RobotNode(Node):
         """Slots whose message for `step` is still to come: expected, not dropped, not silent."""
         return [s for s in slots
                 if self.core.neighbors[s] is not None and (self.core.known[s] or not known_only)
-                and s not in self.silent and (kind, step, s) not in self.inbox
+                and s not in self.silent and (self.round, kind, step, s) not in self.inbox
                 and self.core.arrives(stream, step, s)]
 
     def _ready(self, pending: list[int], timeout: float) -> bool:
@@ -137,7 +163,7 @@ class RobotNode(Node):
         self.wait_started = time.monotonic()
 
     def _take(self, kind: str, step: int, slots) -> list:
-        return [self.inbox.pop((kind, step, s), None) for s in slots]
+        return [self.inbox.pop((self.round, kind, step, s), None) for s in slots]
 
     def _advance(self) -> None:
         while True:
@@ -181,8 +207,7 @@ class RobotNode(Node):
                 if self.step == self.params.formation_steps:
                     self._next(DONE, self.step)
                     self._report()
-                    self.get_logger().debug("done")
-                    return
+                    continue
                 if not self._ready(self._waiting_for("state", rng.STREAM_STATE, self.step, range(NUM_SLOTS)),
                                    self.step_timeout):
                     return
@@ -191,6 +216,8 @@ class RobotNode(Node):
                 self._report()
                 if self.step < self.params.formation_steps:
                     self._send_state()
+            elif self.next_image is not None:      # done, and a new background is up
+                self._start_next_round()
             else:
                 return
 

@@ -1,8 +1,8 @@
 """The projector: publishes the background image the swarm stands on (latched).
 
 Parameters: `image` (a file) or `pattern` (desert, forest, leopard). Setting
-either while running publishes the new background, and the swarm camouflages
-again on it.
+either while running, or sending a name or path on /camo/projector/load,
+publishes the new background, and the swarm camouflages again on it.
 """
 from __future__ import annotations
 
@@ -14,12 +14,13 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import Image
+from std_msgs.msg import String
 
-from camo_core.backgrounds import background
+from camo_core.backgrounds import BACKGROUNDS, background
 from camo_core.sensing import ImageError, load_image
 
 from .image_msg import to_msg
-from .qos import BACKGROUND_TOPIC, LATCHED
+from .qos import BACKGROUND_TOPIC, LATCHED, LOAD_TOPIC
 
 
 def load(image_path: str, pattern: str) -> np.ndarray:
@@ -34,6 +35,17 @@ class ProjectorNode(Node):
         self.publisher = self.create_publisher(Image, BACKGROUND_TOPIC, LATCHED)
         self.image = load(self.get_parameter("image").value, self.get_parameter("pattern").value)
         self.add_on_set_parameters_callback(self._on_set)
+        # A topic as well as the parameters: data is a built-in name or an image path.
+        self.create_subscription(String, LOAD_TOPIC, self._on_load, 10)
+        self.publish()
+
+    def _on_load(self, msg: String) -> None:
+        name = msg.data.strip()
+        try:
+            self.image = load("", name) if name in BACKGROUNDS else load(name, "")
+        except (ImageError, ValueError) as exc:
+            self.get_logger().error(f"cannot project {name!r}: {exc}")
+            return
         self.publish()
 
     def publish(self) -> None:
