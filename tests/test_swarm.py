@@ -127,3 +127,28 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     assert sorted(summary["dead"]) == [[2, 3], [5, 6]]
     assert summary["final"][2][3] is None and summary["final"][5][6] is None
     assert summary["pattern"] == "vertical" and summary["votes"]["vertical"] == 62
+
+
+def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
+    out_dir = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.launcher", "--pattern", "forest", "--procs", "2",
+         "--consensus-steps", "5000", "--domain-id", str(domain()), "--out", str(out_dir)],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    for line in proc.stderr:
+        if "consensus 64" in line:
+            break
+        assert time.monotonic() < deadline, "the swarm never reached consensus"
+    time.sleep(1.0)
+    proc.send_signal(2)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err
+    pids = [int(pid) for pid in json.loads((out_dir / "processes.json").read_text())]
+    for pid in pids:
+        assert not os.path.exists(f"/proc/{pid}") or "zombie" in open(f"/proc/{pid}/status").read().lower()
+    summary = json.loads((out_dir / "summary.json").read_text())
+    assert "incomplete" in summary and "dead" not in summary
+    assert len(summary["consensus_trace"]) >= 2 and summary["votes"]["vertical"] == 64
+    assert (out_dir / "figure.png").exists()

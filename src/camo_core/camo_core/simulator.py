@@ -85,7 +85,7 @@ def simulate(
 
     # Phase 2: consensus.
     p, trace = _consensus(grid, params, votes, known_mask, progress)
-    selected = _select(p)
+    selected = select_patterns(p)
 
     # Phase 3: pattern formation.
     final = _formation(grid, params, initial, selected, known_mask, progress)
@@ -130,7 +130,7 @@ def _consensus(grid: Grid, params: CamoParams, votes: np.ndarray, known_mask: np
     return p, np.array(trace)
 
 
-def _select(p: np.ndarray) -> np.ndarray:
+def select_patterns(p: np.ndarray) -> np.ndarray:
     h, v, m = p[:, :, 0], p[:, :, 1], p[:, :, 2]
     return np.where((h > v) & (h > m), HORIZONTAL, np.where((v > h) & (v > m), VERTICAL, MOTTLED))
 

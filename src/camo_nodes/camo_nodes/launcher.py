@@ -18,6 +18,7 @@ from pathlib import Path
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
+from rclpy.signals import SignalHandlerOptions
 
 from camo_core import cli, figures
 from camo_core.backgrounds import BACKGROUNDS
@@ -27,6 +28,7 @@ from camo_projector.qos import LOAD_TOPIC
 from std_msgs.msg import String
 
 from .monitor_node import MonitorNode
+from .shutdown import StopFlag
 from .swarm_worker import events_executor
 
 
@@ -115,9 +117,12 @@ class Swarm:
                 proc.wait()
 
 
-def write_outputs(monitor: MonitorNode, round_index: int, folder: Path, label: str, image) -> dict:
-    result = monitor.result(round_index)
+def write_outputs(monitor: MonitorNode, round_index: int, folder: Path, label: str, image,
+                  partial: bool = False) -> dict:
+    result = monitor.result(round_index, partial)
     summary = result.summary()
+    if partial:
+        summary["incomplete"] = monitor.progress_line(round_index)
     cli.write_summary(summary, folder)
     params = monitor.params
     figures.run_figure(result, image, folder / "figure.png",
@@ -149,7 +154,8 @@ def run(args: argparse.Namespace) -> int:
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.update(env)
 
-    rclpy.init(args=["--ros-args", "--log-level", "warn"])
+    stop = StopFlag()
+    rclpy.init(args=["--ros-args", "--log-level", "warn"], signal_handler_options=SignalHandlerOptions.NO)
     swarm = Swarm(args, params, env, alone)
     (folder / "processes.json").write_text(json.dumps({str(pid): cells for pid, cells in swarm.cells.items()}))
     monitor = MonitorNode(params, silence_timeout=max(3 * args.step_timeout, 5.0))
@@ -165,6 +171,8 @@ def run(args: argparse.Namespace) -> int:
                 loader.publish(String(data=round_label))
             last_print = 0.0
             while not monitor.complete(round_index):
+                if stop:
+                    raise KeyboardInterrupt
                 executor.spin_once(timeout_sec=0.1)
                 now = time.monotonic()
                 if now - last_print > 1.0:
@@ -194,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
             partial = folder if len(labels) == 1 else folder / f"round_{round_index}"
             partial.mkdir(exist_ok=True)
             try:
-                write_outputs(monitor, round_index, partial, labels[round_index] + " (incomplete)", image)
+                write_outputs(monitor, round_index, partial, labels[round_index] + " (incomplete)", image, partial=True)
                 print(f"camo run: wrote what the swarm had reported to {partial}/", file=sys.stderr)
             except Exception as exc:  # noqa: BLE001 - a run stopped early may lack what a figure needs
                 print(f"camo run: nothing to write yet ({exc})", file=sys.stderr)

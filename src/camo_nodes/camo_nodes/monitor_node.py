@@ -16,6 +16,7 @@ from sensor_msgs.msg import Image
 
 from camo_core.params import CamoParams
 from camo_core.result import RunResult, mean_p
+from camo_core.simulator import select_patterns
 from camo_msgs.msg import RobotStatus
 from camo_projector.image_msg import from_msg, to_msg
 from camo_projector.qos import BACKGROUND_TOPIC, LATCHED
@@ -36,6 +37,7 @@ class RoundRecord:
         n, steps = self.params.count, self.params.consensus_steps
         self.sensed = np.full(n, np.nan)
         self.p_trace = np.full((steps + 1, n, 3), np.nan)
+        self.p_latest = np.full((n, 3), np.nan)
         self.initial = np.full(n, -1, np.int64)
         self.state = np.full(n, -1, np.int64)
         self.selected = np.full(n, -1, np.int64)
@@ -47,6 +49,8 @@ class RoundRecord:
         self.phase[i] = msg.phase
         self.sensed[i] = msg.sensed
         self.state[i] = msg.state
+        if msg.phase >= RobotStatus.PHASE_CONSENSUS:
+            self.p_latest[i] = msg.p
         if msg.phase == RobotStatus.PHASE_CONSENSUS:
             self.p_trace[msg.step, i] = msg.p
             self.initial[i] = msg.state
@@ -54,21 +58,32 @@ class RoundRecord:
             self.selected[i] = msg.pattern
             self.finished[i] = True
 
-    def result(self, dead: np.ndarray) -> RunResult:
-        """What the swarm computed, in the reference simulator's form; dead robots masked out."""
+    def result(self, dead: np.ndarray, partial: bool = False) -> RunResult:
+        """What the swarm computed, in the reference simulator's form; dead robots masked out.
+
+        `partial`: the run was stopped early; robots still working count as alive and show
+        their latest report, and the consensus trace ends where the slowest robot was.
+        """
         shape = (self.params.rows, self.params.cols)
-        alive = self.finished & ~dead
+        alive = ~dead & (self.phase >= RobotStatus.PHASE_CONSENSUS) if partial else self.finished & ~dead
+        trace = []
+        for step in self.p_trace:
+            if np.isnan(step[alive]).any():
+                break
+            trace.append(mean_p(step[alive]))
         first = self.p_trace[0]
         votes = np.where(np.isnan(first).any(axis=1), -1, np.argmax(np.nan_to_num(first), axis=1))
         return RunResult(
             params=self.params,
             sensed=self.sensed.reshape(shape),
             votes=votes.reshape(shape),
-            p=self.p_trace[-1].reshape(shape + (3,)),
-            selected=self.selected.reshape(shape),
+            p=self.p_latest.reshape(shape + (3,)),
+            # Stopped early: a robot still in consensus shows what its current p would select.
+            selected=np.where(self.selected < 0, select_patterns(np.nan_to_num(self.p_latest)[None])[0],
+                              self.selected).reshape(shape) if partial else self.selected.reshape(shape),
             initial=self.initial.reshape(shape),
             final=self.state.reshape(shape),
-            consensus_trace=np.array([mean_p(step[alive]) for step in self.p_trace]),
+            consensus_trace=np.array(trace).reshape(-1, 3),
             elapsed_s=time.monotonic() - self.started,
             alive=None if alive.all() else alive.reshape(shape),
         )
@@ -128,8 +143,8 @@ class MonitorNode(Node):
         return (f"round {round_index}: robots done {int(record.finished.sum())}/{self.params.count}"
                 f"{', ' + busy if busy else ''}; silent {int(self.dead(round_index).sum())}")
 
-    def result(self, round_index: int = 0) -> RunResult:
-        return self.record(round_index).result(self.dead(round_index))
+    def result(self, round_index: int = 0, partial: bool = False) -> RunResult:
+        return self.record(round_index).result(self.dead(round_index), partial)
 
     def _publish_pattern(self) -> None:
         latest = self.rounds[max(self.rounds)]

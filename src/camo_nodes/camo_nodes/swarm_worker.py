@@ -7,10 +7,12 @@ import sys
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 
 from camo_core.params import CamoParams
 
 from .robot_node import RobotNode
+from .shutdown import StopFlag
 
 
 def events_executor():
@@ -29,7 +31,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--step-timeout", type=float, default=10.0)
     args, ros_args = parser.parse_known_args(argv)
     params = CamoParams(**json.loads(args.params))
-    rclpy.init(args=ros_args)
+    stop = StopFlag()
+    rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
     nodes = []
     try:
         executor = events_executor()
@@ -40,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
             nodes.append(node)
             executor.add_node(node)
         # spin_once in a loop: EventsExecutor.spin() busy-waits and starves its timers here.
-        while rclpy.ok():
+        while not stop and rclpy.ok():
             executor.spin_once(timeout_sec=0.2)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
