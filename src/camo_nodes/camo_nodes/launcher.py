@@ -40,6 +40,9 @@ def build_parser() -> cli.Parser:
     parser.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited, else 0)")
     parser.add_argument("--step-timeout", type=float, default=10.0,
                         help="seconds a robot waits for a silent neighbour before moving on (default 10)")
+    parser.add_argument("--discovery-timeout", type=float, default=300.0,
+                        help="seconds a robot waits for its neighbours' hellos (default 300: node start-up "
+                             "of big swarms is slow; a robot that never starts costs this once)")
     parser.add_argument("--own-process", action="append", default=[], metavar="ROW,COL",
                         help="run this robot alone in a process of its own (repeatable)")
     parser.add_argument("--then", action="append", default=[], metavar="BACKGROUND",
@@ -88,6 +91,7 @@ class Swarm:
         for cells in groups:
             proc = self._start([python, "-m", "camo_nodes.swarm_worker", "--params", json.dumps(params.as_dict()),
                                 "--cells", ",".join(map(str, cells)), "--step-timeout", str(args.step_timeout),
+                                "--discovery-timeout", str(args.discovery_timeout),
                                 "--ros-args", "--log-level", "error"], env)
             self.cells[proc.pid] = cells
 
@@ -135,8 +139,9 @@ def run(args: argparse.Namespace) -> int:
     params = cli.params_from(args)
     if args.procs < 1 or args.procs > 256:
         raise cli.UsageError(f"--procs must be an integer in 1..256 (got {args.procs})")
-    if args.step_timeout <= 0:
-        raise cli.UsageError(f"--step-timeout must be positive (got {args.step_timeout})")
+    for name in ("step_timeout", "discovery_timeout"):
+        if getattr(args, name) <= 0:
+            raise cli.UsageError(f"--{name.replace('_', '-')} must be positive (got {getattr(args, name)})")
     alone = parse_cells(args.own_process, params)
     image, label = cli.image_from(args)
     cli.sense_image(image, params.rows, params.cols, params.profile)      # a too-small image fails here
@@ -154,11 +159,13 @@ def run(args: argparse.Namespace) -> int:
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     os.environ.update(env)
 
+    launched = time.monotonic()
     stop = StopFlag()
     rclpy.init(args=["--ros-args", "--log-level", "warn"], signal_handler_options=SignalHandlerOptions.NO)
     swarm = Swarm(args, params, env, alone)
     (folder / "processes.json").write_text(json.dumps({str(pid): cells for pid, cells in swarm.cells.items()}))
-    monitor = MonitorNode(params, silence_timeout=max(3 * args.step_timeout, 5.0))
+    monitor = MonitorNode(params, silence_timeout=max(3 * args.step_timeout, 5.0),
+                          startup_timeout=args.discovery_timeout + 60.0)
     loader = monitor.create_publisher(String, LOAD_TOPIC, 10)
     executor = events_executor()
     executor.add_node(monitor)
@@ -170,10 +177,13 @@ def run(args: argparse.Namespace) -> int:
             if round_index > 0:
                 loader.publish(String(data=round_label))
             last_print = 0.0
+            all_voted = None     # when every robot had voted: the steps start
             while not monitor.complete(round_index):
                 if stop:
                     raise KeyboardInterrupt
                 executor.spin_once(timeout_sec=0.1)
+                if all_voted is None and monitor.all_voted(round_index):
+                    all_voted = time.monotonic()
                 now = time.monotonic()
                 if now - last_print > 1.0:
                     print(f"camo run: {monitor.progress_line(round_index)}", file=sys.stderr)
@@ -187,6 +197,12 @@ def run(args: argparse.Namespace) -> int:
             shown = monitor.images[round_index] if len(monitor.images) > round_index else image
             summary = write_outputs(monitor, round_index, round_folder, round_label, shown)
             written.append(summary)
+            done = time.monotonic()
+            steps = params.consensus_steps + params.formation_steps
+            voted = all_voted or done
+            (round_folder / "timing.json").write_text(json.dumps({
+                "startup_s": voted - launched, "steps": steps, "steps_s": done - voted,
+                "steps_per_s": steps / max(done - voted, 1e-9), "launch_to_done_s": done - launched}) + "\n")
             counts = ", ".join(f"{k} {v}" for k, v in summary["votes"].items())
             dead = f"; dead robots {summary['dead']}" if summary.get("dead") else ""
             print(f"pattern: {summary['pattern']} ({counts}){dead}; wrote {round_folder}/summary.json and figure.png")

@@ -129,6 +129,11 @@ class MonitorNode(Node):
                          now - self.started > self.startup_timeout)
         return ~self.record(round_index).finished & quiet
 
+    def all_voted(self, round_index: int = 0) -> bool:
+        """Every live robot has voted and entered consensus."""
+        record = self.record(round_index)
+        return bool(np.all((record.phase >= RobotStatus.PHASE_CONSENSUS) | self.dead(round_index)))
+
     def record(self, round_index: int) -> RoundRecord:
         return self.rounds.setdefault(round_index, RoundRecord(self.params))
 

@@ -39,7 +39,7 @@ _TYPES = {"hello": Hello, "color": Color, "vote": Vote, "state": State}
 
 class RobotNode(Node):
     def __init__(self, params: CamoParams, row: int, col: int, step_timeout: float = 10.0,
-                 discovery_timeout: float = 30.0, **node_kwargs) -> None:
+                 discovery_timeout: float = 300.0, autostart: bool = True, **node_kwargs) -> None:
         self.core = RobotCore(params, row, col)        # raises ValueError for a cell outside the grid
         super().__init__(f"robot_{row}_{col}", namespace="/camo", **node_kwargs)
         self.params = params
@@ -73,8 +73,17 @@ class RobotNode(Node):
         self.phase = DISCOVERY
         self.step = 0
         self.wait_started = time.monotonic()
+        self.started = False
         self.create_timer(0.05, self._on_timer)
-        self._send("hello", Hello(phase=DISCOVERY, step=0, row=row, col=col))
+        if autostart:
+            self.start()
+
+    def start(self) -> None:
+        """Say hello and begin. A worker hosting many robots creates them all first, then starts
+        them, so that no robot's deadline runs while its process is still busy creating nodes."""
+        self.started = True
+        self.wait_started = time.monotonic()
+        self._send("hello", Hello(phase=DISCOVERY, step=0, row=self.core.row, col=self.core.col))
 
     @property
     def done(self) -> bool:
@@ -83,7 +92,7 @@ class RobotNode(Node):
     # ---- receiving ------------------------------------------------------------
 
     def _on_timer(self) -> None:
-        if self.context.ok():          # not while the process is shutting down
+        if self.started and self.context.ok():          # not while the process is shutting down
             self._advance()
 
     def _on_message(self, kind: str, slot: int, msg) -> None:
@@ -99,7 +108,8 @@ class RobotNode(Node):
         else:
             payload = msg.state
         self.inbox[(msg.round, kind, msg.step, slot)] = payload
-        self._advance()
+        if self.started:
+            self._advance()
 
     def _on_background(self, msg: Image) -> None:
         stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
@@ -110,7 +120,8 @@ class RobotNode(Node):
             self.image = from_msg(msg)
         else:
             self.next_image = from_msg(msg)
-        self._advance()
+        if self.started:
+            self._advance()
 
     def _start_next_round(self) -> None:
         """Camouflage again on the new background: same rules, a fresh robot state."""
@@ -232,7 +243,7 @@ def params_from_node(node: Node) -> tuple[CamoParams, int, int, float]:
     """Read a standalone robot's ROS parameters into CamoParams (raises ParameterError)."""
     spec = {"rows": 8, "cols": 8, "row": 0, "col": 0, "profile": "paper", "seed": 0, "rho_meas": 0.0,
             "rho_comm": 0.0, "threshold": 50.0, "consensus_steps": -1, "formation_steps": -1,
-            "step_timeout": 10.0}
+            "step_timeout": 10.0, "discovery_timeout": 300.0}
     values = {name: node.declare_parameter(name, default).value for name, default in spec.items()}
     params = CamoParams(profile=values["profile"], rows=values["rows"], cols=values["cols"],
                         threshold=values["threshold"], seed=values["seed"], rho_meas=values["rho_meas"],
@@ -242,9 +253,10 @@ def params_from_node(node: Node) -> tuple[CamoParams, int, int, float]:
     if not (0 <= values["row"] < params.rows and 0 <= values["col"] < params.cols):
         raise ParameterError(f"cell ({values['row']}, {values['col']}) is outside the "
                              f"{params.rows}x{params.cols} grid")
-    if not values["step_timeout"] > 0:
-        raise ParameterError(f"step_timeout must be positive (got {values['step_timeout']})")
-    return params, values["row"], values["col"], values["step_timeout"]
+    for name in ("step_timeout", "discovery_timeout"):
+        if not values[name] > 0:
+            raise ParameterError(f"{name} must be positive (got {values[name]})")
+    return params, values["row"], values["col"], values["step_timeout"], values["discovery_timeout"]
 
 
 def main(args=None) -> int:
@@ -254,10 +266,10 @@ def main(args=None) -> int:
     try:
         reader = Node("robot_parameters", start_parameter_services=False)
         try:
-            params, row, col, timeout = params_from_node(reader)
+            params, row, col, timeout, discovery_timeout = params_from_node(reader)
         finally:
             reader.destroy_node()
-        node = RobotNode(params, row, col, step_timeout=timeout)
+        node = RobotNode(params, row, col, step_timeout=timeout, discovery_timeout=discovery_timeout)
         while rclpy.ok():
             rclpy.spin_once(node, timeout_sec=0.5)
     except (ParameterError, ValueError) as exc:

@@ -29,6 +29,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--params", required=True, help="CamoParams as JSON")
     parser.add_argument("--cells", required=True, help="robot ids, comma-separated")
     parser.add_argument("--step-timeout", type=float, default=10.0)
+    parser.add_argument("--discovery-timeout", type=float, default=300.0)
     args, ros_args = parser.parse_known_args(argv)
     params = CamoParams(**json.loads(args.params))
     stop = StopFlag()
@@ -39,9 +40,12 @@ def main(argv: list[str] | None = None) -> int:
         for robot in (int(c) for c in args.cells.split(",") if c):
             row, col = divmod(robot, params.cols)
             node = RobotNode(params, row, col, step_timeout=args.step_timeout,
+                             discovery_timeout=args.discovery_timeout, autostart=False,
                              start_parameter_services=False, enable_rosout=False)
             nodes.append(node)
             executor.add_node(node)
+        for node in nodes:
+            node.start()
         # spin_once in a loop: EventsExecutor.spin() busy-waits and starves its timers here.
         while not stop and rclpy.ok():
             executor.spin_once(timeout_sec=0.2)
