@@ -152,3 +152,17 @@ def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
     assert "incomplete" in summary and "dead" not in summary
     assert len(summary["consensus_trace"]) >= 2 and summary["votes"]["vertical"] == 64
     assert (out_dir / "figure.png").exists()
+
+
+def test_bare_exchange_benchmark_measures_a_rate():
+    from camo_nodes.bench_ros import bare_rate
+    rate = bare_rate(3, 10, 1, domain())
+    assert 0 < rate < 10_000
+
+
+def test_run_writes_timing(tmp_path):
+    out = camo_run("--rows", "4", "--cols", "4", "--procs", "1", "--out", str(tmp_path))
+    assert out.returncode == 0, out.stderr[-2000:]
+    timing = json.loads((tmp_path / "timing.json").read_text())
+    assert timing["steps"] == 45 and timing["steps_per_s"] > 0
+    assert 0 < timing["startup_s"] <= timing["launch_to_done_s"]

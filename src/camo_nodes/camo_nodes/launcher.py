@@ -38,8 +38,8 @@ def build_parser() -> cli.Parser:
     parser.add_argument("--procs", type=int, default=os.cpu_count() or 1,
                         help="worker processes hosting the robot nodes (default: number of cores)")
     parser.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited, else 0)")
-    parser.add_argument("--step-timeout", type=float, default=10.0,
-                        help="seconds a robot waits for a silent neighbour before moving on (default 10)")
+    parser.add_argument("--step-timeout", type=float, default=30.0,
+                        help="seconds a robot waits for a silent neighbour before moving on (default 30)")
     parser.add_argument("--discovery-timeout", type=float, default=300.0,
                         help="seconds a robot waits for its neighbours' hellos (default 300: node start-up "
                              "of big swarms is slow; a robot that never starts costs this once)")
@@ -92,7 +92,7 @@ class Swarm:
             proc = self._start([python, "-m", "camo_nodes.swarm_worker", "--params", json.dumps(params.as_dict()),
                                 "--cells", ",".join(map(str, cells)), "--step-timeout", str(args.step_timeout),
                                 "--discovery-timeout", str(args.discovery_timeout),
-                                "--ros-args", "--log-level", "error"], env)
+                                "--ros-args", "--log-level", "warn"], env)
             self.cells[proc.pid] = cells
 
     def _start(self, command: list[str], env: dict) -> subprocess.Popen:
@@ -181,7 +181,10 @@ def run(args: argparse.Namespace) -> int:
             while not monitor.complete(round_index):
                 if stop:
                     raise KeyboardInterrupt
+                # Handle a burst of statuses before the (numpy) checks below, so the monitor keeps up.
                 executor.spin_once(timeout_sec=0.1)
+                for _ in range(200):
+                    executor.spin_once(timeout_sec=0.0)
                 if all_voted is None and monitor.all_voted(round_index):
                     all_voted = time.monotonic()
                 now = time.monotonic()
