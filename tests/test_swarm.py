@@ -107,13 +107,13 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     out_dir = tmp_path / "run"
     proc = subprocess.Popen(
         [sys.executable, "-m", "camo_nodes.launcher", "--pattern", "forest", "--procs", "1",
-         "--own-process", "2,3", "--own-process", "5,6", "--step-timeout", "2",
-         "--consensus-steps", "200", "--domain-id", str(domain()), "--out", str(out_dir)],
+         "--own-process", "2,3", "--own-process", "5,6", "--step-timeout", "2", "--discovery-timeout", "20",
+         "--consensus-steps", "1000", "--domain-id", str(domain()), "--out", str(out_dir)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     victims = []
     deadline = time.monotonic() + 120
     for line in proc.stderr:
-        if "consensus" in line and (out_dir / "processes.json").exists():
+        if "consensus 64" in line:          # every robot has voted and is in consensus
             processes = json.loads((out_dir / "processes.json").read_text())
             victims = [int(pid) for pid, cells in processes.items() if cells in ([19], [46])]
             for pid in victims:

@@ -225,7 +225,12 @@ def run(args: argparse.Namespace) -> int:
                 print(f"camo run: wrote what the swarm had reported to {partial}/", file=sys.stderr)
             except Exception as exc:  # noqa: BLE001 - a run stopped early may lack what a figure needs
                 print(f"camo run: nothing to write yet ({exc})", file=sys.stderr)
+        # Executor first, then node, then context: the EventsExecutor must let go of the
+        # node's handles before they are destroyed, or interpreter exit can crash.
+        executor.shutdown()
+        executor.remove_node(monitor)
         monitor.destroy_node()
+        del executor
         rclpy.try_shutdown()
     return code
 

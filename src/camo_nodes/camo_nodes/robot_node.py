@@ -34,12 +34,19 @@ from .topics import STATUS_TOPIC, history_qos, robot_topic
 DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = (RobotStatus.PHASE_DISCOVERY, RobotStatus.PHASE_SENSING,
                                                   RobotStatus.PHASE_CONSENSUS, RobotStatus.PHASE_FORMATION,
                                                   RobotStatus.PHASE_DONE)
-_TYPES = {"hello": Hello, "color": Color, "vote": Vote, "state": State}
+MESSAGE_TYPES = {"hello": Hello, "color": Color, "vote": Vote, "state": State}
+
+
+def inputs(neighbors: list[int | None]) -> list[tuple[int, str]]:
+    """(slot, kind) a robot listens to: hellos and states from slots 0-11, colours 0-3, votes 0-7."""
+    limit = {"hello": 12, "color": 4, "vote": 8, "state": 12}
+    return [(slot, kind) for slot, n in enumerate(neighbors) if n is not None
+            for kind in MESSAGE_TYPES if slot < limit[kind]]
 
 
 class RobotNode(Node):
     def __init__(self, params: CamoParams, row: int, col: int, step_timeout: float = 10.0,
-                 discovery_timeout: float = 300.0, autostart: bool = True, **node_kwargs) -> None:
+                 discovery_timeout: float = 300.0, autostart: bool = True, hub=None, **node_kwargs) -> None:
         self.core = RobotCore(params, row, col)        # raises ValueError for a cell outside the grid
         super().__init__(f"robot_{row}_{col}", namespace="/camo", **node_kwargs)
         self.params = params
@@ -48,21 +55,20 @@ class RobotNode(Node):
         depth = max(params.consensus_steps, params.formation_steps) + 4
         qos = history_qos(depth)
         me = self.core.id
-        self.pub = {kind: self.create_publisher(t, robot_topic(me, kind), qos) for kind, t in _TYPES.items()}
-        # Every status of a round stays available to a monitor or recorder that joins late.
-        statuses = params.consensus_steps + params.formation_steps + 8
-        self.status_pub = self.create_publisher(RobotStatus, STATUS_TOPIC, history_qos(statuses))
-        for slot, neighbor in enumerate(self.core.neighbors):
-            if neighbor is None:
-                continue
-            for kind, msg_type in _TYPES.items():
-                if kind == "color" and slot >= 4:
-                    continue
-                if kind == "vote" and slot >= 8:
-                    continue
-                self.create_subscription(msg_type, robot_topic(neighbor, kind),
+        self.pub = {kind: self.create_publisher(t, robot_topic(me, kind), qos) for kind, t in MESSAGE_TYPES.items()}
+        if hub is None:
+            # Every status of a round stays available to a monitor or recorder that joins late.
+            statuses = params.consensus_steps + params.formation_steps + 8
+            self.status_pub = self.create_publisher(RobotStatus, STATUS_TOPIC, history_qos(statuses))
+            for slot, kind in inputs(self.core.neighbors):
+                self.create_subscription(MESSAGE_TYPES[kind], robot_topic(self.core.neighbors[slot], kind),
                                          lambda msg, s=slot, k=kind: self._on_message(k, s, msg), qos)
-        self.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
+            self.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
+        else:
+            # Hosted by a worker: its hub subscribes once per topic for all the robots it hosts
+            # and hands each robot what its neighbours sent (DDS entities cost quadratic set-up time).
+            self.status_pub = hub.status_pub
+            hub.register(self)
         # What has been delivered, by (round, kind, step, slot); early messages wait here for their step.
         self.inbox: dict[tuple[int, str, int, int], object] = {}
         self.silent: set[int] = set()

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 import rclpy
@@ -11,8 +12,52 @@ from rclpy.signals import SignalHandlerOptions
 
 from camo_core.params import CamoParams
 
-from .robot_node import RobotNode
+from camo_msgs.msg import RobotStatus
+from camo_projector.qos import BACKGROUND_TOPIC, LATCHED
+from rclpy.node import Node
+from sensor_msgs.msg import Image
+
+from .robot_node import MESSAGE_TYPES, RobotNode, inputs
+from .topics import STATUS_TOPIC, history_qos, robot_topic
 from .shutdown import StopFlag
+
+
+class Hub(Node):
+    """One subscription per neighbour topic for all the robots of this process.
+
+    Each robot still publishes on its own topics; what its neighbours publish is
+    received once here and handed to every local robot that listens to it, in
+    that robot's slot. This keeps a process's DDS entities near 5 per robot
+    instead of 40, and entity set-up time grows with their square.
+    """
+
+    def __init__(self, params: CamoParams, robots: int) -> None:
+        super().__init__(f"swarm_worker_{os.getpid()}", namespace="/camo", start_parameter_services=False,
+                         enable_rosout=False)
+        self.qos = history_qos(max(params.consensus_steps, params.formation_steps) + 4)
+        statuses = (params.consensus_steps + params.formation_steps + 8) * robots
+        self.status_pub = self.create_publisher(RobotStatus, STATUS_TOPIC, history_qos(statuses))
+        self.listeners: dict[tuple[int, str], list[tuple[RobotNode, int]]] = {}
+        self.robots: list[RobotNode] = []
+        self.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
+
+    def register(self, robot: RobotNode) -> None:
+        self.robots.append(robot)
+        for slot, kind in inputs(robot.core.neighbors):
+            key = (robot.core.neighbors[slot], kind)
+            if key not in self.listeners:
+                self.listeners[key] = []
+                self.create_subscription(MESSAGE_TYPES[kind], robot_topic(key[0], kind),
+                                         lambda msg, k=key: self._dispatch(k, msg), self.qos)
+            self.listeners[key].append((robot, slot))
+
+    def _dispatch(self, key: tuple[int, str], msg) -> None:
+        for robot, slot in self.listeners[key]:
+            robot._on_message(key[1], slot, msg)
+
+    def _on_background(self, msg: Image) -> None:
+        for robot in self.robots:
+            robot._on_background(msg)
 
 
 def events_executor():
@@ -35,16 +80,21 @@ def main(argv: list[str] | None = None) -> int:
     stop = StopFlag()
     rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
     nodes = []
+    executor = None
     try:
         executor = events_executor()
-        for robot in (int(c) for c in args.cells.split(",") if c):
+        cells = [int(c) for c in args.cells.split(",") if c]
+        hub = Hub(params, len(cells))
+        nodes.append(hub)
+        executor.add_node(hub)
+        for robot in cells:
             row, col = divmod(robot, params.cols)
             node = RobotNode(params, row, col, step_timeout=args.step_timeout,
-                             discovery_timeout=args.discovery_timeout, autostart=False,
+                             discovery_timeout=args.discovery_timeout, autostart=False, hub=hub,
                              start_parameter_services=False, enable_rosout=False)
             nodes.append(node)
             executor.add_node(node)
-        for node in nodes:
+        for node in nodes[1:]:
             node.start()
         # spin_once in a loop: EventsExecutor.spin() busy-waits and starves its timers here.
         while not stop and rclpy.ok():
@@ -52,8 +102,13 @@ def main(argv: list[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        if executor is not None:
+            executor.shutdown()
+            for node in nodes:
+                executor.remove_node(node)
         for node in nodes:
             node.destroy_node()
+        executor = None
         rclpy.try_shutdown()
     return 0
 
