@@ -127,6 +127,7 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     assert sorted(summary["dead"]) == [[2, 3], [5, 6]]
     assert summary["final"][2][3] is None and summary["final"][5][6] is None
     assert summary["pattern"] == "vertical" and summary["votes"]["vertical"] == 62
+    assert "2 dead robots [[2, 3], [5, 6]]" in rest
 
 
 def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
@@ -166,3 +167,33 @@ def test_run_writes_timing(tmp_path):
     timing = json.loads((tmp_path / "timing.json").read_text())
     assert timing["steps"] == 45 and timing["steps_per_s"] > 0
     assert 0 < timing["startup_s"] <= timing["launch_to_done_s"]
+
+
+def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
+    import rclpy
+    from sensor_msgs.msg import Image
+
+    domain_id = domain()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.launcher", "--pattern", "forest", "--rows", "5", "--cols", "7",
+         "--procs", "1", "--consensus-steps", "400", "--domain-id", str(domain_id), "--out", str(tmp_path)],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    os.environ["ROS_DOMAIN_ID"] = str(domain_id)
+    rclpy.init()
+    images = []
+    try:
+        node = rclpy.create_node("pattern_viewer")
+        node.create_subscription(Image, "/swarm/pattern", images.append, 10)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not any(set(bytes(m.data)) <= {0, 255} for m in images):
+            rclpy.spin_once(node, timeout_sec=0.2)
+        node.destroy_node()
+    finally:
+        rclpy.shutdown()
+        proc.communicate(timeout=240)
+    assert images, "no /swarm/pattern image"
+    last = images[-1]
+    assert (last.height, last.width, last.encoding) == (5, 7, "mono8")
+    # Once every robot has reported, each pixel is a robot's state: black on, white off.
+    assert set(bytes(last.data)) <= {0, 255}
+    assert proc.returncode == 0

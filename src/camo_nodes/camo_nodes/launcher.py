@@ -207,7 +207,9 @@ def run(args: argparse.Namespace) -> int:
                 "startup_s": voted - launched, "steps": steps, "steps_s": done - voted,
                 "steps_per_s": steps / max(done - voted, 1e-9), "launch_to_done_s": done - launched}) + "\n")
             counts = ", ".join(f"{k} {v}" for k, v in summary["votes"].items())
-            dead = f"; dead robots {summary['dead']}" if summary.get("dead") else ""
+            dead_cells = summary.get("dead", [])
+            dead = f"; {len(dead_cells)} dead robots {dead_cells[:8]}{' ...' if len(dead_cells) > 8 else ''}" \
+                if dead_cells else ""
             print(f"pattern: {summary['pattern']} ({counts}){dead}; wrote {round_folder}/summary.json and figure.png")
     except (KeyboardInterrupt, ExternalShutdownException):
         print("camo run: interrupted; stopping the swarm and writing what it has", file=sys.stderr)
