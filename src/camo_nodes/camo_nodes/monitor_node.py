@@ -42,11 +42,13 @@ class RoundRecord:
         self.state = np.full(n, -1, np.int64)
         self.selected = np.full(n, -1, np.int64)
         self.phase = np.zeros(n, np.int64)
+        self.step = np.zeros(n, np.int64)
         self.finished = np.zeros(n, bool)
 
     def add(self, msg: RobotStatus) -> None:
         i = msg.sender_id
         self.phase[i] = msg.phase
+        self.step[i] = msg.step
         self.sensed[i] = msg.sensed
         self.state[i] = msg.state
         if msg.phase >= RobotStatus.PHASE_CONSENSUS:
@@ -144,7 +146,13 @@ class MonitorNode(Node):
     def progress_line(self, round_index: int = 0) -> str:
         record = self.record(round_index)
         counts = np.bincount(record.phase, minlength=5)
-        busy = ", ".join(f"{PHASE_NAMES[k]} {counts[k]}" for k in range(4) if counts[k])
+        parts = []
+        for k in range(4):
+            if counts[k]:
+                steps = record.step[record.phase == k]
+                where = f" (step {steps.min()}-{steps.max()})" if k >= RobotStatus.PHASE_CONSENSUS else ""
+                parts.append(f"{PHASE_NAMES[k]} {counts[k]}{where}")
+        busy = ", ".join(parts)
         return (f"round {round_index}: robots done {int(record.finished.sum())}/{self.params.count}"
                 f"{', ' + busy if busy else ''}; silent {int(self.dead(round_index).sum())}")
 
