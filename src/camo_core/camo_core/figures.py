@@ -43,11 +43,7 @@ def run_figure(result: RunResult, image: np.ndarray | None, path: str | Path, ti
         ax.set_yticks([])
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def errors_figure(rows: list[dict], random_level: float, path: str | Path, title: str = "") -> Path:
@@ -64,6 +60,10 @@ def errors_figure(rows: list[dict], random_level: float, path: str | Path, title
     ax.legend()
     if title:
         ax.set_title(title)
+    return _save(fig, path)
+
+
+def _save(fig, path: str | Path) -> Path:
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=100)

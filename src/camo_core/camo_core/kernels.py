@@ -11,15 +11,14 @@ import numpy as np
 from numba import njit, prange
 
 from .grid import NEIGHBOR_OFFSETS
-from .rules import ACTIVATORS, DIAGONAL_FALLBACKS, HORIZONTAL, INHIBITORS, MOTTLED, VERTICAL
+from .rules import ACTIVATORS, DIAGONAL_FALLBACKS, HORIZONTAL, INHIBITORS, MOTTLED, OPPOSITE_CARDINAL, VERTICAL
 
 DI = np.array([o[0] for o in NEIGHBOR_OFFSETS], dtype=np.int64)
 DJ = np.array([o[1] for o in NEIGHBOR_OFFSETS], dtype=np.int64)
 # Fallback slots per slot (-1: none), in the order SPEC 2.4 tries them.
-_OPPOSITE = {0: 2, 2: 0, 1: 3, 3: 1, 8: 10, 10: 8, 9: 11, 11: 9}
 FALLBACK = np.full((12, 3), -1, dtype=np.int64)
 for _s in range(12):
-    _chain = DIAGONAL_FALLBACKS.get(_s) or (_OPPOSITE[_s],)
+    _chain = DIAGONAL_FALLBACKS.get(_s) or (OPPOSITE_CARDINAL[_s],)
     FALLBACK[_s, :len(_chain)] = _chain
 # ROLE[pattern, slot]: 1 activator, -1 inhibitor, 0 unused.
 ROLE = np.zeros((3, 12), dtype=np.int64)

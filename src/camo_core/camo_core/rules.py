@@ -13,7 +13,7 @@ HORIZONTAL, VERTICAL, MOTTLED = 0, 1, 2
 PATTERN_NAMES = ("horizontal", "vertical", "mottled")
 
 # Slot pairs that stand in for each other when one is missing (SPEC 2.2, 2.4).
-_OPPOSITE_CARDINAL = {0: 2, 2: 0, 1: 3, 3: 1, 8: 10, 10: 8, 9: 11, 11: 9}
+OPPOSITE_CARDINAL = {0: 2, 2: 0, 1: 3, 3: 1, 8: 10, 10: 8, 9: 11, 11: 9}
 # Diagonals: mirror across the robot's row, then across its column, then point-opposite.
 DIAGONAL_FALLBACKS: dict[int, tuple[int, int, int]] = {
     4: (5, 7, 6),
@@ -122,7 +122,7 @@ def fill_states(received: Sequence[int | None]) -> list[int]:
     for slot in range(12):
         value = received[slot]
         if value is None:
-            candidates = DIAGONAL_FALLBACKS.get(slot) or (_OPPOSITE_CARDINAL[slot],)
+            candidates = DIAGONAL_FALLBACKS.get(slot) or (OPPOSITE_CARDINAL[slot],)
             value = next((received[c] for c in candidates if received[c] is not None), 0)
         filled.append(value)
     return filled

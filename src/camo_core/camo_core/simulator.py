@@ -43,9 +43,6 @@ class Grid:
         di, dj = NEIGHBOR_OFFSETS[slot]
         return padded[..., PAD + di:PAD + di + self.rows, PAD + dj:PAD + dj + self.cols]
 
-    def interior(self, padded: np.ndarray) -> np.ndarray:
-        return padded[..., PAD:PAD + self.rows, PAD:PAD + self.cols]
-
     def arrivals(self, params: CamoParams, stream: int, step: int, slots: range) -> list[np.ndarray] | None:
         """Per slot, which robots receive their neighbour's message (None: the link loses nothing)."""
         if params.rho_comm <= 0.0:
