@@ -204,3 +204,50 @@ def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
     # Every pixel is a robot's state (black on, white off): the forest's initial stripes here.
     assert bytes(last.data) != bytes([last.data[0]]) * 35
     assert proc.returncode == 130
+
+
+def test_robots_started_alone_with_robot_node_finish_like_the_simulator(tmp_path):
+    import rclpy
+    from camo_msgs.msg import RobotStatus
+
+    from camo_nodes.topics import STATUS_TOPIC, status_listener_qos
+
+    domain_id = domain()
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
+    procs = [subprocess.Popen([sys.executable, "-m", "camo_projector.projector_node", "--ros-args",
+                               "-p", "pattern:=desert"], env=env, stderr=subprocess.DEVNULL)]
+    for col in range(3):
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "camo_nodes.robot_node", "--ros-args", "-p", "rows:=2", "-p", "cols:=3",
+             "-p", "row:=1", "-p", f"col:={col}", "-p", "seed:=4", "-p", "rho_comm:=0.2"], env=env))
+    # The other row's robots share one process, as a second machine might.
+    procs.append(subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.swarm_worker", "--params",
+         json.dumps({"rows": 2, "cols": 3, "seed": 4, "rho_comm": 0.2}), "--cells", "0,1,2"], env=env))
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    done = {}
+    try:
+        node = rclpy.create_node("status_listener", context=context)
+        node.create_subscription(RobotStatus, STATUS_TOPIC,
+                                 lambda m: done.__setitem__(m.sender_id, m.state) if m.phase == 4 else None,
+                                 status_listener_qos())
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        deadline = time.monotonic() + 120
+        while len(done) < 6 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.2)
+        executor.shutdown()
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+        for proc in procs:
+            proc.send_signal(2)
+        for proc in procs:
+            proc.wait(timeout=30)
+    sim = run_camo("sim", "--pattern", "desert", "--rows", "2", "--cols", "3", "--seed", "4", "--rho-comm", "0.2",
+                   "--out", str(tmp_path))
+    assert sim.returncode == 0, sim.stderr
+    final = json.loads((tmp_path / "summary.json").read_text())["final"]
+    assert done == {r * 3 + c: final[r][c] for r in range(2) for c in range(3)}
+    assert all(proc.returncode == 0 for proc in procs[1:4])
