@@ -15,11 +15,17 @@ from camo_core.params import CamoParams
 from camo_msgs.msg import RobotStatus
 from camo_projector.qos import BACKGROUND_TOPIC, LATCHED
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image
 
 from .robot_node import MESSAGE_TYPES, RobotNode, inputs
 from .topics import STATUS_TOPIC, history_qos, robot_topic
 from .shutdown import StopFlag
+
+
+# Hosted robots need no parameter, rosout or type-description services: fewer DDS entities.
+LEAN_NODE = {"start_parameter_services": False, "enable_rosout": False,
+             "parameter_overrides": [Parameter("start_type_description_service", value=False)]}
 
 
 class Hub(Node):
@@ -32,8 +38,7 @@ class Hub(Node):
     """
 
     def __init__(self, params: CamoParams, robots: int) -> None:
-        super().__init__(f"swarm_worker_{os.getpid()}", namespace="/camo", start_parameter_services=False,
-                         enable_rosout=False)
+        super().__init__(f"swarm_worker_{os.getpid()}", namespace="/camo", **LEAN_NODE)
         self.qos = history_qos(max(params.consensus_steps, params.formation_steps) + 4)
         statuses = (params.consensus_steps + params.formation_steps + 8) * robots
         self.status_pub = self.create_publisher(RobotStatus, STATUS_TOPIC, history_qos(statuses))
@@ -91,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
             row, col = divmod(robot, params.cols)
             node = RobotNode(params, row, col, step_timeout=args.step_timeout,
                              discovery_timeout=args.discovery_timeout, autostart=False, hub=hub,
-                             start_parameter_services=False, enable_rosout=False)
+                             **LEAN_NODE)
             nodes.append(node)
             executor.add_node(node)
         for node in nodes[1:]:
