@@ -40,9 +40,9 @@ def build_parser() -> cli.Parser:
     parser.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited, else 0)")
     parser.add_argument("--step-timeout", type=float, default=30.0,
                         help="seconds a robot waits for a silent neighbour before moving on (default 30)")
-    parser.add_argument("--discovery-timeout", type=float, default=300.0,
-                        help="seconds a robot waits for its neighbours' hellos (default 300: node start-up "
-                             "of big swarms is slow; a robot that never starts costs this once)")
+    parser.add_argument("--discovery-timeout", type=float, default=None,
+                        help="seconds a robot waits for its neighbours' hellos (default 300 + 0.15 per robot: "
+                             "node start-up of big swarms is slow; a robot that never starts costs this once)")
     parser.add_argument("--own-process", action="append", default=[], metavar="ROW,COL",
                         help="run this robot alone in a process of its own (repeatable)")
     parser.add_argument("--then", action="append", default=[], metavar="BACKGROUND",
@@ -139,6 +139,8 @@ def run(args: argparse.Namespace) -> int:
     params = cli.params_from(args)
     if args.procs < 1 or args.procs > 256:
         raise cli.UsageError(f"--procs must be an integer in 1..256 (got {args.procs})")
+    if args.discovery_timeout is None:
+        args.discovery_timeout = 300.0 + 0.15 * params.count     # 64x64 needed about 505 s to start here
     for name in ("step_timeout", "discovery_timeout"):
         if getattr(args, name) <= 0:
             raise cli.UsageError(f"--{name.replace('_', '-')} must be positive (got {getattr(args, name)})")
