@@ -10,20 +10,10 @@ NEIGHBOR_OFFSETS: tuple[tuple[int, int], ...] = (
 NUM_SLOTS = 12
 DESCRIPTOR_SLOTS = range(4)
 CONSENSUS_SLOTS = range(8)
-FORMATION_SLOTS = range(12)
-
-# The slot a neighbour in slot k sees us in: the point-opposite offset.
-OPPOSITE_SLOT: tuple[int, ...] = tuple(
-    NEIGHBOR_OFFSETS.index((-di, -dj)) for di, dj in NEIGHBOR_OFFSETS
-)
 
 
 def robot_id(row: int, col: int, cols: int) -> int:
     return row * cols + col
-
-
-def cell_of(robot: int, cols: int) -> tuple[int, int]:
-    return divmod(robot, cols)
 
 
 def neighbor_cell(row: int, col: int, slot: int, rows: int, cols: int) -> tuple[int, int] | None:

@@ -46,13 +46,6 @@ def to_gray(image: np.ndarray, profile: str) -> np.ndarray:
     return 0.5 * bgr[:, :, 2] + 0.5 * bgr[:, :, 1]
 
 
-def rgb_to_gray(r: float, g: float, b: float, profile: str) -> float:
-    """One colour reading (a Droplet's get_rgb) to grey, with the profile's weights."""
-    if profile == "paper":
-        return 0.299 * r + 0.587 * g + 0.114 * b
-    return 0.5 * r + 0.5 * g
-
-
 def block_means(gray: np.ndarray, rows: int, cols: int) -> np.ndarray:
     """Mean grey value of the image block each robot covers (rows x cols float64)."""
     height, width = gray.shape[:2]

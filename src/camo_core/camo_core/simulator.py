@@ -33,9 +33,9 @@ class Grid:
         self.ids = np.arange(rows * cols, dtype=np.uint64).reshape(rows, cols)
         self.exists = [self.view(self.pad(np.ones((rows, cols), bool)), s) for s in range(NUM_SLOTS)]
 
-    def pad(self, a: np.ndarray, fill: float = 0) -> np.ndarray:
+    def pad(self, a: np.ndarray) -> np.ndarray:
         shape = a.shape[:-2] + (self.rows + 2 * PAD, self.cols + 2 * PAD)
-        out = np.full(shape, fill, dtype=a.dtype)
+        out = np.zeros(shape, dtype=a.dtype)
         out[..., PAD:PAD + self.rows, PAD:PAD + self.cols] = a
         return out
 

@@ -3,7 +3,6 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 STATUS_TOPIC = "/swarm/status"
 PATTERN_TOPIC = "/swarm/pattern"
-KINDS = ("hello", "color", "vote", "state")
 
 
 def robot_topic(robot_id: int, kind: str) -> str:
