@@ -14,7 +14,7 @@ setup(
     zip_safe=True,
     maintainer="camo developers",
     maintainer_email="camo@example.org",
-    description="Camouflage swarm nodes: robot, monitor, swarm worker, launcher.",
+    description="Camouflage swarm nodes: robot, monitor, swarm worker, launcher, recorder, replay.",
     license="MIT",
     entry_points={
         "console_scripts": [
@@ -22,6 +22,10 @@ setup(
             "monitor_node = camo_nodes.monitor_node:main",
             "swarm_worker = camo_nodes.swarm_worker:main",
             "camo_run = camo_nodes.launcher:main",
+            "recorder_node = camo_nodes.recorder_node:main",
+            "camo_replay = camo_nodes.replay:main",
+            "camo_render = camo_nodes.render:main",
+            "camo_bag = camo_nodes.bag_cli:main",
         ],
     },
 )

@@ -6,6 +6,7 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.patches  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -60,6 +61,36 @@ def errors_figure(rows: list[dict], random_level: float, path: str | Path, title
     ax.legend()
     if title:
         ax.set_title(title)
+    return _save(fig, path)
+
+
+def timeline_figure(frames: list[tuple[str, np.ndarray]], path: str | Path, title: str = "") -> Path:
+    """A strip of small grids: selected pattern at each consensus step (c<k>), state at each formation step (f<k>).
+
+    Consensus frames hold 0/1/2 (horizontal/vertical/mottled), formation frames 0/1 (off/on); -1 is
+    a robot that did not report that step (grey).
+    """
+    consensus = [f for f in frames if f[0].startswith("c")]
+    formation = [f for f in frames if f[0].startswith("f")]
+    per_row = max(1, min(12, max(len(consensus), len(formation))))
+    rows = -(-len(consensus) // per_row) + -(-len(formation) // per_row)
+    fig, axes = plt.subplots(rows, per_row, figsize=(1.2 * per_row, 1.35 * rows + 0.8), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    colors = np.array([matplotlib.colors.to_rgb(c) for c in PATTERN_COLORS.values()] + [(0.5, 0.5, 0.5)])
+    grey = {0: 1.0, 1: 0.0, -1: 0.5}
+    row = 0
+    for group, paint in ((consensus, lambda g: colors[np.where(g < 0, 3, g)]),
+                         (formation, lambda g: np.vectorize(grey.get)(g).astype(float)[..., None].repeat(3, -1))):
+        for k, (label, grid) in enumerate(group):
+            ax = axes[row + k // per_row, k % per_row]
+            ax.imshow(paint(np.asarray(grid)), interpolation="nearest")
+            ax.set_title(label, fontsize=7)
+        row += -(-len(group) // per_row)
+    handles = [matplotlib.patches.Patch(color=c, label=n) for n, c in PATTERN_COLORS.items()]
+    fig.legend(handles=handles, loc="upper right", fontsize=7, ncol=3)
+    fig.suptitle(title or "consensus steps (c: selected pattern), then formation steps (f: dark = on)",
+                 fontsize=9, x=0.02, ha="left")
     return _save(fig, path)
 
 

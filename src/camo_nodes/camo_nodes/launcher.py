@@ -20,16 +20,20 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 
-from camo_core import cli, figures
+from camo_core import cli
 from camo_core.backgrounds import BACKGROUNDS
 from camo_core.params import ParameterError
 from camo_core.sensing import ImageError, load_image
-from camo_projector.qos import LOAD_TOPIC
+from camo_projector.qos import BACKGROUND_TOPIC, LATCHED, LOAD_TOPIC
 from std_msgs.msg import String
 
-from .monitor_node import MonitorNode
+from .bag import BagError
+from .monitor_node import MonitorNode, write_round
+from .recorder_node import RecorderNode
+from .robot_node import MESSAGE_TYPES
 from .shutdown import StopFlag
 from .swarm_worker import events_executor
+from .topics import PARAMS_TOPIC, PATTERN_TOPIC, STATUS_TOPIC, robot_topic
 
 
 def build_parser() -> cli.Parser:
@@ -48,6 +52,11 @@ def build_parser() -> cli.Parser:
     parser.add_argument("--then", action="append", default=[], metavar="BACKGROUND",
                         help="after the camouflage finishes, project this built-in name or image file and "
                              "camouflage again (repeatable); each round writes round_<k>/")
+    parser.add_argument("--record", metavar="BAG", default=None,
+                        help="record every topic of the run into this MCAP bag folder (as rosbag2 does)")
+    parser.add_argument("--no-projector", action="store_true",
+                        help="start no projector: the background comes from elsewhere, e.g. "
+                             "./camo replay BAG --topics /camo/background")
     return parser
 
 
@@ -78,12 +87,8 @@ class Swarm:
         self.procs: list[subprocess.Popen] = []
         self.cells: dict[int, list[int]] = {}      # pid -> robot ids
         python = sys.executable
-        projector = [python, "-m", "camo_projector.projector_node", "--ros-args", "--log-level", "warn"]
-        if args.image:
-            projector += ["-p", f"image:={Path(args.image).resolve()}"]
-        else:
-            projector += ["-p", f"pattern:={args.pattern or args.default_pattern}"]
-        self._start(projector, env)
+        if not args.no_projector:
+            self._start_projector(args, env)
         shared = [i for i in range(params.count) if i not in alone]
         groups = [[i] for i in alone] + (split_cells(len(shared), args.procs) if shared else [])
         for group in groups[len(alone):]:
@@ -94,6 +99,14 @@ class Swarm:
                                 "--discovery-timeout", str(args.discovery_timeout),
                                 "--ros-args", "--log-level", "warn"], env)
             self.cells[proc.pid] = cells
+
+    def _start_projector(self, args: argparse.Namespace, env: dict) -> None:
+        projector = [sys.executable, "-m", "camo_projector.projector_node", "--ros-args", "--log-level", "warn"]
+        if args.image:
+            projector += ["-p", f"image:={Path(args.image).resolve()}"]
+        else:
+            projector += ["-p", f"pattern:={args.pattern or args.default_pattern}"]
+        self._start(projector, env)
 
     def _start(self, command: list[str], env: dict) -> subprocess.Popen:
         # Own process group: the terminal's Ctrl-C reaches us, and we stop them in order.
@@ -123,16 +136,27 @@ class Swarm:
 
 def write_outputs(monitor: MonitorNode, round_index: int, folder: Path, label: str, image,
                   partial: bool = False) -> dict:
-    result = monitor.result(round_index, partial)
-    summary = result.summary()
-    if partial:
-        summary["incomplete"] = monitor.progress_line(round_index)
-    cli.write_summary(summary, folder)
-    params = monitor.params
-    figures.run_figure(result, image, folder / "figure.png",
-                       title=f"{label}: {params.rows}x{params.cols} robot nodes, {params.profile} profile, "
-                             f"seed {params.seed}, rho_meas {params.rho_meas:g}, rho_comm {params.rho_comm:g}")
-    return summary
+    return write_round(monitor.result(round_index, partial), image, folder, label,
+                       monitor.progress_line(round_index) if partial else None)
+
+
+def recorded_topics(params, switching: bool) -> set[str]:
+    """The topics a recording of a whole run must hold."""
+    topics = {robot_topic(i, kind) for i in range(params.count) for kind in MESSAGE_TYPES}
+    topics |= {STATUS_TOPIC, PATTERN_TOPIC, PARAMS_TOPIC, BACKGROUND_TOPIC}
+    return topics | {LOAD_TOPIC} if switching else topics
+
+
+def drain(executor, recorder: RecorderNode, topics: set[str], stop, quiet: float = 1.0, limit: float = 30.0) -> None:
+    """Before the robots stop: let the recorder subscribe to every topic and take in what is still coming."""
+    deadline = time.monotonic() + limit
+    while time.monotonic() < deadline and not stop:
+        executor.spin_once(timeout_sec=0.1)
+        if recorder.recording(topics) and recorder.idle_for(frozenset({PATTERN_TOPIC})) > quiet:
+            return
+    missing = sorted(topics - recorder.recording_now())
+    if missing and not stop:
+        print(f"camo run: the recording lacks {len(missing)} topics, e.g. {missing[:3]}", file=sys.stderr)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -164,13 +188,25 @@ def run(args: argparse.Namespace) -> int:
     launched = time.monotonic()
     stop = StopFlag()
     rclpy.init(args=["--ros-args", "--log-level", "warn"], signal_handler_options=SignalHandlerOptions.NO)
-    swarm = Swarm(args, params, env, alone)
-    (folder / "processes.json").write_text(json.dumps({str(pid): cells for pid, cells in swarm.cells.items()}))
+    recorder = None
+    if args.record:
+        try:
+            recorder = RecorderNode(args.record)     # first, so that it hears the run from its start
+        except BagError as exc:
+            rclpy.try_shutdown()
+            raise cli.UsageError(str(exc)) from None
+        print(f"camo run: recording every topic to {recorder.bag.file}", file=sys.stderr)
     monitor = MonitorNode(params, silence_timeout=max(3 * args.step_timeout, 5.0),
                           startup_timeout=args.discovery_timeout + 60.0)
     loader = monitor.create_publisher(String, LOAD_TOPIC, 10)
+    monitor.create_publisher(String, PARAMS_TOPIC, LATCHED).publish(
+        String(data=json.dumps({"params": params.as_dict(), "backgrounds": labels})))
     executor = events_executor()
     executor.add_node(monitor)
+    if recorder is not None:
+        executor.add_node(recorder)
+    swarm = Swarm(args, params, env, alone)
+    (folder / "processes.json").write_text(json.dumps({str(pid): cells for pid, cells in swarm.cells.items()}))
     code = 0
     round_index = 0
     written: list[dict] = []
@@ -213,6 +249,8 @@ def run(args: argparse.Namespace) -> int:
             dead = f"; {len(dead_cells)} dead robots {dead_cells[:8]}{' ...' if len(dead_cells) > 8 else ''}" \
                 if dead_cells else ""
             print(f"pattern: {summary['pattern']} ({counts}){dead}; wrote {round_folder}/summary.json and figure.png")
+        if recorder is not None:
+            drain(executor, recorder, recorded_topics(params, len(labels) > 1), stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         print("camo run: interrupted; stopping the swarm and writing what it has", file=sys.stderr)
         code = 130
@@ -229,11 +267,17 @@ def run(args: argparse.Namespace) -> int:
                 print(f"camo run: wrote what the swarm had reported to {partial}/", file=sys.stderr)
             except Exception as exc:  # noqa: BLE001 - a run stopped early may lack what a figure needs
                 print(f"camo run: nothing to write yet ({exc})", file=sys.stderr)
+        if recorder is not None:
+            recorder.close()
+            print(f"camo run: recorded {recorder.bag.message_count} messages on {len(recorder.bag.topics)} topics "
+                  f"to {recorder.bag.folder}/", file=sys.stderr)
         # Executor first, then node, then context: the EventsExecutor must let go of the
         # node's handles before they are destroyed, or interpreter exit can crash.
         executor.shutdown()
-        executor.remove_node(monitor)
-        monitor.destroy_node()
+        for node in (monitor, recorder):
+            if node is not None:
+                executor.remove_node(node)
+                node.destroy_node()
         del executor
         rclpy.try_shutdown()
     return code

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 
+from camo_core import cli, figures
 from camo_core.params import CamoParams
 from camo_core.result import RunResult, mean_p
 from camo_core.simulator import select_patterns
@@ -37,6 +39,7 @@ class RoundRecord:
         n, steps = self.params.count, self.params.consensus_steps
         self.sensed = np.full(n, np.nan)
         self.p_trace = np.full((steps + 1, n, 3), np.nan)
+        self.state_trace = np.full((self.params.formation_steps + 1, n), -1, np.int64)
         self.p_latest = np.full((n, 3), np.nan)
         self.initial = np.full(n, -1, np.int64)
         self.state = np.full(n, -1, np.int64)
@@ -56,9 +59,23 @@ class RoundRecord:
         if msg.phase == RobotStatus.PHASE_CONSENSUS:
             self.p_trace[msg.step, i] = msg.p
             self.initial[i] = msg.state
-        elif msg.phase == RobotStatus.PHASE_DONE:
+        elif msg.phase == RobotStatus.PHASE_FORMATION:
+            self.state_trace[msg.step, i] = msg.state
+        if msg.phase == RobotStatus.PHASE_DONE:
+            self.state_trace[msg.step, i] = msg.state
             self.selected[i] = msg.pattern
             self.finished[i] = True
+
+    def timeline(self) -> list[tuple[str, np.ndarray]]:
+        """The swarm at each consensus step (selected pattern, -1 unknown) and formation step (state)."""
+        shape = (self.params.rows, self.params.cols)
+        frames = []
+        for step, p in enumerate(self.p_trace):
+            unknown = np.isnan(p).any(axis=1)
+            chosen = select_patterns(np.nan_to_num(p).reshape(shape + (3,))).reshape(-1)
+            frames.append((f"c{step}", np.where(unknown, -1, chosen).reshape(shape)))
+        frames += [(f"f{step}", states.reshape(shape)) for step, states in enumerate(self.state_trace)]
+        return frames
 
     def result(self, dead: np.ndarray, partial: bool = False) -> RunResult:
         """What the swarm computed, in the reference simulator's form; dead robots masked out.
@@ -89,6 +106,20 @@ class RoundRecord:
             elapsed_s=time.monotonic() - self.started,
             alive=None if alive.all() else alive.reshape(shape),
         )
+
+
+def write_round(result: RunResult, image: np.ndarray | None, folder: Path, label: str,
+                incomplete: str | None = None) -> dict:
+    """summary.json and figure.png of one round, as `./camo sim` writes them."""
+    summary = result.summary()
+    if incomplete is not None:
+        summary["incomplete"] = incomplete
+    cli.write_summary(summary, folder)
+    params = result.params
+    figures.run_figure(result, image, folder / "figure.png",
+                       title=f"{label}: {params.rows}x{params.cols} robot nodes, {params.profile} profile, "
+                             f"seed {params.seed}, rho_meas {params.rho_meas:g}, rho_comm {params.rho_comm:g}")
+    return summary
 
 
 class MonitorNode(Node):

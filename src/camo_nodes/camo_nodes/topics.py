@@ -3,6 +3,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 STATUS_TOPIC = "/swarm/status"
 PATTERN_TOPIC = "/swarm/pattern"
+# std_msgs/String, latched: the run's parameters and backgrounds as JSON, for recorders and `camo render`.
+PARAMS_TOPIC = "/swarm/params"
 
 
 def robot_topic(robot_id: int, kind: str) -> str:

@@ -1,0 +1,143 @@
+"""The recorder: every topic of a run (or the ones named) into an MCAP bag, as rosbag2 records.
+
+It discovers topics as they appear, subscribes to each with a QoS compatible
+with what its publishers offer (transient-local topics hand over their
+history, so nothing published before discovery is lost), and stores the CDR
+bytes as received. Log time is the receive time; publish time is the
+message's header stamp (the receive time for types without a header). It
+flushes a chunk every second, so a recorder killed with SIGKILL loses at
+most the last second; Ctrl-C closes the bag with its index and summary.
+"""
+from __future__ import annotations
+
+import argparse
+import struct
+import sys
+import time
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from . import msgdefs, qos_yaml
+from .bag import BagError, BagWriter, TopicInfo
+from .shutdown import StopFlag
+
+SKIPPED = {"/rosout", "/parameter_events"}
+
+
+def header_stamp_ns(data: bytes) -> int | None:
+    """The header stamp of a CDR message whose first field is std_msgs/Header (sec int32, nanosec uint32)."""
+    if len(data) < 12:
+        return None
+    sec, nanosec = struct.unpack("<iI" if data[1] == 1 else ">iI", data[4:12])
+    return sec * 10**9 + nanosec
+
+
+class RecorderNode(Node):
+    def __init__(self, path: str, topics: list[str] | None = None, discovery_period: float = 0.5,
+                 flush_period: float = 1.0, **kwargs) -> None:
+        super().__init__("recorder", namespace="/camo", **kwargs)
+        self.bag = BagWriter(path, library="camo recorder_node")
+        self.wanted = set(topics) if topics else None
+        self.last_message: dict[str, float] = {}
+        self._stamped: dict[str, bool] = {}
+        self._recorded = {}
+        self.create_timer(discovery_period, self.discover)
+        self.create_timer(flush_period, self.bag.flush)
+        self.discover()
+
+    @property
+    def topic_count(self) -> int:
+        return len(self._recorded)
+
+    def recording_now(self) -> set[str]:
+        return {name for name, sub in self._recorded.items() if sub is not None}
+
+    def recording(self, topics: set[str]) -> bool:
+        """Subscribed to every one of these topics."""
+        return topics <= self.recording_now()
+
+    def idle_for(self, ignoring: frozenset[str] = frozenset()) -> float:
+        """Seconds since the last message arrived on a topic not ignored (e.g. a periodic one)."""
+        times = [t for name, t in self.last_message.items() if name not in ignoring]
+        return time.monotonic() - max(times, default=0.0)
+
+    def discover(self) -> None:
+        for name, types in self.get_topic_names_and_types():
+            if name in self._recorded or name in SKIPPED or (self.wanted and name not in self.wanted):
+                continue
+            if len(types) != 1:
+                self.get_logger().warning(f"{name} carries several types {types}; not recorded")
+                self._recorded[name] = None
+                continue
+            publishers = self.get_publishers_info_by_topic(name)
+            if not publishers:
+                continue            # only subscribers so far: wait for a publisher's QoS
+            self._subscribe(name, msgdefs.full_name(types[0]), [p.qos_profile for p in publishers])
+
+    def _subscribe(self, name: str, type_name: str, offered: list[QoSProfile]) -> None:
+        try:
+            cls = msgdefs.message_class(type_name)
+            definition = msgdefs.message_definition(type_name)
+        except msgdefs.DefinitionError as exc:
+            self.get_logger().warning(f"{name} not recorded: {exc}")
+            self._recorded[name] = None
+            return
+        self.bag.add_topic(TopicInfo(name, type_name, qos_yaml.dump(offered), msgdefs.type_hash(type_name)),
+                           definition)
+        fields = list(cls.get_fields_and_field_types().items())
+        self._stamped[name] = bool(fields) and fields[0] == ("header", "std_msgs/Header")
+        # As rosbag2 adapts: reliable and transient-local only when every publisher offers it.
+        reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+        latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
+        qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+        self._recorded[name] = self.create_subscription(
+            cls, name, lambda data, topic=name: self._on_message(topic, data), qos, raw=True)
+
+    def _on_message(self, topic: str, data: bytes) -> None:
+        if self.bag.closed:
+            return
+        received = time.time_ns()
+        published = header_stamp_ns(data) if self._stamped[topic] else None
+        self.bag.write(topic, data, received, published if published is not None else received)
+        self.last_message[topic] = time.monotonic()
+
+    def close(self) -> None:
+        self.bag.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="recorder_node", description="record topics into an MCAP bag folder")
+    parser.add_argument("path", help="bag folder to create (NAME/ with NAME_0.mcap and metadata.yaml)")
+    parser.add_argument("--topics", nargs="+", default=None, help="only these topics (default: every topic)")
+    args, ros_args = parser.parse_known_args(argv)
+    stop = StopFlag()
+    rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        node = RecorderNode(args.path, args.topics)
+        print(f"recorder_node: recording to {node.bag.file} (Ctrl-C to stop)", file=sys.stderr)
+        while not stop and rclpy.ok():
+            rclpy.spin_once(node, timeout_sec=0.2)
+    except BagError as exc:
+        print(f"recorder_node: error: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.close()
+            print(f"recorder_node: wrote {node.bag.message_count} messages on {len(node.bag.topics)} topics "
+                  f"to {node.bag.folder}", file=sys.stderr)
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
