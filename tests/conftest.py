@@ -6,8 +6,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -17,7 +15,16 @@ def run_camo(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
                           timeout=timeout, cwd=ROOT)
 
 
-@pytest.fixture
-def domain_id(worker_id: str = "master") -> int:
-    """A ROS domain id of this test process's own, so parallel runs do not hear each other."""
-    return 100 + os.getpid() % 100
+_next_domain = [0]
+
+
+def domain() -> int:
+    """A ROS domain of its own for each run, so parallel test processes do not hear each other."""
+    _next_domain[0] += 1
+    return 1 + (os.getpid() * 7 + _next_domain[0]) % 200
+
+
+def camo_run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
+    """`./camo run` with a domain of its own."""
+    return subprocess.run([sys.executable, "-m", "camo_nodes.launcher", *args, "--domain-id", str(domain())],
+                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)

@@ -7,21 +7,7 @@ import time
 
 import pytest
 
-from conftest import ROOT, run_camo
-
-_next_domain = [0]
-
-
-def domain() -> int:
-    """A ROS domain of its own for each run, so parallel test processes do not hear each other."""
-    _next_domain[0] += 1
-    return 1 + (os.getpid() * 7 + _next_domain[0]) % 200
-
-
-def camo_run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "camo_nodes.launcher", *args, "--domain-id", str(domain())],
-                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
-
+from conftest import ROOT, camo_run, domain, run_camo
 
 def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:
     swarm = camo_run(*options, "--procs", str(procs), "--out", str(tmp_path / "run"))

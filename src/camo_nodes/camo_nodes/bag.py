@@ -226,14 +226,14 @@ def salvage(path: str | Path) -> tuple[list[Schema], list[Channel], list[Message
     ending = "complete"
     with open(file, "rb") as stream:
         try:
-            for record in StreamReader(stream, skip_magic=False, emit_chunks=False, validate_crcs=True):
+            for record in StreamReader(stream, skip_magic=False, emit_chunks=False, validate_crcs=True).records:
                 if isinstance(record, Schema):
                     schemas[record.id] = record
                 elif isinstance(record, Channel):
                     channels[record.id] = record
                 elif isinstance(record, Message):
                     messages.append(record)
-        except (McapError, EOFError, ValueError, OSError) as exc:
+        except Exception as exc:  # noqa: BLE001 - a damaged tail makes the parser fail in many ways
             ending = f"cut short ({type(exc).__name__})"
     messages = [m for m in messages if m.channel_id in channels]
     return list(schemas.values()), list(channels.values()), messages, ending

@@ -152,7 +152,7 @@ def drain(executor, recorder: RecorderNode, topics: set[str], stop, quiet: float
     deadline = time.monotonic() + limit
     while time.monotonic() < deadline and not stop:
         executor.spin_once(timeout_sec=0.1)
-        if recorder.recording(topics) and recorder.idle_for(frozenset({PATTERN_TOPIC})) > quiet:
+        if recorder.settled(topics, quiet, ignoring=frozenset({PATTERN_TOPIC})):
             return
     missing = sorted(topics - recorder.recording_now())
     if missing and not stop:

@@ -41,7 +41,7 @@ def _policy(enum, value, default):
 
 
 def load_first(text: str) -> QoSProfile:
-    """The first recorded profile, for a replay publisher (default: reliable, volatile, depth 10)."""
+    """The first recorded profile, for a replay publisher (default: reliable, volatile, keep all)."""
     try:
         profiles = yaml.safe_load(text) if text else []
     except yaml.YAMLError:
@@ -49,12 +49,15 @@ def load_first(text: str) -> QoSProfile:
     if not profiles or not isinstance(profiles, list) or not isinstance(profiles[0], dict):
         return QoSProfile(depth=10)
     first = profiles[0]
-    history = _policy(HistoryPolicy, first.get("history"), HistoryPolicy.KEEP_LAST)
-    if history not in (HistoryPolicy.KEEP_LAST, HistoryPolicy.KEEP_ALL):
-        history = HistoryPolicy.KEEP_LAST
+    # Offered profiles from graph discovery carry no history (rosbag2 writes "unknown", depth 0): keep
+    # all then, or a reliable burst would overwrite samples a subscriber has not acknowledged yet.
+    history = _policy(HistoryPolicy, first.get("history"), HistoryPolicy.KEEP_ALL)
+    depth = int(first.get("depth", 0) or 0)
+    if history != HistoryPolicy.KEEP_LAST or depth < 1:
+        history, depth = HistoryPolicy.KEEP_ALL, 1
     return QoSProfile(
         history=history,
-        depth=max(1, int(first.get("depth", 10) or 10)),
+        depth=depth,
         reliability=_policy(ReliabilityPolicy, first.get("reliability"), ReliabilityPolicy.RELIABLE),
         durability=_policy(DurabilityPolicy, first.get("durability"), DurabilityPolicy.VOLATILE),
         liveliness=_policy(LivelinessPolicy, first.get("liveliness"), LivelinessPolicy.AUTOMATIC),

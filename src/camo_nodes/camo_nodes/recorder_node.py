@@ -24,6 +24,7 @@ from rclpy.signals import SignalHandlerOptions
 from . import msgdefs, qos_yaml
 from .bag import BagError, BagWriter, TopicInfo
 from .shutdown import StopFlag
+from .swarm_worker import events_executor
 
 SKIPPED = {"/rosout", "/parameter_events"}
 
@@ -44,9 +45,12 @@ class RecorderNode(Node):
         self.wanted = set(topics) if topics else None
         self.last_message: dict[str, float] = {}
         self._stamped: dict[str, bool] = {}
+        self._since: dict[str, float] = {}
         self._recorded = {}
         self.create_timer(discovery_period, self.discover)
-        self.create_timer(flush_period, self.bag.flush)
+        self.flush_period = flush_period
+        self._flushed = time.monotonic()
+        self.create_timer(flush_period, self._flush)
         self.discover()
 
     @property
@@ -56,9 +60,14 @@ class RecorderNode(Node):
     def recording_now(self) -> set[str]:
         return {name for name, sub in self._recorded.items() if sub is not None}
 
-    def recording(self, topics: set[str]) -> bool:
-        """Subscribed to every one of these topics."""
-        return topics <= self.recording_now()
+    def settled(self, topics: set[str], quiet: float, ignoring: frozenset[str] = frozenset()) -> bool:
+        """Subscribed to every one of these topics, matched with their publishers for `quiet` seconds
+        (a latched topic's history has come in), and no message for `quiet` seconds."""
+        if not topics <= self.recording_now():
+            return False
+        now = time.monotonic()
+        return all(self._recorded[name].get_publisher_count() > 0 and now - self._since[name] > quiet
+                   for name in topics) and self.idle_for(ignoring) > quiet
 
     def idle_for(self, ignoring: frozenset[str] = frozenset()) -> float:
         """Seconds since the last message arrived on a topic not ignored (e.g. a periodic one)."""
@@ -96,6 +105,7 @@ class RecorderNode(Node):
         qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+        self._since[name] = time.monotonic()
         self._recorded[name] = self.create_subscription(
             cls, name, lambda data, topic=name: self._on_message(topic, data), qos, raw=True)
 
@@ -105,7 +115,13 @@ class RecorderNode(Node):
         received = time.time_ns()
         published = header_stamp_ns(data) if self._stamped[topic] else None
         self.bag.write(topic, data, received, published if published is not None else received)
-        self.last_message[topic] = time.monotonic()
+        now = self.last_message[topic] = time.monotonic()
+        if now - self._flushed > self.flush_period:      # timers can starve under a flood of messages
+            self._flush()
+
+    def _flush(self) -> None:
+        self.bag.flush()
+        self._flushed = time.monotonic()
 
     def close(self) -> None:
         self.bag.close()
@@ -119,18 +135,22 @@ def main(argv: list[str] | None = None) -> int:
     stop = StopFlag()
     rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
+    executor = events_executor()
     try:
         node = RecorderNode(args.path, args.topics)
+        executor.add_node(node)
         print(f"recorder_node: recording to {node.bag.file} (Ctrl-C to stop)", file=sys.stderr)
         while not stop and rclpy.ok():
-            rclpy.spin_once(node, timeout_sec=0.2)
+            executor.spin_once(timeout_sec=0.2)
     except BagError as exc:
         print(f"recorder_node: error: {exc}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        executor.shutdown()
         if node is not None:
+            executor.remove_node(node)
             node.close()
             print(f"recorder_node: wrote {node.bag.message_count} messages on {len(node.bag.topics)} topics "
                   f"to {node.bag.folder}", file=sys.stderr)

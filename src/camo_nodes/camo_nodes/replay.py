@@ -31,6 +31,9 @@ def build_parser() -> cli.Parser:
     parser.add_argument("--rate", type=float, default=1.0, help="playback speed factor (default 1)")
     parser.add_argument("--topics", nargs="+", default=None, help="only these topics (default: all)")
     parser.add_argument("--loop", action="store_true", help="start again at the end, until Ctrl-C")
+    parser.add_argument("--delay", type=float, default=1.0,
+                        help="seconds between creating the publishers and the first message, so that "
+                             "subscribers are matched first (default 1)")
     parser.add_argument("--linger", type=float, default=2.0,
                         help="seconds to keep publishers up after the last message (default 2)")
     parser.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited)")
@@ -55,6 +58,7 @@ def replay(args, stop: StopFlag) -> int:
                       for t in topics}
         total = sum(t.count for t in topics)
         passes = 0
+        sleep_until(time.monotonic() + args.delay, stop)
         while not stop:
             bar = ProgressBar(total, f"replay x{args.rate:g}")
             start = time.monotonic()
@@ -80,8 +84,9 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         if not 0 < args.rate <= 1000:
             raise cli.UsageError(f"--rate must be in (0, 1000] (got {args.rate})")
-        if args.linger < 0:
-            raise cli.UsageError(f"--linger must not be negative (got {args.linger})")
+        for name in ("delay", "linger"):
+            if not 0 <= getattr(args, name) <= 3600:
+                raise cli.UsageError(f"--{name} must be in 0..3600 seconds (got {getattr(args, name)})")
         if args.domain_id is not None and not 0 <= args.domain_id <= 232:
             raise cli.UsageError(f"--domain-id must be in 0..232 (got {args.domain_id})")
         read_summary(args.bag)                    # a bad bag fails before ROS starts
