@@ -26,6 +26,8 @@ setup(
             "camo_replay = camo_nodes.replay:main",
             "camo_render = camo_nodes.render:main",
             "camo_bag = camo_nodes.bag_cli:main",
+            "droplet_bridge = camo_nodes.droplet_bridge:main",
+            "droplet_emulator = camo_nodes.droplet_emulator:main",
         ],
     },
 )

@@ -79,14 +79,41 @@ def write_summary(summary: dict, folder: Path) -> Path:
     return path
 
 
+def sensed_overrides(texts: list[str], rows: int, cols: int) -> dict[tuple[int, int], float]:
+    """--sensed ROW,COL=VALUE options: real readings (a bridged Droplet's) for some cells."""
+    overrides = {}
+    for text in texts:
+        try:
+            cell, value = text.split("=")
+            row, col = (int(x) for x in cell.split(","))
+            value = float(value)
+        except ValueError:
+            raise UsageError(f"--sensed takes ROW,COL=VALUE (got {text!r})") from None
+        if not (0 <= row < rows and 0 <= col < cols):
+            raise UsageError(f"--sensed {text}: outside the {rows}x{cols} grid")
+        if not 0.0 <= value <= 255.0:
+            raise UsageError(f"--sensed {text}: a grey value is in 0..255")
+        overrides[(row, col)] = value
+    return overrides
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     params = params_from(args)
     image, label = image_from(args)
     raw = sense_image(image, params.rows, params.cols, params.profile)
+    exempt = None
+    overrides = sensed_overrides(args.sensed, params.rows, params.cols)
+    if overrides:
+        # Real readings: they replace the image's value and never get simulated measurement noise.
+        exempt = np.zeros(raw.shape, bool)
+        for (row, col), value in overrides.items():
+            raw[row, col] = value
+            exempt[row, col] = True
     folder = out_dir(args)
     big = params.count >= 256 * 256
     bar = ProgressBar(params.consensus_steps + params.formation_steps, "simulating") if big else None
-    result = simulate(params, raw, progress=(lambda phase, step, total: bar.update(note=phase)) if bar else None)
+    progress = (lambda phase, step, total: bar.update(note=phase)) if bar else None
+    result = simulate(params, raw, exempt=exempt, progress=progress)
     write_summary(result.summary(), folder)
     figures.run_figure(result, image, folder / "figure.png",
                        title=f"{label}, {params.rows}x{params.cols} robots, {params.profile} profile, "
@@ -128,6 +155,9 @@ def build_parser() -> Parser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
     sim = sub.add_parser("sim", help="run the centralized reference simulator once")
     add_run_options(sim)
+    sim.add_argument("--sensed", action="append", default=[], metavar="ROW,COL=VALUE",
+                     help="this cell's sensed grey value is a real reading (e.g. a bridged Droplet's): it "
+                          "replaces the image's and gets no measurement noise (repeatable)")
     sim.set_defaults(func=cmd_sim)
     err = sub.add_parser("errors", help="the paper's error analysis")
     add_run_options(err)

@@ -46,6 +46,15 @@ def to_gray(image: np.ndarray, profile: str) -> np.ndarray:
     return 0.5 * bgr[:, :, 2] + 0.5 * bgr[:, :, 1]
 
 
+def rgb_to_gray(r: float, g: float, b: float, profile: str) -> float:
+    """One colour reading (0..255 per channel) as the profile's grey value, exactly as to_gray does
+    for a pixel of that colour: r = g = b = v gives v."""
+    if not all(0 <= c <= 255 and float(c).is_integer() for c in (r, g, b)):
+        raise ValueError(f"a colour reading has integer channels in 0..255 (got {r}, {g}, {b})")
+    pixel = np.array([[[b, g, r]]], dtype=np.uint8)
+    return float(to_gray(pixel, profile)[0, 0])
+
+
 def block_means(gray: np.ndarray, rows: int, cols: int) -> np.ndarray:
     """Mean grey value of the image block each robot covers (rows x cols float64)."""
     height, width = gray.shape[:2]

@@ -28,6 +28,7 @@ from camo_projector.qos import BACKGROUND_TOPIC, LATCHED, LOAD_TOPIC
 from std_msgs.msg import String
 
 from .bag import BagError
+from .droplet_link import Calibration
 from .monitor_node import MonitorNode, write_round
 from .recorder_node import RecorderNode
 from .robot_node import MESSAGE_TYPES
@@ -52,6 +53,10 @@ def build_parser() -> cli.Parser:
     parser.add_argument("--then", action="append", default=[], metavar="BACKGROUND",
                         help="after the camouflage finishes, project this built-in name or image file and "
                              "camouflage again (repeatable); each round writes round_<k>/")
+    parser.add_argument("--bridge", action="append", default=[], metavar="ROW,COL=PORT",
+                        help="this cell is a real Droplet on this serial port (repeatable); see docs/hardware.md")
+    parser.add_argument("--calibration", default=None, metavar="YAML",
+                        help="gain and offset applied to every bridged Droplet's grey reading")
     parser.add_argument("--record", metavar="BAG", default=None,
                         help="record every topic of the run into this MCAP bag folder (as rosbag2 does)")
     parser.add_argument("--no-projector", action="store_true",
@@ -73,6 +78,32 @@ def parse_cells(texts: list[str], params) -> list[int]:
     return cells
 
 
+def parse_bridges(texts: list[str], params) -> dict[int, str]:
+    """--bridge ROW,COL=PORT options as {robot id: port}."""
+    bridges = {}
+    for text in texts:
+        cell, _, port = text.partition("=")
+        if not port:
+            raise cli.UsageError(f"--bridge takes ROW,COL=PORT (got {text!r})")
+        robot = parse_cells([cell], params)[0]
+        if robot in bridges:
+            raise cli.UsageError(f"--bridge {cell}: that cell is bridged twice")
+        bridges[robot] = port
+    return bridges
+
+
+def robot_parameters(params, args: argparse.Namespace, robot: int) -> list[str]:
+    """A standalone robot's (or bridge's) ROS parameters, as -p options."""
+    row, col = divmod(robot, params.cols)
+    values = {"rows": params.rows, "cols": params.cols, "row": row, "col": col, "profile": params.profile,
+              "seed": params.seed, "rho_meas": float(params.rho_meas), "rho_comm": float(params.rho_comm),
+              "threshold": float(params.threshold), "consensus_steps": params.consensus_steps,
+              "formation_steps": params.formation_steps, "step_timeout": float(args.step_timeout),
+              "discovery_timeout": float(args.discovery_timeout)}
+    return [x for name, value in values.items() for x in ("-p", f"{name}:={value!r}" if isinstance(value, float)
+                                                            else f"{name}:={value}")]
+
+
 def split_cells(count: int, procs: int) -> list[list[int]]:
     """Robot ids in contiguous blocks, one per process, so neighbours mostly share a process."""
     procs = max(1, min(procs, count))
@@ -83,13 +114,20 @@ def split_cells(count: int, procs: int) -> list[list[int]]:
 class Swarm:
     """The processes of one run: projector and workers."""
 
-    def __init__(self, args: argparse.Namespace, params, env: dict, alone: list[int]) -> None:
+    def __init__(self, args: argparse.Namespace, params, env: dict, alone: list[int],
+                 bridges: dict[int, str]) -> None:
         self.procs: list[subprocess.Popen] = []
         self.cells: dict[int, list[int]] = {}      # pid -> robot ids
         python = sys.executable
         if not args.no_projector:
             self._start_projector(args, env)
-        shared = [i for i in range(params.count) if i not in alone]
+        for robot, port in bridges.items():
+            command = [python, "-m", "camo_nodes.droplet_bridge", "--ros-args", "--log-level", "warn",
+                       *robot_parameters(params, args, robot), "-p", f"port:={port}"]
+            if args.calibration:
+                command += ["-p", f"calibration:={Path(args.calibration).resolve()}"]
+            self.cells[self._start(command, env).pid] = [robot]
+        shared = [i for i in range(params.count) if i not in alone and i not in bridges]
         groups = [[i] for i in alone] + (split_cells(len(shared), args.procs) if shared else [])
         for group in groups[len(alone):]:
             group[:] = [shared[k] for k in group]
@@ -169,6 +207,11 @@ def run(args: argparse.Namespace) -> int:
         if getattr(args, name) <= 0:
             raise cli.UsageError(f"--{name.replace('_', '-')} must be positive (got {getattr(args, name)})")
     alone = parse_cells(args.own_process, params)
+    bridges = parse_bridges(args.bridge, params)
+    if set(alone) & set(bridges):
+        raise cli.UsageError("a cell cannot be both --own-process and --bridge")
+    if args.calibration:
+        Calibration.from_yaml(args.calibration)             # a bad file fails here, in one line
     image, label = cli.image_from(args)
     cli.sense_image(image, params.rows, params.cols, params.profile)      # a too-small image fails here
     labels = [label]
@@ -205,7 +248,7 @@ def run(args: argparse.Namespace) -> int:
     executor.add_node(monitor)
     if recorder is not None:
         executor.add_node(recorder)
-    swarm = Swarm(args, params, env, alone)
+    swarm = Swarm(args, params, env, alone, bridges)
     (folder / "processes.json").write_text(json.dumps({str(pid): cells for pid, cells in swarm.cells.items()}))
     code = 0
     round_index = 0

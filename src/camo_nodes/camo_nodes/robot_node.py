@@ -147,10 +147,29 @@ class RobotNode(Node):
         msg.round = self.round
         self.pub[kind].publish(msg)
 
+    # ---- sensor and display: a simulated robot reads the projected image and shows nothing ----
+
+    def _read_sensor(self) -> tuple[float, bool] | None:
+        """(grey value, real reading) of this robot's cell; a real reading gets no simulated noise."""
+        raw = sense_image(self.image, self.params.rows, self.params.cols, self.params.profile)
+        return float(raw[self.core.row, self.core.col]), False
+
+    def _show(self, state: int) -> None:
+        """Display the formation state (a hardware robot sets its LED)."""
+
+    def _hardware_ok(self) -> bool:
+        return True
+
+    def _display_ready(self) -> bool:
+        """The display shows the latest state."""
+        return True
+
     def _report(self) -> None:
         core = self.core
+        if self.phase >= FORMATION:
+            self._show(core.state)
         status = RobotStatus(sender_id=core.id, row=core.row, col=core.col, phase=self.phase, step=self.step,
-                             sensed=core.sensed, p=list(core.p), state=core.state, alive=True,
+                             sensed=core.sensed, p=list(core.p), state=core.state, alive=self._hardware_ok(),
                              known_slots=core.known_mask, round=self.round,
                              pattern=RobotStatus.PATTERN_NONE if core.pattern is None else core.pattern)
         status.header.stamp = self.get_clock().now().to_msg()
@@ -195,8 +214,10 @@ class RobotNode(Node):
                 if self.image is None:
                     return
                 if math.isnan(self.core.sensed):
-                    raw = sense_image(self.image, self.params.rows, self.params.cols, self.params.profile)
-                    self.core.sense(raw[self.core.row, self.core.col])
+                    reading = self._read_sensor()
+                    if reading is None:          # the sensor is not available yet: try again later
+                        return
+                    self.core.sense(*reading)
                     self._send("color", Color(phase=SENSING, step=0, value=self.core.sensed))
                     self.wait_started = time.monotonic()
                 if not self._ready(self._waiting_for("color", rng.STREAM_COLOR, 0, range(4)), self.step_timeout):
@@ -222,6 +243,8 @@ class RobotNode(Node):
                     self._send_vote()
             elif self.phase == FORMATION:
                 if self.step == self.params.formation_steps:
+                    if not self._display_ready():       # a hardware robot is done once it shows its state
+                        return
                     self._next(DONE, self.step)
                     self._report()
                     continue
