@@ -17,6 +17,7 @@ import os
 import pty
 import random
 import select
+import signal
 import sys
 import threading
 import time
@@ -211,6 +212,7 @@ def main(argv: list[str] | None = None) -> int:
     except (cli.UsageError, ImageError, OSError) as exc:
         print(f"camo droplet-emulator: error: {exc}", file=sys.stderr)
         return 2
+    signal.signal(signal.SIGTERM, signal.default_int_handler)       # stop cleanly on SIGTERM too
     r, g, b = emulator.rgb
     print(f"droplet-emulator {emulator.droplet_id:04X}: on {emulator.link}, reads r {r} g {g} b {b} "
           f"(Ctrl-C to stop)", file=sys.stderr, flush=True)
