@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import time
@@ -89,11 +90,13 @@ def bare_rate(side: int, steps: int, procs: int, domain: int) -> float:
     return (steps - 1) / (max(r["end"] for r in reports) - min(r["start"] for r in reports))
 
 
-def swarm_run(side: int, procs: int, domain: int, out: Path) -> dict:
-    """Run `./camo run` once; its timing.json has the wall time and the step rate."""
+def swarm_run(side: int, procs: int, domain: int, out: Path, steps: int | None = None) -> dict:
+    """Run `./camo run` once (paper profile; `steps` consensus + formation steps if given);
+    its timing.json has the wall time and the step rate."""
     start = time.monotonic()
+    length = [] if steps is None else ["--consensus-steps", str(steps - 10), "--formation-steps", "10"]
     proc = subprocess.run([sys.executable, "-m", "camo_nodes.launcher", "--rows", str(side), "--cols", str(side),
-                           "--procs", str(procs), "--domain-id", str(domain), "--out", str(out)],
+                           "--procs", str(procs), "--domain-id", str(domain), "--out", str(out), *length],
                           capture_output=True, text=True, timeout=1800)
     wall = time.monotonic() - start
     if proc.returncode != 0:
@@ -108,6 +111,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sides", default="8,16", help="grid sides for the rate comparison (default 8,16)")
     parser.add_argument("--wall-sides", default="8,32", help="grid sides for whole-run wall times (default 8,32)")
     parser.add_argument("--procs", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--steps", type=int, default=300,
+                        help="steps per rate measurement, swarm and bare alike (default 300)")
+    parser.add_argument("--repeat", type=int, default=3, help="runs per rate; the median is reported (default 3)")
     parser.add_argument("--out", type=Path, default=Path("results") / time.strftime("bench-ros-%Y%m%d-%H%M%S"))
     parser.add_argument("--bare-worker", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -115,15 +121,22 @@ def main(argv: list[str] | None = None) -> int:
         side, steps, cells = int(args.bare_worker[0]), int(args.bare_worker[1]), args.bare_worker[2]
         print(json.dumps(bare_worker(side, side, steps, [int(c) for c in cells.split(",")])))
         return 0
+    if not (20 <= args.steps <= 100_000 and args.repeat >= 1):
+        parser.error("--steps must be in 20..100000 and --repeat at least 1")
     domain = 180 + os.getpid() % 40
     rates, walls = [], []
     for side in (int(s) for s in args.sides.split(",")):
-        swarm = swarm_run(side, args.procs, domain, args.out / f"swarm_{side}")
-        bare = bare_rate(side, 45, args.procs, domain)
-        rates.append({"robots": f"{side}x{side}", "swarm_steps_per_s": swarm["steps_per_s"],
-                      "bare_steps_per_s": bare, "ratio": swarm["steps_per_s"] / bare})
-        print(f"{side}x{side}: swarm {swarm['steps_per_s']:.2f} steps/s, bare exchange {bare:.2f} steps/s",
-              file=sys.stderr)
+        # Alternate swarm and bare runs and take medians: this shared machine's speed drifts.
+        swarm_rates, bare_rates = [], []
+        for k in range(args.repeat):
+            swarm = swarm_run(side, args.procs, domain, args.out / f"swarm_{side}_{k}", args.steps)
+            swarm_rates.append(swarm["steps_per_s"])
+            bare_rates.append(bare_rate(side, args.steps, args.procs, domain))
+            print(f"{side}x{side}: swarm {swarm_rates[-1]:.2f} steps/s, bare exchange {bare_rates[-1]:.2f} steps/s",
+                  file=sys.stderr)
+        swarm_rate, bare = statistics.median(swarm_rates), statistics.median(bare_rates)
+        rates.append({"robots": f"{side}x{side}", "swarm_steps_per_s": swarm_rate, "bare_steps_per_s": bare,
+                      "ratio": swarm_rate / bare, "steps": args.steps, "repeat": args.repeat})
     for side in (int(s) for s in args.wall_sides.split(",")):
         walls.append(swarm_run(side, args.procs, domain, args.out / f"wall_{side}"))
         print(f"{side}x{side}: whole run {walls[-1]['wall_s']:.1f} s", file=sys.stderr)
@@ -131,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(report))
     else:
+        print(f"rates: median of {args.repeat} runs of {args.steps} steps each")
         print(f"{'robots':>8} {'swarm steps/s':>14} {'bare steps/s':>13} {'ratio':>6}")
         for r in rates:
             print(f"{r['robots']:>8} {r['swarm_steps_per_s']:>14.2f} {r['bare_steps_per_s']:>13.2f} {r['ratio']:>6.2f}")
