@@ -66,7 +66,8 @@ def test_switching_the_background_makes_the_same_swarm_camouflage_again(tmp_path
     assert out.returncode == 0, out.stderr[-2000:]
     first = json.loads((tmp_path / "run" / "round_0" / "summary.json").read_text())
     second = json.loads((tmp_path / "run" / "round_1" / "summary.json").read_text())
-    assert (first["pattern"], second["pattern"]) == ("vertical", "horizontal")
+    assert (first["pattern"], second["pattern"]) == ("vertical", "horizontal"), \
+        (first["votes"], second["votes"], second.get("dead"), out.stderr[-3000:])
     sim = run_camo("sim", "--pattern", "desert", "--out", str(tmp_path / "sim"))
     assert sim.returncode == 0
     reference = json.loads((tmp_path / "sim" / "summary.json").read_text())
