@@ -113,6 +113,20 @@ def test_render_rebuilds_the_live_summary_from_the_bag_alone(recorded, tmp_path)
     assert (tmp_path / "timeline.png").stat().st_size > 10_000
 
 
+def test_render_of_a_run_with_two_backgrounds_writes_each_round(tmp_path):
+    out = camo_run("--rows", "4", "--cols", "5", "--pattern", "forest", "--then", "desert", "--procs", "1",
+                   "--out", str(tmp_path / "live"), "--record", str(tmp_path / "bag"))
+    assert out.returncode == 0, out.stderr[-2000:]
+    rendered = tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
+    assert rendered.returncode == 0, rendered.stderr
+    for k in (0, 1):
+        live = json.loads((tmp_path / "live" / f"round_{k}" / "summary.json").read_text())
+        again = json.loads((tmp_path / "rendered" / f"round_{k}" / "summary.json").read_text())
+        assert {x: v for x, v in again.items() if x != "elapsed_s"} == {x: v for x, v in live.items() if x != "elapsed_s"}
+        assert (tmp_path / "rendered" / f"round_{k}" / "timeline.png").exists()
+    assert "round 1: pattern" in rendered.stdout
+
+
 def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded, tmp_path):
     bag, live = recorded
     domain_id = domain()

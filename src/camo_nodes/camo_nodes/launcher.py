@@ -1,9 +1,11 @@
 """`./camo run`: the distributed swarm, launched from one command.
 
-Starts the projector and K worker processes (robot nodes spread over them,
-many per executor), runs the monitor here, shows progress, and writes
-summary.json and figure.png when every live robot has finished. Ctrl-C stops
-every process it started and still writes what it has.
+Starts the projector (unless --no-projector), a bridge process per real
+Droplet (--bridge) and K worker processes (robot nodes spread over them, many
+per executor), runs the monitor (and with --record the recorder) here, shows
+progress, and writes summary.json and figure.png when every live robot has
+finished. Ctrl-C stops every process it started and still writes what it has,
+bag included.
 """
 from __future__ import annotations
 

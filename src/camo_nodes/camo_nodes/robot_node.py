@@ -35,6 +35,8 @@ DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = (RobotStatus.PHASE_DISCOVERY, R
                                                   RobotStatus.PHASE_CONSENSUS, RobotStatus.PHASE_FORMATION,
                                                   RobotStatus.PHASE_DONE)
 MESSAGE_TYPES = {"hello": Hello, "color": Color, "vote": Vote, "state": State}
+TICK = 0.05          # s between checks of the step deadline
+STALL = 0.5          # s: a tick this late means the process itself stalled
 
 
 def inputs(neighbors: list[int | None]) -> list[tuple[int, str]]:
@@ -80,7 +82,8 @@ class RobotNode(Node):
         self.step = 0
         self.wait_started = time.monotonic()
         self.started = False
-        self.create_timer(0.05, self._on_timer)
+        self.last_tick = time.monotonic()
+        self.create_timer(TICK, self._on_timer)
         if autostart:
             self.start()
 
@@ -88,7 +91,7 @@ class RobotNode(Node):
         """Say hello and begin. A worker hosting many robots creates them all first, then starts
         them, so that no robot's deadline runs while its process is still busy creating nodes."""
         self.started = True
-        self.wait_started = time.monotonic()
+        self.wait_started = self.last_tick = time.monotonic()
         self._send("hello", Hello(phase=DISCOVERY, step=0, row=self.core.row, col=self.core.col))
 
     @property
@@ -98,6 +101,13 @@ class RobotNode(Node):
     # ---- receiving ------------------------------------------------------------
 
     def _on_timer(self) -> None:
+        now = time.monotonic()
+        stalled = now - self.last_tick - TICK
+        self.last_tick = now
+        if stalled > STALL:
+            # This process could not listen (busy or descheduled): that time is not the neighbours'
+            # fault, and their messages may still be queued behind this tick. Extend the deadline.
+            self.wait_started += stalled
         if self.started and self.context.ok():          # not while the process is shutting down
             self._advance()
 
