@@ -295,6 +295,10 @@ def test_recording_into_an_existing_bag_is_refused_before_anything_starts(tmp_pa
     assert out.returncode == 2 and "already exists" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
     assert (tmp_path / "bag" / "x").read_text() == "keep me"
+    for args in ([str(tmp_path / "bag")], []):
+        out = tool("recorder_node", *args)
+        assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
+    assert (tmp_path / "bag" / "x").read_text() == "keep me"
 
 
 def test_dockerfile_builds_on_ros_jazzy_and_copies_files_that_exist():

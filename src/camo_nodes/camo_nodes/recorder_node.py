@@ -10,7 +10,6 @@ most the last second; Ctrl-C closes the bag with its index and summary.
 """
 from __future__ import annotations
 
-import argparse
 import struct
 import sys
 import time
@@ -20,6 +19,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+
+from camo_core import cli
 
 from . import msgdefs, qos_yaml
 from .bag import BagError, BagWriter, TopicInfo
@@ -128,10 +129,14 @@ class RecorderNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="recorder_node", description="record topics into an MCAP bag folder")
+    parser = cli.Parser(prog="recorder_node", description="record topics into an MCAP bag folder")
     parser.add_argument("path", help="bag folder to create (NAME/ with NAME_0.mcap and metadata.yaml)")
     parser.add_argument("--topics", nargs="+", default=None, help="only these topics (default: every topic)")
-    args, ros_args = parser.parse_known_args(argv)
+    try:
+        args, ros_args = parser.parse_known_args(argv)
+    except cli.UsageError as exc:
+        print(f"recorder_node: error: {exc}", file=sys.stderr)
+        return 2
     stop = StopFlag()
     rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
