@@ -191,6 +191,19 @@ def test_truncated_and_foreign_files_get_one_line_errors(recorded, tmp_path):
     assert out.returncode == 2 and "not an MCAP file" in out.stderr
 
 
+def test_render_refuses_a_bag_whose_messages_do_not_decode(tmp_path):
+    from camo_nodes.bag import BagWriter, TopicInfo
+    from camo_nodes.msgdefs import message_definition
+    writer = BagWriter(tmp_path / "odd")
+    for topic, kind in (("/swarm/params", "std_msgs/msg/String"), ("/swarm/status", "camo_msgs/msg/RobotStatus")):
+        writer.add_topic(TopicInfo(topic, kind), message_definition(kind))
+        writer.write(topic, b"\x00\x01\x00\x00\xff\xff", 10**9, 10**9)
+    writer.close()
+    out = tool("render", str(tmp_path / "odd"), "--out", str(tmp_path / "r"))
+    assert out.returncode == 2 and "does not decode" in out.stderr, out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+
+
 def test_repair_keeps_every_complete_chunk_of_a_cut_file(tmp_path):
     from camo_nodes.bag import BagWriter, TopicInfo, read_messages
     from camo_nodes.msgdefs import message_definition

@@ -268,3 +268,21 @@ def test_bad_bridge_options_are_one_line_errors(tmp_path):
                 ["--bridge", "1,1=/a", "--calibration", str(tmp_path / "missing.yaml")]):
         out = camo_run("--rows", "4", "--cols", "4", *bad, "--out", str(tmp_path / "o"))
         assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, (bad, out.stderr)
+
+
+def test_monitor_counts_bridged_robots_whose_hardware_is_offline():
+    import rclpy
+    from camo_core.params import CamoParams
+    from camo_msgs.msg import RobotStatus
+    from camo_nodes.monitor_node import MonitorNode
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain())
+    try:
+        monitor = MonitorNode(CamoParams(rows=2, cols=2), context=context)
+        monitor._on_status(RobotStatus(sender_id=3, row=1, col=1, phase=2, alive=False))
+        assert "hardware offline 1" in monitor.progress_line()
+        monitor._on_status(RobotStatus(sender_id=3, row=1, col=1, phase=2, alive=True))
+        assert "offline" not in monitor.progress_line()
+        monitor.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

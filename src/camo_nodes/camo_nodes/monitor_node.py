@@ -134,6 +134,7 @@ class MonitorNode(Node):
         self._image_stamps: list[tuple[int, int]] = []
         self.last_heard = np.zeros(params.count)
         self.heard = np.zeros(params.count, bool)
+        self.offline = np.zeros(params.count, bool)
         self.started = time.monotonic()
         self.create_subscription(RobotStatus, STATUS_TOPIC, self._on_status, status_listener_qos())
         self.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
@@ -151,6 +152,7 @@ class MonitorNode(Node):
             return
         self.last_heard[msg.sender_id] = time.monotonic()
         self.heard[msg.sender_id] = True
+        self.offline[msg.sender_id] = not msg.alive      # a bridged Droplet whose port went away
         self.rounds.setdefault(msg.round, RoundRecord(self.params)).add(msg)
 
     # ---- views ------------------------------------------------------------------
@@ -184,8 +186,9 @@ class MonitorNode(Node):
                 where = f" (step {steps.min()}-{steps.max()})" if k >= RobotStatus.PHASE_CONSENSUS else ""
                 parts.append(f"{PHASE_NAMES[k]} {counts[k]}{where}")
         busy = ", ".join(parts)
+        offline = f"; hardware offline {int(self.offline.sum())}" if self.offline.any() else ""
         return (f"round {round_index}: robots done {int(record.finished.sum())}/{self.params.count}"
-                f"{', ' + busy if busy else ''}; silent {int(self.dead(round_index).sum())}")
+                f"{', ' + busy if busy else ''}; silent {int(self.dead(round_index).sum())}{offline}")
 
     def result(self, round_index: int = 0, partial: bool = False) -> RunResult:
         return self.record(round_index).result(self.dead(round_index), partial)

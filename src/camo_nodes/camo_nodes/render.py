@@ -37,17 +37,22 @@ def load_run(path: str | Path) -> tuple[CamoParams, list[str], dict[int, RoundRe
     stamps: list[tuple[int, int]] = []
     times: dict[int, list[int]] = {}
     pending: list[tuple[RobotStatus, int]] = []
-    for message in read_messages(path, [PARAMS_TOPIC, STATUS_TOPIC, BACKGROUND_TOPIC]):
-        if message.topic == PARAMS_TOPIC and setup is None:
-            setup = json.loads(deserialize_message(message.data, String).data)
-        elif message.topic == BACKGROUND_TOPIC:
-            image = deserialize_message(message.data, Image)
-            stamp = (image.header.stamp.sec, image.header.stamp.nanosec)
-            if stamp not in stamps:
-                stamps.append(stamp)
-                images.append(from_msg(image))
-        elif message.topic == STATUS_TOPIC:
-            pending.append((deserialize_message(message.data, RobotStatus), message.log_time))
+    try:
+        for message in read_messages(path, [PARAMS_TOPIC, STATUS_TOPIC, BACKGROUND_TOPIC]):
+            if message.topic == PARAMS_TOPIC and setup is None:
+                setup = json.loads(deserialize_message(message.data, String).data)
+            elif message.topic == BACKGROUND_TOPIC:
+                image = deserialize_message(message.data, Image)
+                stamp = (image.header.stamp.sec, image.header.stamp.nanosec)
+                if stamp not in stamps:
+                    stamps.append(stamp)
+                    images.append(from_msg(image))
+            elif message.topic == STATUS_TOPIC:
+                pending.append((deserialize_message(message.data, RobotStatus), message.log_time))
+    except BagError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - bytes that do not decode as their recorded type
+        raise BagError(f"{path}: a message does not decode as its recorded type ({exc})") from None
     if setup is None:
         raise BagError(f"{path} has no {PARAMS_TOPIC} message: it was not recorded from `./camo run`")
     params = CamoParams(**setup["params"])
