@@ -12,6 +12,7 @@ from conftest import ROOT, camo_run, domain, run_camo
 def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:
     swarm = camo_run(*options, "--procs", str(procs), "--out", str(tmp_path / "run"))
     assert swarm.returncode == 0, swarm.stderr[-2000:]
+    assert json.loads((tmp_path / "run" / "timing.json").read_text())["deadlines"] == 0
     sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
     assert sim.returncode == 0, sim.stderr
     load = lambda name: json.loads((tmp_path / name / "summary.json").read_text())  # noqa: E731
@@ -117,6 +118,9 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     assert summary["final"][2][3] is None and summary["final"][5][6] is None
     assert summary["pattern"] == "vertical" and summary["votes"]["vertical"] == 62
     assert "2 dead robots [[2, 3], [5, 6]]" in rest
+    # Their neighbours each let a deadline pass once, and the run says so.
+    assert json.loads((out_dir / "timing.json").read_text())["deadlines"] > 0
+    assert "step deadlines passed" in rest
 
 
 def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
@@ -154,7 +158,7 @@ def test_run_writes_timing(tmp_path):
     out = camo_run("--rows", "4", "--cols", "4", "--procs", "1", "--out", str(tmp_path))
     assert out.returncode == 0, out.stderr[-2000:]
     timing = json.loads((tmp_path / "timing.json").read_text())
-    assert timing["steps"] == 45 and timing["steps_per_s"] > 0
+    assert timing["steps"] == 45 and timing["steps_per_s"] > 0 and timing["deadlines"] == 0
     assert 0 < timing["startup_s"] <= timing["launch_to_done_s"]
 
 

@@ -288,11 +288,16 @@ def run(args: argparse.Namespace) -> int:
             voted = all_voted or done
             (round_folder / "timing.json").write_text(json.dumps({
                 "startup_s": voted - launched, "steps": steps, "steps_s": done - voted,
-                "steps_per_s": steps / max(done - voted, 1e-9), "launch_to_done_s": done - launched}) + "\n")
+                "steps_per_s": steps / max(done - voted, 1e-9), "launch_to_done_s": done - launched,
+                "deadlines": int(monitor.record(round_index).deadlines.sum())}) + "\n")
             counts = ", ".join(f"{k} {v}" for k, v in summary["votes"].items())
             dead_cells = summary.get("dead", [])
             dead = f"; {len(dead_cells)} dead robots {dead_cells[:8]}{' ...' if len(dead_cells) > 8 else ''}" \
                 if dead_cells else ""
+            missed = int(monitor.record(round_index).deadlines.sum())
+            if missed:
+                dead += (f"; {missed} step deadlines passed (robots moved on without silent neighbours: the "
+                         f"result can differ from ./camo sim)")
             print(f"pattern: {summary['pattern']} ({counts}){dead}; wrote {round_folder}/summary.json and figure.png")
         if recorder is not None:
             drain(executor, recorder, recorded_topics(params, len(labels) > 1), stop)

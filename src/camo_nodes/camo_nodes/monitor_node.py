@@ -47,6 +47,7 @@ class RoundRecord:
         self.phase = np.zeros(n, np.int64)
         self.step = np.zeros(n, np.int64)
         self.finished = np.zeros(n, bool)
+        self.deadlines = np.zeros(n, np.int64)     # step deadlines each robot let pass
 
     def add(self, msg: RobotStatus) -> None:
         i = msg.sender_id
@@ -54,6 +55,7 @@ class RoundRecord:
         self.step[i] = msg.step
         self.sensed[i] = msg.sensed
         self.state[i] = msg.state
+        self.deadlines[i] = msg.deadlines
         if msg.phase >= RobotStatus.PHASE_CONSENSUS:
             self.p_latest[i] = msg.p
         if msg.phase == RobotStatus.PHASE_CONSENSUS:
@@ -187,6 +189,8 @@ class MonitorNode(Node):
                 parts.append(f"{PHASE_NAMES[k]} {counts[k]}{where}")
         busy = ", ".join(parts)
         offline = f"; hardware offline {int(self.offline.sum())}" if self.offline.any() else ""
+        if record.deadlines.any():
+            offline += f"; step deadlines passed {int(record.deadlines.sum())}"
         return (f"round {round_index}: robots done {int(record.finished.sum())}/{self.params.count}"
                 f"{', ' + busy if busy else ''}; silent {int(self.dead(round_index).sum())}{offline}")
 

@@ -74,6 +74,7 @@ class RobotNode(Node):
         # What has been delivered, by (round, kind, step, slot); early messages wait here for their step.
         self.inbox: dict[tuple[int, str, int, int], object] = {}
         self.silent: set[int] = set()
+        self.deadlines = 0            # step deadlines passed in this round
         self.image = None
         self.image_stamp = None
         self.next_image = None        # a background that arrived mid-round: camouflaged next
@@ -144,6 +145,7 @@ class RobotNode(Node):
         self.round += 1
         self.image, self.next_image = self.next_image, None
         self.core = RobotCore(self.params, self.core.row, self.core.col)
+        self.deadlines = 0
         self.inbox = {key: value for key, value in self.inbox.items() if key[0] >= self.round}
         self._next(DISCOVERY)
         self._send("hello", Hello(phase=DISCOVERY, step=0, row=self.core.row, col=self.core.col))
@@ -180,7 +182,7 @@ class RobotNode(Node):
             self._show(core.state)
         status = RobotStatus(sender_id=core.id, row=core.row, col=core.col, phase=self.phase, step=self.step,
                              sensed=core.sensed, p=list(core.p), state=core.state, alive=self._hardware_ok(),
-                             known_slots=core.known_mask, round=self.round,
+                             known_slots=core.known_mask, round=self.round, deadlines=self.deadlines,
                              pattern=RobotStatus.PATTERN_NONE if core.pattern is None else core.pattern)
         status.header.stamp = self.get_clock().now().to_msg()
         status.header.frame_id = "camo"
@@ -201,6 +203,7 @@ class RobotNode(Node):
         if time.monotonic() - self.wait_started < timeout:
             return False
         self.silent.update(pending)
+        self.deadlines += 1
         self.get_logger().warning(f"step deadline passed; neighbours in slots {pending} are silent")
         return True
 
