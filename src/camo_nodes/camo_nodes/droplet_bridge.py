@@ -67,9 +67,8 @@ class Reconnector:
             self.backoff = min(MAX_BACKOFF, self.backoff * 2)
             return False
         self.backoff = 0.5
-        if self.link.reconnects or self.next_try:
+        if self.next_try:                      # an earlier open failed or the port went away
             self.logger.info(f"reconnected to {self.link.path}")
-        self.link.reconnects += 1
         return True
 
     def failed(self, exc: DropletError) -> None:

@@ -122,7 +122,6 @@ class DropletLink:
         self.lines: deque[str] = deque()
         self.asynchronous: deque[str] = deque(maxlen=10_000)     # the robot's own prints, for monitor mode
         self.port = None
-        self.reconnects = 0
 
     # ---- connection -------------------------------------------------------------
 

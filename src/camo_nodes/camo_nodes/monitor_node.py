@@ -110,6 +110,14 @@ class RoundRecord:
         )
 
 
+def add_background(images: list[np.ndarray], stamps: list[tuple[int, int]], msg: Image) -> None:
+    """Keep each new background once (by its stamp): round k camouflaged images[k]."""
+    stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+    if stamp not in stamps:
+        stamps.append(stamp)
+        images.append(from_msg(msg))
+
+
 def write_round(result: RunResult, image: np.ndarray | None, folder: Path, label: str,
                 incomplete: str | None = None) -> dict:
     """summary.json and figure.png of one round, as `./camo sim` writes them."""
@@ -144,10 +152,7 @@ class MonitorNode(Node):
         self.create_timer(0.2, self._publish_pattern)
 
     def _on_background(self, msg: Image) -> None:
-        stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
-        if stamp not in self._image_stamps:
-            self._image_stamps.append(stamp)
-            self.images.append(from_msg(msg))
+        add_background(self.images, self._image_stamps, msg)
 
     def _on_status(self, msg: RobotStatus) -> None:
         if msg.sender_id >= self.params.count:

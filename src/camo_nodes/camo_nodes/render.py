@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -19,34 +20,38 @@ from rclpy.serialization import deserialize_message
 from camo_core import cli, figures
 from camo_core.params import CamoParams, ParameterError
 from camo_msgs.msg import RobotStatus
-from camo_projector.image_msg import from_msg
 from camo_projector.qos import BACKGROUND_TOPIC
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
 from .bag import BagError, read_messages
-from .monitor_node import RoundRecord, write_round
+from .monitor_node import RoundRecord, add_background, write_round
 from .topics import PARAMS_TOPIC, STATUS_TOPIC
 
 
-def load_run(path: str | Path) -> tuple[CamoParams, list[str], dict[int, RoundRecord], list[np.ndarray]]:
-    """Parameters, background labels, one RoundRecord per round and the backgrounds, from a bag."""
+@dataclass
+class RecordedRun:
+    """What a bag tells of a run: enough to write its summaries and figures."""
+
+    params: CamoParams
+    labels: list[str]                   # the backgrounds, in round order
+    rounds: dict[int, RoundRecord]
+    images: list[np.ndarray]            # round k camouflaged images[k]
+    elapsed_s: dict[int, float]         # span of each round's statuses in the bag
+
+
+def load_run(path: str | Path) -> RecordedRun:
+    """The run's parameters, statuses and backgrounds, from a bag."""
     setup = None
-    rounds: dict[int, RoundRecord] = {}
     images: list[np.ndarray] = []
     stamps: list[tuple[int, int]] = []
-    times: dict[int, list[int]] = {}
     pending: list[tuple[RobotStatus, int]] = []
     try:
         for message in read_messages(path, [PARAMS_TOPIC, STATUS_TOPIC, BACKGROUND_TOPIC]):
             if message.topic == PARAMS_TOPIC and setup is None:
                 setup = json.loads(deserialize_message(message.data, String).data)
             elif message.topic == BACKGROUND_TOPIC:
-                image = deserialize_message(message.data, Image)
-                stamp = (image.header.stamp.sec, image.header.stamp.nanosec)
-                if stamp not in stamps:
-                    stamps.append(stamp)
-                    images.append(from_msg(image))
+                add_background(images, stamps, deserialize_message(message.data, Image))
             elif message.topic == STATUS_TOPIC:
                 pending.append((deserialize_message(message.data, RobotStatus), message.log_time))
     except BagError:
@@ -56,28 +61,29 @@ def load_run(path: str | Path) -> tuple[CamoParams, list[str], dict[int, RoundRe
     if setup is None:
         raise BagError(f"{path} has no {PARAMS_TOPIC} message: it was not recorded from `./camo run`")
     params = CamoParams(**setup["params"])
+    rounds: dict[int, RoundRecord] = {}
+    times: dict[int, list[int]] = {}
     for status, log_time in pending:
         if status.sender_id < params.count:
             rounds.setdefault(status.round, RoundRecord(params)).add(status)
             times.setdefault(status.round, []).append(log_time)
     if not rounds:
         raise BagError(f"{path} holds no robot status: nothing to render")
-    for index, record in rounds.items():
-        record.elapsed_ns = max(times[index]) - min(times[index])
-    return params, setup.get("backgrounds", []), rounds, images
+    elapsed = {index: (max(t) - min(t)) / 1e9 for index, t in times.items()}
+    return RecordedRun(params, setup.get("backgrounds", []), rounds, images, elapsed)
 
 
 def render(path: str | Path, out: Path) -> list[dict]:
-    params, labels, rounds, images = load_run(path)
-    summaries = []
-    for index in sorted(rounds):
-        record = rounds[index]
-        folder = out if len(rounds) == 1 else out / f"round_{index}"
+    run = load_run(path)
+    params, summaries = run.params, []
+    for index in sorted(run.rounds):
+        record = run.rounds[index]
+        folder = out if len(run.rounds) == 1 else out / f"round_{index}"
         folder.mkdir(parents=True, exist_ok=True)
         result = record.result(dead=~record.finished)
-        result.elapsed_s = record.elapsed_ns / 1e9
-        label = labels[index] if index < len(labels) else f"round {index}"
-        image = images[index] if index < len(images) else None
+        result.elapsed_s = run.elapsed_s[index]
+        label = run.labels[index] if index < len(run.labels) else f"round {index}"
+        image = run.images[index] if index < len(run.images) else None
         summaries.append(write_round(result, image, folder, f"{label} (from {Path(path).name})"))
         figures.timeline_figure(record.timeline(), folder / "timeline.png",
                                 title=f"{label}: {params.rows}x{params.cols} robots; consensus steps c0.., "
