@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from conftest import ROOT, camo_run, domain
+from conftest import ROOT, StatusListener, camo_run, domain, wait_for_line
 
 ROWS, COLS = 5, 6
 OPTIONS = ["--pattern", "forest", "--profile", "droplet", "--rows", str(ROWS), "--cols", str(COLS),
@@ -145,32 +145,17 @@ def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded
 
 
 def test_replay_publishes_recorded_messages_with_their_qos(recorded):
-    import rclpy
-    from camo_msgs.msg import RobotStatus
-    from camo_nodes.topics import STATUS_TOPIC, status_listener_qos
     bag, live = recorded
     domain_id = domain()
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    got = []
-    try:
-        node = rclpy.create_node("listener", context=context)
-        node.create_subscription(RobotStatus, STATUS_TOPIC, got.append, status_listener_qos())
+    with StatusListener(domain_id) as listener:
         replay = subprocess.Popen([sys.executable, "-m", "camo_nodes.replay", str(bag), "--rate", "20",
-                                   "--topics", STATUS_TOPIC, "--domain-id", str(domain_id)],
+                                   "--topics", "/swarm/status", "--domain-id", str(domain_id)],
                                   cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        executor = rclpy.executors.SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        while replay.poll() is None:
-            executor.spin_once(timeout_sec=0.1)
-        for _ in range(20):
-            executor.spin_once(timeout_sec=0.05)
-        assert replay.returncode == 0, replay.stderr.read()
-        done = {(m.row, m.col): m.state for m in got if m.phase == RobotStatus.PHASE_DONE}
-        assert [[done[(i, j)] for j in range(COLS)] for i in range(ROWS)] == live["final"]
-        node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
+        listener.spin_until(lambda: replay.poll() is not None, timeout=120)
+        listener.spin_until(lambda: False, timeout=1.0)          # what is still on its way
+        assert replay.wait(timeout=30) == 0, replay.stderr.read()
+    done = listener.final_states()
+    assert [[done[i * COLS + j] for j in range(COLS)] for i in range(ROWS)] == live["final"]
 
 
 def test_truncated_and_foreign_files_get_one_line_errors(recorded, tmp_path):
@@ -250,11 +235,7 @@ def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers
                               "--out", str(tmp_path / "run")],
                              cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 120
-        for line in swarm.stderr:
-            if "consensus 4" in line:
-                break
-            assert time.monotonic() < deadline, "the swarm never reached consensus"
+        wait_for_line(swarm, "consensus 4")
         time.sleep(5.0)
         assert swarm.poll() is None, "the run ended before the recorder was killed"
     finally:
@@ -286,11 +267,7 @@ def test_ctrl_c_during_a_recorded_run_leaves_a_complete_indexed_bag(tmp_path):
          "--cols", "4", "--consensus-steps", "5000", "--domain-id", str(domain()), "--out", str(tmp_path / "run"),
          "--record", str(tmp_path / "bag")],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    for line in proc.stderr:
-        if "consensus 16" in line:
-            break
-        assert time.monotonic() < deadline, "the swarm never reached consensus"
+    wait_for_line(proc, "consensus 16")
     time.sleep(1.0)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from conftest import ROOT, camo_run, domain, run_camo
+from conftest import ROOT, StatusListener, camo_run, domain, run_camo
 from camo_core.backgrounds import background
 from camo_core.sensing import rgb_to_gray, to_gray
 from camo_nodes.droplet_emulator import DropletEmulator, Faults, emulated_rgb
@@ -160,29 +160,18 @@ def test_firmware_printouts_become_state():
 
 
 def test_monitor_mode_turns_a_transcript_into_status_messages():
-    import rclpy
     from camo_msgs.msg import RobotStatus
-    from camo_nodes.topics import STATUS_TOPIC, status_listener_qos
     domain_id = domain()
     bridge = subprocess.Popen([sys.executable, "-m", "camo_nodes.droplet_bridge", "--ros-args", "-p", "rows:=4",
                                "-p", "cols:=4", "-p", "row:=1", "-p", "col:=2", "-p", f"transcript:={TRANSCRIPT}"],
                               env={**os.environ, "ROS_DOMAIN_ID": str(domain_id)}, stderr=subprocess.PIPE, text=True)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    got = []
     try:
-        node = rclpy.create_node("listener", context=context)
-        node.create_subscription(RobotStatus, STATUS_TOPIC, got.append, status_listener_qos())
-        executor = rclpy.executors.SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        deadline = time.monotonic() + 30
-        while len(got) < 5 and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.1)
-        node.destroy_node()
+        with StatusListener(domain_id) as listener:
+            listener.spin_until(lambda: len(listener.got) >= 5, timeout=30)
     finally:
-        rclpy.try_shutdown(context=context)
         bridge.send_signal(2)
         bridge.communicate(timeout=30)
+    got = listener.got
     assert len(got) == 5
     assert {(m.sender_id, m.row, m.col) for m in got} == {(6, 1, 2)}
     assert got[0].phase == RobotStatus.PHASE_SENSING and got[0].sensed == 187.0

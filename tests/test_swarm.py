@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from conftest import ROOT, camo_run, domain, run_camo
+from conftest import ROOT, StatusListener, camo_run, domain, run_camo, wait_for_line
 
 def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:
     swarm = camo_run(*options, "--procs", str(procs), "--out", str(tmp_path / "run"))
@@ -98,18 +98,11 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
          "--own-process", "2,3", "--own-process", "5,6", "--step-timeout", "2", "--discovery-timeout", "20",
          "--consensus-steps", "1000", "--domain-id", str(domain()), "--out", str(out_dir)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    victims = []
-    seen = []
-    deadline = time.monotonic() + 120
-    for line in proc.stderr:
-        seen.append(line)
-        if "consensus 64" in line:          # every robot has voted and is in consensus
-            processes = json.loads((out_dir / "processes.json").read_text())
-            victims = [int(pid) for pid, cells in processes.items() if cells in ([19], [46])]
-            for pid in victims:
-                os.kill(pid, 9)
-            break
-        assert time.monotonic() < deadline, "the swarm never reached consensus"
+    seen = wait_for_line(proc, "consensus 64")          # every robot has voted and is in consensus
+    processes = json.loads((out_dir / "processes.json").read_text())
+    victims = [int(pid) for pid, cells in processes.items() if cells in ([19], [46])]
+    for pid in victims:
+        os.kill(pid, 9)
     assert len(victims) == 2, "".join(seen[-30:])
     rest, _ = proc.communicate(timeout=240)
     assert proc.returncode == 0, rest
@@ -129,11 +122,7 @@ def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
         [sys.executable, "-m", "camo_nodes.launcher", "--pattern", "forest", "--procs", "2",
          "--consensus-steps", "5000", "--domain-id", str(domain()), "--out", str(out_dir)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    for line in proc.stderr:
-        if "consensus 64" in line:
-            break
-        assert time.monotonic() < deadline, "the swarm never reached consensus"
+    wait_for_line(proc, "consensus 64")
     time.sleep(1.0)
     proc.send_signal(2)
     _, err = proc.communicate(timeout=60)
@@ -198,11 +187,6 @@ def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
 
 
 def test_robots_started_alone_with_robot_node_finish_like_the_simulator(tmp_path):
-    import rclpy
-    from camo_msgs.msg import RobotStatus
-
-    from camo_nodes.topics import STATUS_TOPIC, status_listener_qos
-
     domain_id = domain()
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
     procs = [subprocess.Popen([sys.executable, "-m", "camo_projector.projector_node", "--ros-args",
@@ -215,23 +199,11 @@ def test_robots_started_alone_with_robot_node_finish_like_the_simulator(tmp_path
     procs.append(subprocess.Popen(
         [sys.executable, "-m", "camo_nodes.swarm_worker", "--params",
          json.dumps({"rows": 2, "cols": 3, "seed": 4, "rho_comm": 0.2}), "--cells", "0,1,2"], env=env))
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    done = {}
     try:
-        node = rclpy.create_node("status_listener", context=context)
-        node.create_subscription(RobotStatus, STATUS_TOPIC,
-                                 lambda m: done.__setitem__(m.sender_id, m.state) if m.phase == 4 else None,
-                                 status_listener_qos())
-        executor = rclpy.executors.SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        deadline = time.monotonic() + 120
-        while len(done) < 6 and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.2)
-        executor.shutdown()
-        node.destroy_node()
+        with StatusListener(domain_id) as listener:
+            listener.spin_until(lambda: len(listener.final_states()) == 6, timeout=120)
+        done = listener.final_states()
     finally:
-        rclpy.shutdown(context=context)
         for proc in procs:
             proc.send_signal(2)
         for proc in procs:
