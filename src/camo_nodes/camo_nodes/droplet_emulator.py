@@ -25,12 +25,11 @@ import tty
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from camo_core import cli
 from camo_core.backgrounds import BACKGROUNDS, background
-from camo_core.sensing import ImageError, load_image
+from camo_core.sensing import ImageError, block_means, load_image
 
 
 @dataclass
@@ -46,7 +45,7 @@ class Faults:
 def emulated_rgb(image: np.ndarray, rows: int, cols: int, row: int, col: int) -> tuple[int, int, int]:
     """What a Droplet at (row, col) reads of the projected image: its block's mean colour, rounded."""
     bgr = image if image.ndim == 3 else np.repeat(image[:, :, None], 3, axis=2)
-    means = cv2.resize(bgr.astype(np.float64), (cols, rows), interpolation=cv2.INTER_AREA)[row, col]
+    means = block_means(bgr, rows, cols)[row, col]
     b, g, r = (int(np.clip(np.rint(v), 0, 255)) for v in means)
     return r, g, b
 

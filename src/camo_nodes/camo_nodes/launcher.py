@@ -286,15 +286,15 @@ def run(args: argparse.Namespace) -> int:
             done = time.monotonic()
             steps = params.consensus_steps + params.formation_steps
             voted = all_voted or done
+            missed = int(monitor.record(round_index).deadlines.sum())
             (round_folder / "timing.json").write_text(json.dumps({
                 "startup_s": voted - launched, "steps": steps, "steps_s": done - voted,
                 "steps_per_s": steps / max(done - voted, 1e-9), "launch_to_done_s": done - launched,
-                "deadlines": int(monitor.record(round_index).deadlines.sum())}) + "\n")
+                "deadlines": missed}) + "\n")
             counts = ", ".join(f"{k} {v}" for k, v in summary["votes"].items())
             dead_cells = summary.get("dead", [])
             dead = f"; {len(dead_cells)} dead robots {dead_cells[:8]}{' ...' if len(dead_cells) > 8 else ''}" \
                 if dead_cells else ""
-            missed = int(monitor.record(round_index).deadlines.sum())
             if missed:
                 dead += (f"; {missed} step deadlines passed (robots moved on without silent neighbours: the "
                          f"result can differ from ./camo sim)")

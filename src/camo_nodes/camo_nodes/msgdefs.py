@@ -66,8 +66,7 @@ def _used_types(package: str, text: str) -> list[tuple[str, str]]:
         line = line.split("#", 1)[0].strip()
         if not line:
             continue
-        field_type = re.sub(r"(\[.*\]|<=\d+)$", "", line.split()[0])
-        field_type = re.sub(r"<=\d+", "", field_type)
+        field_type = re.sub(r"\[.*\]$|<=\d+", "", line.split()[0])     # arrays and bounded strings
         if field_type in PRIMITIVES:
             continue
         if "/" in field_type:

@@ -54,10 +54,6 @@ class RecorderNode(Node):
         self.create_timer(flush_period, self._flush)
         self.discover()
 
-    @property
-    def topic_count(self) -> int:
-        return len(self._recorded)
-
     def recording_now(self) -> set[str]:
         return {name for name, sub in self._recorded.items() if sub is not None}
 

@@ -20,7 +20,7 @@ from camo_core import cli
 from camo_core.progress import ProgressBar
 
 from . import msgdefs, qos_yaml
-from .bag import BagError, read_messages, read_summary
+from .bag import BagError, BagSummary, read_messages, read_summary
 from .shutdown import StopFlag
 from .swarm_worker import LEAN_NODE
 
@@ -45,8 +45,7 @@ def sleep_until(due: float, stop: StopFlag) -> None:
         time.sleep(min(left, 0.1))
 
 
-def replay(args, stop: StopFlag) -> int:
-    summary = read_summary(args.bag)
+def replay(args, summary: BagSummary, stop: StopFlag) -> int:
     topics = [t for t in summary.topics if args.topics is None or t.name in args.topics]
     if args.topics:
         unknown = sorted(set(args.topics) - {t.name for t in summary.topics})
@@ -89,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise cli.UsageError(f"--{name} must be in 0..3600 seconds (got {getattr(args, name)})")
         if args.domain_id is not None and not 0 <= args.domain_id <= 232:
             raise cli.UsageError(f"--domain-id must be in 0..232 (got {args.domain_id})")
-        read_summary(args.bag)                    # a bad bag fails before ROS starts
+        summary = read_summary(args.bag)          # a bad bag fails before ROS starts
     except (cli.UsageError, BagError) as exc:
         print(f"camo replay: error: {exc}", file=sys.stderr)
         return 2
@@ -98,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = StopFlag()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     try:
-        return replay(args, stop)
+        return replay(args, summary, stop)
     except (cli.UsageError, BagError, msgdefs.DefinitionError) as exc:
         print(f"camo replay: error: {exc}", file=sys.stderr)
         return 2
