@@ -2,6 +2,7 @@
 replayed, repaired after a kill, and bad bags refused in one line."""
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -113,18 +114,26 @@ def test_render_rebuilds_the_live_summary_from_the_bag_alone(recorded, tmp_path)
     assert (tmp_path / "timeline.png").stat().st_size > 10_000
 
 
-def test_render_of_a_run_with_two_backgrounds_writes_each_round(tmp_path):
-    out = camo_run("--rows", "4", "--cols", "5", "--pattern", "forest", "--then", "desert", "--procs", "1",
-                   "--out", str(tmp_path / "live"), "--record", str(tmp_path / "bag"))
+def test_render_of_a_run_with_three_backgrounds_writes_each_round_from_a_complete_bag(tmp_path):
+    # A small swarm finishes a round in a fraction of a second, before the recorder may have
+    # discovered its topics; each round must still be in the bag whole.
+    out = camo_run("--rows", "4", "--cols", "5", "--pattern", "forest", "--then", "desert", "--then", "forest",
+                   "--procs", "1", "--out", str(tmp_path / "live"), "--record", str(tmp_path / "bag"))
     assert out.returncode == 0, out.stderr[-2000:]
     rendered = tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
     assert rendered.returncode == 0, rendered.stderr
-    for k in (0, 1):
+    for k in (0, 1, 2):
         live = json.loads((tmp_path / "live" / f"round_{k}" / "summary.json").read_text())
         again = json.loads((tmp_path / "rendered" / f"round_{k}" / "summary.json").read_text())
         assert {x: v for x, v in again.items() if x != "elapsed_s"} == {x: v for x, v in live.items() if x != "elapsed_s"}
         assert (tmp_path / "rendered" / f"round_{k}" / "timeline.png").exists()
-    assert "round 1: pattern" in rendered.stdout
+    assert "round 2: pattern" in rendered.stdout
+    info = tool("bag_cli", "info", str(tmp_path / "bag"))
+    assert info.returncode == 0, info.stderr
+    consensus_steps = len(live["consensus_trace"]) - 1
+    votes = sum(int(count) for count in re.findall(r"/vote +\| Type: camo_msgs/msg/Vote \| Count: (\d+)",
+                                                   info.stdout))
+    assert votes == 3 * 4 * 5 * consensus_steps
 
 
 def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded, tmp_path):

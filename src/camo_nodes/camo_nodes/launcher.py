@@ -188,7 +188,8 @@ def recorded_topics(params, switching: bool) -> set[str]:
 
 
 def drain(executor, recorder: RecorderNode, topics: set[str], stop, quiet: float = 1.0, limit: float = 30.0) -> None:
-    """Before the robots stop: let the recorder subscribe to every topic and take in what is still coming."""
+    """Before the robots stop or start a new round: let the recorder subscribe to every topic and take in
+    what is still coming."""
     deadline = time.monotonic() + limit
     while time.monotonic() < deadline and not stop:
         executor.spin_once(timeout_sec=0.1)
@@ -258,6 +259,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         for round_index, round_label in enumerate(labels):
             if round_index > 0:
+                if recorder is not None:
+                    # A robot's topics keep one round of history for late subscribers: the recorder
+                    # must have taken this round in before the next one pushes it out.
+                    drain(executor, recorder, recorded_topics(params, True), stop)
                 loader.publish(String(data=round_label))
             last_print = 0.0
             all_voted = None     # when every robot had voted: the steps start
