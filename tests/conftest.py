@@ -78,3 +78,13 @@ class StatusListener:
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+
+
+def count_round_records(monkeypatch) -> list[int]:
+    """Counts RoundRecord constructions (each allocates traces of consensus steps x robots)."""
+    from camo_nodes.monitor_node import RoundRecord
+    made = []
+    original = RoundRecord.__post_init__
+    monkeypatch.setattr(RoundRecord, "__post_init__", lambda self: (made.append(1), original(self))[1])
+    return made
+

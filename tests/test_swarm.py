@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from conftest import ROOT, StatusListener, camo_run, domain, run_camo, wait_for_line
+from conftest import ROOT, StatusListener, camo_run, count_round_records, domain, run_camo, wait_for_line
 
 def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:
     swarm = camo_run(*options, "--procs", str(procs), "--out", str(tmp_path / "run"))
@@ -179,7 +179,9 @@ def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
         proc.send_signal(2)
         _, err = proc.communicate(timeout=120)
     assert images, f"no /swarm/pattern image; launcher said: {err[-1500:]}"
-    last = next(m for m in images if set(bytes(m.data)) <= {0, 255})
+    complete = [m for m in images if set(bytes(m.data)) <= {0, 255}]
+    assert complete, f"{len(images)} images, none with every robot's state; launcher said: {err[-1500:]}"
+    last = complete[0]
     assert (last.height, last.width, last.encoding) == (5, 7, "mono8")
     # Every pixel is a robot's state (black on, white off): the forest's initial stripes here.
     assert bytes(last.data) != bytes([last.data[0]]) * 35
@@ -214,3 +216,25 @@ def test_robots_started_alone_with_robot_node_finish_like_the_simulator(tmp_path
     final = json.loads((tmp_path / "summary.json").read_text())["final"]
     assert done == {r * 3 + c: final[r][c] for r in range(2) for c in range(3)}
     assert all(proc.returncode == 0 for proc in procs[1:4])
+
+
+def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(monkeypatch):
+    # A record allocated per status made a long run's monitor fall far behind its robots.
+    import rclpy
+    from camo_core.params import CamoParams
+    from camo_msgs.msg import RobotStatus
+    from camo_nodes.monitor_node import MonitorNode
+    made = count_round_records(monkeypatch)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain())
+    try:
+        monitor = MonitorNode(CamoParams(rows=2, cols=2), context=context)
+        for round_index in (0, 1):
+            for step in range(5):
+                for robot in range(4):
+                    monitor._on_status(RobotStatus(sender_id=robot, phase=2, step=step, round=round_index))
+        assert monitor.record(1).step.tolist() == [4, 4, 4, 4]
+        assert len(made) == 2 and monitor.statuses_heard == 40
+        monitor.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -187,17 +187,50 @@ def recorded_topics(params, switching: bool) -> set[str]:
     return topics | {LOAD_TOPIC} if switching else topics
 
 
-def drain(executor, recorder: RecorderNode, topics: set[str], stop, quiet: float = 1.0, limit: float = 30.0) -> None:
-    """Before the robots stop or start a new round: let the recorder subscribe to every topic and take in
-    what is still coming."""
+def expected_messages(params, monitor: MonitorNode, rounds: int) -> dict[str, int]:
+    """What a recording must hold once `rounds` rounds are over: every status the monitor heard, and
+    from each robot, for each round it finished, its hello, its colour, its votes and its states."""
+    per_round = {"hello": 1, "color": 1, "vote": params.consensus_steps, "state": params.formation_steps}
+    finished = sum(monitor.record(k).finished.astype(int) for k in range(rounds))
+    expected = {robot_topic(i, kind): n * int(finished[i]) for i in range(params.count)
+                for kind, n in per_round.items()}
+    expected[STATUS_TOPIC] = monitor.statuses_heard
+    return expected
+
+
+def lacking(recorder: RecorderNode, expected: dict[str, int]) -> dict[str, int]:
+    """Messages still missing from the recording, by topic."""
+    return {topic: n - recorder.recorded(topic) for topic, n in expected.items() if recorder.recorded(topic) < n}
+
+
+def drain(executor, recorder: RecorderNode, topics: set[str], expected, stop, quiet: float = 1.0,
+          limit: float = 60.0) -> None:
+    """Before the robots stop or start a new round: let the recorder subscribe to every topic and take
+    in what is still coming. Matching a publisher is not enough: a publisher in another process hands
+    over its history only once it has discovered the recorder, so wait for the messages themselves."""
     deadline = time.monotonic() + limit
     while time.monotonic() < deadline and not stop:
         executor.spin_once(timeout_sec=0.1)
-        if recorder.settled(topics, quiet, ignoring=frozenset({PATTERN_TOPIC})):
+        if recorder.settled(topics, quiet, ignoring=frozenset({PATTERN_TOPIC})) and not lacking(recorder, expected()):
             return
+    if stop:
+        return
     missing = sorted(topics - recorder.recording_now())
-    if missing and not stop:
+    if missing:
         print(f"camo run: the recording lacks {len(missing)} topics, e.g. {missing[:3]}", file=sys.stderr)
+    short = lacking(recorder, expected())
+    if short:
+        print(f"camo run: the recording lacks {sum(short.values())} messages on {len(short)} topics, "
+              f"e.g. {sorted(short)[:3]}", file=sys.stderr)
+
+
+def wait_for_listener(executor, publisher, what: str, stop, limit: float = 60.0) -> None:
+    """A message on a volatile topic reaches only subscribers matched when it is sent."""
+    deadline = time.monotonic() + limit
+    while publisher.get_subscription_count() == 0 and not stop:
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"no {what} listens on {publisher.topic_name} after {limit:g} s")
+        executor.spin_once(timeout_sec=0.1)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -262,7 +295,9 @@ def run(args: argparse.Namespace) -> int:
                 if recorder is not None:
                     # A robot's topics keep one round of history for late subscribers: the recorder
                     # must have taken this round in before the next one pushes it out.
-                    drain(executor, recorder, recorded_topics(params, True), stop)
+                    drain(executor, recorder, recorded_topics(params, True),
+                          lambda: expected_messages(params, monitor, round_index), stop)
+                wait_for_listener(executor, loader, "projector", stop)
                 loader.publish(String(data=round_label))
             last_print = 0.0
             all_voted = None     # when every robot had voted: the steps start
@@ -305,7 +340,8 @@ def run(args: argparse.Namespace) -> int:
                          f"result can differ from ./camo sim)")
             print(f"pattern: {summary['pattern']} ({counts}){dead}; wrote {round_folder}/summary.json and figure.png")
         if recorder is not None:
-            drain(executor, recorder, recorded_topics(params, len(labels) > 1), stop)
+            drain(executor, recorder, recorded_topics(params, len(labels) > 1),
+                  lambda: expected_messages(params, monitor, len(labels)), stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         print("camo run: interrupted; stopping the swarm and writing what it has", file=sys.stderr)
         code = 130

@@ -145,6 +145,7 @@ class MonitorNode(Node):
         self.last_heard = np.zeros(params.count)
         self.heard = np.zeros(params.count, bool)
         self.offline = np.zeros(params.count, bool)
+        self.statuses_heard = 0        # a recording of the run must hold at least these
         self.started = time.monotonic()
         self.create_subscription(RobotStatus, STATUS_TOPIC, self._on_status, status_listener_qos())
         self.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
@@ -155,12 +156,13 @@ class MonitorNode(Node):
         add_background(self.images, self._image_stamps, msg)
 
     def _on_status(self, msg: RobotStatus) -> None:
+        self.statuses_heard += 1
         if msg.sender_id >= self.params.count:
             return
         self.last_heard[msg.sender_id] = time.monotonic()
         self.heard[msg.sender_id] = True
         self.offline[msg.sender_id] = not msg.alive      # a bridged Droplet whose port went away
-        self.rounds.setdefault(msg.round, RoundRecord(self.params)).add(msg)
+        self.record(msg.round).add(msg)
 
     # ---- views ------------------------------------------------------------------
 
@@ -177,7 +179,10 @@ class MonitorNode(Node):
         return bool(np.all((record.phase >= RobotStatus.PHASE_CONSENSUS) | self.dead(round_index)))
 
     def record(self, round_index: int) -> RoundRecord:
-        return self.rounds.setdefault(round_index, RoundRecord(self.params))
+        # Not setdefault: its default would allocate a record's traces on every status.
+        if round_index not in self.rounds:
+            self.rounds[round_index] = RoundRecord(self.params)
+        return self.rounds[round_index]
 
     def complete(self, round_index: int = 0) -> bool:
         record = self.record(round_index)

@@ -57,6 +57,11 @@ class RecorderNode(Node):
     def recording_now(self) -> set[str]:
         return {name for name, sub in self._recorded.items() if sub is not None}
 
+    def recorded(self, topic: str) -> int:
+        """Messages recorded on a topic so far."""
+        info = self.bag.topics.get(topic)
+        return 0 if info is None else info.count
+
     def settled(self, topics: set[str], quiet: float, ignoring: frozenset[str] = frozenset()) -> bool:
         """Subscribed to every one of these topics, matched with their publishers for `quiet` seconds
         (a latched topic's history has come in), and no message for `quiet` seconds."""

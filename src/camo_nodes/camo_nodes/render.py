@@ -65,7 +65,9 @@ def load_run(path: str | Path) -> RecordedRun:
     times: dict[int, list[int]] = {}
     for status, log_time in pending:
         if status.sender_id < params.count:
-            rounds.setdefault(status.round, RoundRecord(params)).add(status)
+            if status.round not in rounds:         # not setdefault, which would allocate on every status
+                rounds[status.round] = RoundRecord(params)
+            rounds[status.round].add(status)
             times.setdefault(status.round, []).append(log_time)
     if not rounds:
         raise BagError(f"{path} holds no robot status: nothing to render")
