@@ -238,3 +238,26 @@ def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(monk
         monitor.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
+
+
+def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one():
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from std_msgs.msg import String
+    from camo_nodes.launcher import wait_for_listener
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain())
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        node = rclpy.create_node("launcher_test", context=context)
+        executor.add_node(node)
+        loader = node.create_publisher(String, "/camo/projector/load", 10)
+        with pytest.raises(RuntimeError, match="no projector listens on /camo/projector/load after 0.5 s"):
+            wait_for_listener(executor, loader, "projector", stop=False, limit=0.5)
+        node.create_subscription(String, "/camo/projector/load", lambda msg: None, 10)
+        wait_for_listener(executor, loader, "projector", stop=False, limit=10.0)
+        assert loader.get_subscription_count() == 1
+        executor.shutdown()
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
