@@ -261,3 +261,27 @@ def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
+
+
+def test_a_deadline_passes_only_on_the_tick_after_discounting_a_stall_of_the_robots_process():
+    import rclpy
+    from camo_core.params import CamoParams
+    from camo_nodes.robot_node import DISCOVERY, RobotNode
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain())
+    try:
+        robot = RobotNode(CamoParams(rows=1, cols=2), 0, 0, step_timeout=2.0, discovery_timeout=2.0,
+                          context=context)       # waits for its one neighbour's hello
+        # The process stalled for 10 s; a message is handled before the robot's tick.
+        robot.wait_started -= 10.0
+        robot.last_tick -= 10.0
+        robot._advance()
+        assert (robot.phase, robot.deadlines) == (DISCOVERY, 0)
+        robot._on_timer()                        # sees the stall and discounts it
+        assert (robot.phase, robot.deadlines) == (DISCOVERY, 0)
+        robot.wait_started -= 3.0                # now the neighbour really is late
+        robot._on_timer()
+        assert robot.phase != DISCOVERY and robot.deadlines == 1 and robot.silent
+        robot.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)

@@ -83,6 +83,7 @@ class RobotNode(Node):
         self.step = 0
         self.wait_started = time.monotonic()
         self.started = False
+        self.ticking = False          # in the timer's call to _advance: deadlines may pass
         self.last_tick = time.monotonic()
         self.create_timer(TICK, self._on_timer)
         if autostart:
@@ -110,7 +111,11 @@ class RobotNode(Node):
             # fault, and their messages may still be queued behind this tick. Extend the deadline.
             self.wait_started += stalled
         if self.started and self.context.ok():          # not while the process is shutting down
-            self._advance()
+            self.ticking = True
+            try:
+                self._advance()
+            finally:
+                self.ticking = False
 
     def _on_message(self, kind: str, slot: int, msg) -> None:
         self.silent.discard(slot)          # it speaks again: wait for it again
@@ -200,7 +205,9 @@ class RobotNode(Node):
     def _ready(self, pending: list[int], timeout: float) -> bool:
         if not pending:
             return True
-        if time.monotonic() - self.wait_started < timeout:
+        # Only the tick lets a deadline pass: it has first discounted a stall of this process, and a
+        # message handled before the tick after a stall would otherwise find the deadline long gone.
+        if not self.ticking or time.monotonic() - self.wait_started < timeout:
             return False
         self.silent.update(pending)
         self.deadlines += 1
