@@ -143,6 +143,14 @@ def test_bare_exchange_benchmark_measures_a_rate():
     assert 0 < rate < 10_000
 
 
+def test_bench_runs_are_longer_on_small_grids_and_reject_absurd_step_counts():
+    from camo_nodes.bench_ros import default_steps
+    assert (default_steps(8), default_steps(16), default_steps(64)) == (1562, 390, 300)
+    out = subprocess.run([sys.executable, "-m", "camo_nodes.bench_ros", "--steps", "5"], cwd=ROOT,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "--steps must be in 20..100000" in out.stderr
+
+
 def test_run_writes_timing(tmp_path):
     out = camo_run("--rows", "4", "--cols", "4", "--procs", "1", "--out", str(tmp_path))
     assert out.returncode == 0, out.stderr[-2000:]
