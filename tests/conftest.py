@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -23,6 +24,18 @@ def domain() -> int:
     """A ROS domain of its own for each run, so parallel test processes do not hear each other."""
     _next_domain[0] += 1
     return 1 + (os.getpid() * 7 + _next_domain[0]) % 200
+
+
+@contextmanager
+def ros_context(domain_id: int | None = None):
+    """An rclpy context of the caller's own (in a domain of its own unless given), shut down on leaving."""
+    import rclpy
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain() if domain_id is None else domain_id)
+    try:
+        yield context
+    finally:
+        rclpy.try_shutdown(context=context)
 
 
 def camo_run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:

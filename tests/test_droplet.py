@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from conftest import ROOT, StatusListener, camo_run, domain, run_camo
+from conftest import ROOT, StatusListener, camo_run, domain, ros_context, run_camo
 from camo_core.backgrounds import background
 from camo_core.sensing import rgb_to_gray, to_gray
 from camo_nodes.droplet_emulator import DropletEmulator, Faults, emulated_rgb
@@ -260,18 +260,13 @@ def test_bad_bridge_options_are_one_line_errors(tmp_path):
 
 
 def test_monitor_counts_bridged_robots_whose_hardware_is_offline():
-    import rclpy
     from camo_core.params import CamoParams
     from camo_msgs.msg import RobotStatus
     from camo_nodes.monitor_node import MonitorNode
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain())
-    try:
+    with ros_context() as context:
         monitor = MonitorNode(CamoParams(rows=2, cols=2), context=context)
         monitor._on_status(RobotStatus(sender_id=3, row=1, col=1, phase=2, alive=False))
         assert "hardware offline 1" in monitor.progress_line()
         monitor._on_status(RobotStatus(sender_id=3, row=1, col=1, phase=2, alive=True))
         assert "offline" not in monitor.progress_line()
         monitor.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)

@@ -7,7 +7,8 @@ import time
 
 import pytest
 
-from conftest import ROOT, StatusListener, camo_run, count_round_records, domain, run_camo, wait_for_line
+from conftest import (ROOT, StatusListener, camo_run, count_round_records, domain, ros_context, run_camo,
+                      wait_for_line)
 
 def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:
     swarm = camo_run(*options, "--procs", str(procs), "--out", str(tmp_path / "run"))
@@ -169,21 +170,19 @@ def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
         [sys.executable, "-m", "camo_nodes.launcher", "--pattern", "forest", "--rows", "5", "--cols", "7",
          "--procs", "1", "--consensus-steps", "100000", "--domain-id", str(domain_id), "--out", str(tmp_path)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
     images = []
     try:
-        node = rclpy.create_node("pattern_viewer", context=context)
-        node.create_subscription(Image, "/swarm/pattern", images.append, 10)
-        executor = rclpy.executors.SingleThreadedExecutor(context=context)
-        executor.add_node(node)
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and not any(set(bytes(m.data)) <= {0, 255} for m in images):
-            executor.spin_once(timeout_sec=0.2)
-        executor.shutdown()
-        node.destroy_node()
+        with ros_context(domain_id) as context:
+            node = rclpy.create_node("pattern_viewer", context=context)
+            node.create_subscription(Image, "/swarm/pattern", images.append, 10)
+            executor = rclpy.executors.SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            deadline = time.monotonic() + 120
+            while time.monotonic() < deadline and not any(set(bytes(m.data)) <= {0, 255} for m in images):
+                executor.spin_once(timeout_sec=0.2)
+            executor.shutdown()
+            node.destroy_node()
     finally:
-        rclpy.shutdown(context=context)
         proc.send_signal(2)
         _, err = proc.communicate(timeout=120)
     assert images, f"no /swarm/pattern image; launcher said: {err[-1500:]}"
@@ -228,14 +227,11 @@ def test_robots_started_alone_with_robot_node_finish_like_the_simulator(tmp_path
 
 def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(monkeypatch):
     # A record allocated per status made a long run's monitor fall far behind its robots.
-    import rclpy
     from camo_core.params import CamoParams
     from camo_msgs.msg import RobotStatus
     from camo_nodes.monitor_node import MonitorNode
     made = count_round_records(monkeypatch)
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain())
-    try:
+    with ros_context() as context:
         monitor = MonitorNode(CamoParams(rows=2, cols=2), context=context)
         for round_index in (0, 1):
             for step in range(5):
@@ -244,8 +240,6 @@ def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(monk
         assert monitor.record(1).step.tolist() == [4, 4, 4, 4]
         assert len(made) == 2 and monitor.statuses_heard == 40
         monitor.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
 
 
 def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one():
@@ -253,10 +247,8 @@ def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one
     from rclpy.executors import SingleThreadedExecutor
     from std_msgs.msg import String
     from camo_nodes.launcher import wait_for_listener
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain())
-    executor = SingleThreadedExecutor(context=context)
-    try:
+    with ros_context() as context:
+        executor = SingleThreadedExecutor(context=context)
         node = rclpy.create_node("launcher_test", context=context)
         executor.add_node(node)
         loader = node.create_publisher(String, "/camo/projector/load", 10)
@@ -267,17 +259,12 @@ def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one
         assert loader.get_subscription_count() == 1
         executor.shutdown()
         node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)
 
 
 def test_a_deadline_passes_only_on_the_tick_after_discounting_a_stall_of_the_robots_process():
-    import rclpy
     from camo_core.params import CamoParams
     from camo_nodes.robot_node import DISCOVERY, RobotNode
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain())
-    try:
+    with ros_context() as context:
         robot = RobotNode(CamoParams(rows=1, cols=2), 0, 0, step_timeout=2.0, discovery_timeout=2.0,
                           context=context)       # waits for its one neighbour's hello
         # The process stalled for 10 s; a message is handled before the robot's tick.
@@ -291,5 +278,3 @@ def test_a_deadline_passes_only_on_the_tick_after_discounting_a_stall_of_the_rob
         robot._on_timer()
         assert robot.phase != DISCOVERY and robot.deadlines == 1 and robot.silent
         robot.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=context)

@@ -200,7 +200,7 @@ def expected_messages(params, monitor: MonitorNode, rounds: int) -> dict[str, in
 
 def lacking(recorder: RecorderNode, expected: dict[str, int]) -> dict[str, int]:
     """Messages still missing from the recording, by topic."""
-    return {topic: n - recorder.recorded(topic) for topic, n in expected.items() if recorder.recorded(topic) < n}
+    return {topic: n - got for topic, n in expected.items() if (got := recorder.recorded(topic)) < n}
 
 
 def drain(executor, recorder: RecorderNode, topics: set[str], expected, stop, quiet: float = 1.0,

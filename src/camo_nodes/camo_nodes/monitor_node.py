@@ -110,6 +110,14 @@ class RoundRecord:
         )
 
 
+def round_record(rounds: dict[int, RoundRecord], index: int, params: CamoParams) -> RoundRecord:
+    """The record of round `index`, created on first use. Not setdefault: its default would allocate
+    a record's traces (steps x robots) on every status."""
+    if index not in rounds:
+        rounds[index] = RoundRecord(params)
+    return rounds[index]
+
+
 def add_background(images: list[np.ndarray], stamps: list[tuple[int, int]], msg: Image) -> None:
     """Keep each new background once (by its stamp): round k camouflaged images[k]."""
     stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
@@ -179,10 +187,7 @@ class MonitorNode(Node):
         return bool(np.all((record.phase >= RobotStatus.PHASE_CONSENSUS) | self.dead(round_index)))
 
     def record(self, round_index: int) -> RoundRecord:
-        # Not setdefault: its default would allocate a record's traces on every status.
-        if round_index not in self.rounds:
-            self.rounds[round_index] = RoundRecord(self.params)
-        return self.rounds[round_index]
+        return round_record(self.rounds, round_index, self.params)
 
     def complete(self, round_index: int = 0) -> bool:
         record = self.record(round_index)

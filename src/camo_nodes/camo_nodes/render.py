@@ -25,7 +25,7 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
 from .bag import BagError, read_messages
-from .monitor_node import RoundRecord, add_background, write_round
+from .monitor_node import RoundRecord, add_background, round_record, write_round
 from .topics import PARAMS_TOPIC, STATUS_TOPIC
 
 
@@ -65,9 +65,7 @@ def load_run(path: str | Path) -> RecordedRun:
     times: dict[int, list[int]] = {}
     for status, log_time in pending:
         if status.sender_id < params.count:
-            if status.round not in rounds:         # not setdefault, which would allocate on every status
-                rounds[status.round] = RoundRecord(params)
-            rounds[status.round].add(status)
+            round_record(rounds, status.round, params).add(status)
             times.setdefault(status.round, []).append(log_time)
     if not rounds:
         raise BagError(f"{path} holds no robot status: nothing to render")
