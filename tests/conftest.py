@@ -1,4 +1,5 @@
 """Shared helpers. Tests run through `./camo test`, inside the project's venv and workspace."""
+
 from __future__ import annotations
 
 import os
@@ -13,8 +14,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def run_camo(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run the camo command line (already set up: we are inside ./camo test)."""
-    return subprocess.run([sys.executable, "-m", "camo_core.cli", *args], capture_output=True, text=True,
-                          timeout=timeout, cwd=ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "camo_core.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
 
 
 _next_domain = [0]
@@ -30,6 +36,7 @@ def domain() -> int:
 def ros_context(domain_id: int | None = None):
     """An rclpy context of the caller's own (in a domain of its own unless given), shut down on leaving."""
     import rclpy
+
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain() if domain_id is None else domain_id)
     try:
@@ -40,8 +47,13 @@ def ros_context(domain_id: int | None = None):
 
 def camo_run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
     """`./camo run` with a domain of its own."""
-    return subprocess.run([sys.executable, "-m", "camo_nodes.launcher", *args, "--domain-id", str(domain())],
-                          capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    return subprocess.run(
+        [sys.executable, "-m", "camo_nodes.launcher", *args, "--domain-id", str(domain())],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
 
 
 def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 120.0) -> list[str]:
@@ -52,7 +64,9 @@ def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 120.0) -> 
         seen.append(line)
         if text in line:
             return seen
-        assert time.monotonic() < deadline, f"no line with {text!r} in {timeout:g} s:\n{''.join(seen[-30:])}"
+        assert time.monotonic() < deadline, (
+            f"no line with {text!r} in {timeout:g} s:\n{''.join(seen[-30:])}"
+        )
     raise AssertionError(f"the process ended before a line with {text!r}:\n{''.join(seen[-30:])}")
 
 
@@ -63,15 +77,19 @@ class StatusListener:
         self.domain_id = domain_id
         self.got: list = []
 
-    def __enter__(self) -> "StatusListener":
+    def __enter__(self) -> StatusListener:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
+
         from camo_msgs.msg import RobotStatus
         from camo_nodes.topics import STATUS_TOPIC, status_listener_qos
+
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)
         self.node = rclpy.create_node("status_listener", context=self.context)
-        self.node.create_subscription(RobotStatus, STATUS_TOPIC, self.got.append, status_listener_qos())
+        self.node.create_subscription(
+            RobotStatus, STATUS_TOPIC, self.got.append, status_listener_qos()
+        )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         return self
@@ -88,6 +106,7 @@ class StatusListener:
 
     def __exit__(self, *exc) -> None:
         import rclpy
+
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
@@ -96,8 +115,10 @@ class StatusListener:
 def count_round_records(monkeypatch) -> list[int]:
     """Counts RoundRecord constructions (each allocates traces of consensus steps x robots)."""
     from camo_nodes.monitor_node import RoundRecord
+
     made = []
     original = RoundRecord.__post_init__
-    monkeypatch.setattr(RoundRecord, "__post_init__", lambda self: (made.append(1), original(self))[1])
+    monkeypatch.setattr(
+        RoundRecord, "__post_init__", lambda self: (made.append(1), original(self))[1]
+    )
     return made
-

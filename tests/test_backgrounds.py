@@ -7,8 +7,9 @@ from camo_core.sensing import sense_image
 from camo_core.simulator import simulate
 
 
-@pytest.mark.parametrize("name, expected", [("desert", "horizontal"), ("forest", "vertical"),
-                                            ("leopard", "mottled")])
+@pytest.mark.parametrize(
+    "name, expected", [("desert", "horizontal"), ("forest", "vertical"), ("leopard", "mottled")]
+)
 @pytest.mark.parametrize("profile", ["paper", "droplet"])
 def test_builtin_background_selects_its_pattern_at_8x8(name, expected, profile):
     image = background(name)

@@ -1,27 +1,44 @@
 """The reference tools from the command line: outputs, and one-line errors on bad input."""
+
 import csv
 import json
 
 import cv2
 import numpy as np
 import pytest
+from conftest import run_camo
 
 from camo_core.result import SUMMARY_KEYS
-from conftest import run_camo
 
 
 def test_sim_writes_summary_and_figure(tmp_path):
-    out = run_camo("sim", "--pattern", "desert", "--rows", "8", "--cols", "12", "--seed", "4",
-                   "--rho-comm", "0.1", "--out", str(tmp_path))
+    out = run_camo(
+        "sim",
+        "--pattern",
+        "desert",
+        "--rows",
+        "8",
+        "--cols",
+        "12",
+        "--seed",
+        "4",
+        "--rho-comm",
+        "0.1",
+        "--out",
+        str(tmp_path),
+    )
     assert out.returncode == 0, out.stderr
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert tuple(summary) == SUMMARY_KEYS
     assert summary["pattern"] == "horizontal" and summary["rows"] == 8 and summary["cols"] == 12
     assert sum(summary["votes"].values()) == 96
-    assert np.array(summary["final"]).shape == (8, 12) and np.array(summary["sensed"]).shape == (8, 12)
+    assert np.array(summary["final"]).shape == (8, 12) and np.array(summary["sensed"]).shape == (
+        8,
+        12,
+    )
     assert len(summary["consensus_trace"]) == 36 and summary["rho_comm"] == 0.1
     figure = cv2.imread(str(tmp_path / "figure.png"))
-    assert figure is not None and figure.shape[1] > 3 * figure.shape[0]   # one row of five panels
+    assert figure is not None and figure.shape[1] > 3 * figure.shape[0]  # one row of five panels
 
 
 def test_sim_accepts_a_colour_image_file(tmp_path):
@@ -30,19 +47,24 @@ def test_sim_accepts_a_colour_image_file(tmp_path):
     image[:, 1::16] = (0, 0, 255)
     path = tmp_path / "stripes.jpg"
     cv2.imwrite(str(path), image)
-    out = run_camo("sim", "--image", str(path), "--profile", "droplet", "--out", str(tmp_path / "o"))
+    out = run_camo(
+        "sim", "--image", str(path), "--profile", "droplet", "--out", str(tmp_path / "o")
+    )
     assert out.returncode == 0, out.stderr
     assert json.loads((tmp_path / "o" / "summary.json").read_text())["profile"] == "droplet"
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--image", "/no/such/file.png"], "image not found"),
-    (["--rows", "0"], "rows must be"),
-    (["--rho-meas", "-0.5"], "rho_meas must be"),
-    (["--rows", "200", "--cols", "200"], "smaller than"),
-    (["--profile", "nope"], "invalid choice"),
-    (["--seed", "abc"], "invalid int value"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--image", "/no/such/file.png"], "image not found"),
+        (["--rows", "0"], "rows must be"),
+        (["--rho-meas", "-0.5"], "rho_meas must be"),
+        (["--rows", "200", "--cols", "200"], "smaller than"),
+        (["--profile", "nope"], "invalid choice"),
+        (["--seed", "abc"], "invalid int value"),
+    ],
+)
 def test_bad_input_is_one_line_and_exit_2(args, message, tmp_path):
     out = run_camo("sim", *args, "--out", str(tmp_path / "o"))
     assert out.returncode == 2
@@ -59,7 +81,9 @@ def test_corrupt_image_is_one_line_and_exit_2(tmp_path):
 
 
 def test_errors_writes_csv_and_figure(tmp_path):
-    out = run_camo("errors", "--pattern", "forest", "--trials", "2", "--rhos", "0,0.3", "--out", str(tmp_path))
+    out = run_camo(
+        "errors", "--pattern", "forest", "--trials", "2", "--rhos", "0,0.3", "--out", str(tmp_path)
+    )
     assert out.returncode == 0, out.stderr
     rows = list(csv.DictReader((tmp_path / "errors.csv").open()))
     assert [r["mode"] for r in rows] == ["measurement"] * 2 + ["communication"] * 2 + ["both"] * 2
@@ -68,7 +92,7 @@ def test_errors_writes_csv_and_figure(tmp_path):
     assert all(float(r["mean_diff"]) == 0.0 and float(r["correct_rate"]) == 1.0 for r in at_zero)
     assert max(float(r["mean_diff"]) for r in rows) > 0
     assert cv2.imread(str(tmp_path / "errors.png")) is not None
-    assert "error analysis" in out.stderr   # the progress bar
+    assert "error analysis" in out.stderr  # the progress bar
 
 
 def test_errors_rejects_bad_rhos(tmp_path):

@@ -1,4 +1,5 @@
 """The algorithm package must import and run where ROS is not installed at all."""
+
 import subprocess
 import sys
 
@@ -24,7 +25,9 @@ print(len(names), result.majority_pattern)
 
 
 def test_camo_core_imports_and_runs_with_ros_blocked():
-    out = subprocess.run([sys.executable, "-c", BLOCK_ROS], capture_output=True, text=True, timeout=300)
+    out = subprocess.run(
+        [sys.executable, "-c", BLOCK_ROS], capture_output=True, text=True, timeout=300
+    )
     assert out.returncode == 0, out.stderr
     count, pattern = out.stdout.split()
     assert int(count) >= 10 and pattern == "vertical"

@@ -1,4 +1,5 @@
 """The two drivers (per-robot step functions, whole-grid simulator) agree bit for bit."""
+
 import numpy as np
 import pytest
 
@@ -16,7 +17,9 @@ SHAPES = [(1, 1), (1, 7), (6, 1), (2, 2), (3, 5), (8, 8), (9, 4)]
 def test_drivers_agree_on_random_grids(profile, rho, seed):
     generator = np.random.default_rng(seed % 1000 + int(rho * 10))
     for rows, cols in SHAPES:
-        params = CamoParams(profile=profile, rows=rows, cols=cols, seed=seed, rho_meas=rho, rho_comm=rho)
+        params = CamoParams(
+            profile=profile, rows=rows, cols=cols, seed=seed, rho_meas=rho, rho_comm=rho
+        )
         raw = generator.uniform(0, 255, (rows, cols))
         fast, slow = simulate(params, raw), run_per_robot(params, raw)
         for field in FIELDS:

@@ -1,4 +1,5 @@
 """Every camo_msgs type goes through real rclpy publishers and subscriptions in one process."""
+
 import os
 import time
 
@@ -44,7 +45,9 @@ def test_each_message_type_round_trips(monkeypatch):
         pubs = []
         for msg_type in (Hello, Color, Vote, State, RobotStatus):
             topic = f"/camo_test/{msg_type.__name__.lower()}"
-            node.create_subscription(msg_type, topic, lambda m, t=msg_type: received.setdefault(t, m), 10)
+            node.create_subscription(
+                msg_type, topic, lambda m, t=msg_type: received.setdefault(t, m), 10
+            )
             pubs.append((node.create_publisher(msg_type, topic, 10), msg_type))
             sent[msg_type] = filled(msg_type)
         deadline = time.monotonic() + 20
@@ -56,7 +59,7 @@ def test_each_message_type_round_trips(monkeypatch):
         assert set(received) == set(sent)
         for msg_type, msg in sent.items():
             assert received[msg_type] == msg, msg_type.__name__
-        assert received[Color].value == 123.456789012345      # float64, not rounded
+        assert received[Color].value == 123.456789012345  # float64, not rounded
         assert list(received[Vote].p) == [0.125, 0.5, 0.375]
         node.destroy_node()
     finally:

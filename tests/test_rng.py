@@ -12,7 +12,13 @@ def test_mix_matches_the_published_splitmix64_sequence():
 def test_uniform_is_in_unit_interval_and_depends_on_every_argument():
     base = rng.uniform(1, 2, 3, 4, 5)
     assert 0.0 <= base < 1.0
-    for changed in [(9, 2, 3, 4, 5), (1, 9, 3, 4, 5), (1, 2, 9, 4, 5), (1, 2, 3, 9, 5), (1, 2, 3, 4, 9)]:
+    for changed in [
+        (9, 2, 3, 4, 5),
+        (1, 9, 3, 4, 5),
+        (1, 2, 9, 4, 5),
+        (1, 2, 3, 9, 5),
+        (1, 2, 3, 4, 9),
+    ]:
         assert rng.uniform(*changed) != base
 
 
@@ -27,6 +33,8 @@ def test_vectorised_uniform_equals_scalar_bit_for_bit():
 
 
 def test_loss_rate_follows_rho():
-    draws = rng.uniform_array(7, rng.STREAM_CONSENSUS, 0, np.arange(20000, dtype=np.uint64), np.uint64(1))
+    draws = rng.uniform_array(
+        7, rng.STREAM_CONSENSUS, 0, np.arange(20000, dtype=np.uint64), np.uint64(1)
+    )
     assert abs(np.mean(draws < 0.2) - 0.2) < 0.02
     assert not rng.lost(7, rng.STREAM_CONSENSUS, 0, 1, 2, 0.0)

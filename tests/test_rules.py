@@ -1,4 +1,5 @@
 """Hand-worked cases of SPEC section 2, one rule at a time."""
+
 import pytest
 
 from camo_core import rules
@@ -10,6 +11,7 @@ DROPLET = CamoParams(profile="droplet")
 
 
 # ---- descriptor --------------------------------------------------------------
+
 
 def test_missing_side_takes_the_opposite_side():
     # Top row: no top neighbour, so T takes B ("counts its bottom neighbour twice").
@@ -39,16 +41,19 @@ def test_paper_and_droplet_disagree_on_a_ramp():
 
 
 def test_threshold_is_a_parameter():
-    received = [160.0, 100.0, 160.0, 100.0]   # Dy - Dx = 120
+    received = [160.0, 100.0, 160.0, 100.0]  # Dy - Dx = 120
     assert rules.vote(100.0, received, DROPLET) == HORIZONTAL
     assert rules.vote(100.0, received, DROPLET.with_(threshold=130.0)) == MOTTLED
 
 
 # ---- consensus ---------------------------------------------------------------
 
+
 def test_metropolis_step_by_hand():
     # Robot of degree 2 with neighbours of degree 3 and 1: weights 1/4 and 1/3.
-    p = rules.consensus_step((1.0, 0.0, 0.0), 2, [((0.0, 1.0, 0.0), 3), ((0.0, 0.0, 1.0), 1)] + [None] * 6)
+    p = rules.consensus_step(
+        (1.0, 0.0, 0.0), 2, [((0.0, 1.0, 0.0), 3), ((0.0, 0.0, 1.0), 1)] + [None] * 6
+    )
     assert p == pytest.approx((1 - 0.25 - 1 / 3, 0.25, 1 / 3))
     assert sum(p) == pytest.approx(1.0)
 
@@ -70,6 +75,7 @@ def test_selection_is_strict_maximum_and_ties_go_to_mottled():
 
 
 # ---- pattern formation -------------------------------------------------------
+
 
 def test_initial_state_is_dark_below_127():
     assert rules.initial_state(126.99) == 1

@@ -8,7 +8,7 @@ from camo_core.sensing import ImageError
 
 def test_block_means_are_unrounded_area_averages():
     gray = np.zeros((4, 4), np.uint8)
-    gray[0, 0] = 1       # block (0, 0) mean is 0.25, which a uint8 resize would round away
+    gray[0, 0] = 1  # block (0, 0) mean is 0.25, which a uint8 resize would round away
     gray[2:, 2:] = 200
     means = sensing.block_means(gray, 2, 2)
     assert means.dtype == np.float64
@@ -17,8 +17,10 @@ def test_block_means_are_unrounded_area_averages():
 
 def test_paper_grey_is_opencv_luma_and_droplet_grey_is_red_green_mean():
     bgr = np.zeros((2, 2, 3), np.uint8)
-    bgr[..., 0], bgr[..., 1], bgr[..., 2] = 10, 101, 250     # B, G, R
-    assert np.array_equal(sensing.to_gray(bgr, "paper"), cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(float))
+    bgr[..., 0], bgr[..., 1], bgr[..., 2] = 10, 101, 250  # B, G, R
+    assert np.array_equal(
+        sensing.to_gray(bgr, "paper"), cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(float)
+    )
     assert sensing.to_gray(bgr, "droplet")[0, 0] == 0.5 * 250 + 0.5 * 101
 
 

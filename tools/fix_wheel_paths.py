@@ -4,6 +4,7 @@ The ros-jazzy-* wheels are built in a manylinux container, and their generated
 CMake files name that container's include directories. colcon builds of
 rosidl packages link against those targets, so we rewrite the paths in place.
 """
+
 import pathlib
 import sys
 import sysconfig

@@ -3,6 +3,7 @@
 desert: horizontal dunes; forest: vertical trunks; leopard: rosettes. Each is
 deterministic, so a run on a built-in background is reproducible.
 """
+
 from __future__ import annotations
 
 import cv2
@@ -27,13 +28,15 @@ def forest(size: int = SIZE) -> np.ndarray:
     """Dark trunks standing on a light, misty background."""
     rng = np.random.default_rng(7)
     image = np.full((size, size), 200.0)
-    image += 15.0 * np.sin(2 * np.pi * np.arange(size)[:, None] / 128.0)   # light mist, top to bottom
+    image += 15.0 * np.sin(
+        2 * np.pi * np.arange(size)[:, None] / 128.0
+    )  # light mist, top to bottom
     for centre in range(8, size, 32):
         width = rng.uniform(11.0, 15.0)
         left = int(round(centre + rng.uniform(-2.0, 2.0) - width / 2))
         shade = rng.uniform(30.0, 55.0)
         cv2.rectangle(image, (left, 0), (left + int(width), size - 1), shade, thickness=-1)
-    image += rng.normal(0.0, 8.0, (size, size))                             # bark and leaves
+    image += rng.normal(0.0, 8.0, (size, size))  # bark and leaves
     return _to_uint8(cv2.GaussianBlur(image, (3, 3), 0))
 
 
@@ -48,7 +51,7 @@ def leopard(size: int = SIZE) -> np.ndarray:
             cx = int(gx + (spacing / 2 if int(gy / spacing) % 2 else 0) + rng.uniform(-2.5, 2.5))
             axes = (int(rng.integers(3, 5)), int(rng.integers(3, 5)))
             angle = float(rng.uniform(0, 180))
-            cv2.ellipse(image, (cx, cy), axes, angle, 0, 360, 45.0, thickness=2)      # dark ring
+            cv2.ellipse(image, (cx, cy), axes, angle, 0, 360, 45.0, thickness=2)  # dark ring
             cv2.ellipse(image, (cx, cy), (axes[0] - 2, axes[1] - 2), angle, 0, 360, 120.0, -1)
     image += rng.normal(0.0, 6.0, (size, size))
     return _to_uint8(cv2.GaussianBlur(image, (3, 3), 0))
@@ -58,7 +61,9 @@ def background(name: str) -> np.ndarray:
     try:
         return {"desert": desert, "forest": forest, "leopard": leopard}[name]()
     except KeyError:
-        raise ValueError(f"unknown built-in background {name!r} (choose from {', '.join(BACKGROUNDS)})") from None
+        raise ValueError(
+            f"unknown built-in background {name!r} (choose from {', '.join(BACKGROUNDS)})"
+        ) from None
 
 
 def _to_uint8(image: np.ndarray) -> np.ndarray:

@@ -4,6 +4,7 @@ Every figure is a ratio against a baseline measured in the same run: the time
 NumPy takes to copy one p-array (rows x cols x 3 float64) once per consensus
 and formation step. Also: the speed-up over the per-robot driver at 64x64.
 """
+
 from __future__ import annotations
 
 import time
@@ -15,7 +16,7 @@ from .perrobot import run_per_robot
 from .simulator import simulate
 
 SIZES = (64, 256, 1024)
-TARGETS = {0.0: 10.0, 0.1: 60.0}   # ratio to the copy baseline, per rho_comm
+TARGETS = {0.0: 10.0, 0.1: 60.0}  # ratio to the copy baseline, per rho_comm
 
 
 def _best_of(fn, repeats: int) -> float:
@@ -34,6 +35,7 @@ def copy_baseline(rows: int, cols: int, steps: int, repeats: int) -> float:
     def copies() -> None:
         for _ in range(steps):
             np.copyto(out, p)
+
     return _best_of(copies, repeats)
 
 
@@ -48,10 +50,16 @@ def run(sizes=SIZES, repeats: int = 3) -> dict:
         for rho in TARGETS:
             params = base.with_(rho_comm=rho)
             seconds = _best_of(lambda: simulate(params, raw), reps)
-            rows_out.append({
-                "robots": f"{n}x{n}", "rho_comm": rho, "seconds": seconds, "baseline_s": baseline,
-                "ratio": seconds / baseline, "target_ratio": TARGETS[rho] if n == 1024 else None,
-            })
+            rows_out.append(
+                {
+                    "robots": f"{n}x{n}",
+                    "rho_comm": rho,
+                    "seconds": seconds,
+                    "baseline_s": baseline,
+                    "ratio": seconds / baseline,
+                    "target_ratio": TARGETS[rho] if n == 1024 else None,
+                }
+            )
     n = 64
     raw = np.random.default_rng(n).uniform(0, 255, (n, n))
     params = CamoParams(rows=n, cols=n)
@@ -76,9 +84,13 @@ def format_table(report: dict) -> str:
     ]
     for r in report["results"]:
         target = f"<= {r['target_ratio']:g}" if r["target_ratio"] else ""
-        lines.append(f"{r['robots']:>10} {r['rho_comm']:>8g} {r['seconds']:>9.3f} {r['baseline_s']:>11.4f} "
-                     f"{r['ratio']:>8.1f} {target:>7}")
+        lines.append(
+            f"{r['robots']:>10} {r['rho_comm']:>8g} {r['seconds']:>9.3f} {r['baseline_s']:>11.4f} "
+            f"{r['ratio']:>8.1f} {target:>7}"
+        )
     lines.append("")
-    lines.append(f"64x64: per-robot driver {report['per_robot_64x64_s']:.3f} s, vectorised "
-                 f"{report['vectorised_64x64_s']:.4f} s, speed-up {report['speedup_over_per_robot']:.0f}x")
+    lines.append(
+        f"64x64: per-robot driver {report['per_robot_64x64_s']:.3f} s, vectorised "
+        f"{report['vectorised_64x64_s']:.4f} s, speed-up {report['speedup_over_per_robot']:.0f}x"
+    )
     return "\n".join(lines)

@@ -3,6 +3,7 @@
 Bad input (a missing or unreadable image, a bad parameter) is one line on
 stderr and exit code 2, never a traceback.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -32,29 +33,57 @@ class Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def add_run_options(parser: argparse.ArgumentParser, default_pattern: str | None = "forest") -> None:
+def add_run_options(
+    parser: argparse.ArgumentParser, default_pattern: str | None = "forest"
+) -> None:
     """The options shared by every command that runs one camouflage (sim, and later run)."""
     source = parser.add_mutually_exclusive_group()
     source.add_argument("--image", help="background image file (any format OpenCV reads)")
-    source.add_argument("--pattern", choices=BACKGROUNDS, default=None,
-                        help=f"built-in background (default: {default_pattern})")
+    source.add_argument(
+        "--pattern",
+        choices=BACKGROUNDS,
+        default=None,
+        help=f"built-in background (default: {default_pattern})",
+    )
     parser.add_argument("--rows", type=int, default=8, help="robot rows (default 8)")
     parser.add_argument("--cols", type=int, default=8, help="robot columns (default 8)")
-    parser.add_argument("--profile", choices=PROFILES, default="paper", help="paper or droplet rules")
-    parser.add_argument("--seed", type=int, default=0, help="seed of every random draw (default 0)")
-    parser.add_argument("--rho-meas", type=float, default=0.0, help="measurement error probability")
+    parser.add_argument(
+        "--profile", choices=PROFILES, default="paper", help="paper or droplet rules"
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="seed of every random draw (default 0)"
+    )
+    parser.add_argument(
+        "--rho-meas", type=float, default=0.0, help="measurement error probability"
+    )
     parser.add_argument("--rho-comm", type=float, default=0.0, help="message loss probability")
-    parser.add_argument("--threshold", type=float, default=50.0, help="descriptor threshold T (default 50)")
-    parser.add_argument("--consensus-steps", type=int, default=None, help="default: 35 paper, 10 droplet")
-    parser.add_argument("--formation-steps", type=int, default=None, help="default: 10 paper, 20 droplet")
-    parser.add_argument("--out", type=Path, default=None, help="output folder (default results/<timestamp>/)")
+    parser.add_argument(
+        "--threshold", type=float, default=50.0, help="descriptor threshold T (default 50)"
+    )
+    parser.add_argument(
+        "--consensus-steps", type=int, default=None, help="default: 35 paper, 10 droplet"
+    )
+    parser.add_argument(
+        "--formation-steps", type=int, default=None, help="default: 10 paper, 20 droplet"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output folder (default results/<timestamp>/)"
+    )
     parser.set_defaults(default_pattern=default_pattern)
 
 
 def params_from(args: argparse.Namespace) -> CamoParams:
-    return CamoParams(profile=args.profile, rows=args.rows, cols=args.cols, threshold=args.threshold,
-                      consensus_steps=args.consensus_steps, formation_steps=args.formation_steps,
-                      seed=args.seed, rho_meas=args.rho_meas, rho_comm=args.rho_comm)
+    return CamoParams(
+        profile=args.profile,
+        rows=args.rows,
+        cols=args.cols,
+        threshold=args.threshold,
+        consensus_steps=args.consensus_steps,
+        formation_steps=args.formation_steps,
+        seed=args.seed,
+        rho_meas=args.rho_meas,
+        rho_comm=args.rho_comm,
+    )
 
 
 def image_from(args: argparse.Namespace) -> tuple[np.ndarray, str]:
@@ -111,16 +140,24 @@ def cmd_sim(args: argparse.Namespace) -> int:
             exempt[row, col] = True
     folder = out_dir(args)
     big = params.count >= 256 * 256
-    bar = ProgressBar(params.consensus_steps + params.formation_steps, "simulating") if big else None
+    bar = (
+        ProgressBar(params.consensus_steps + params.formation_steps, "simulating") if big else None
+    )
     progress = (lambda phase, step, total: bar.update(note=phase)) if bar else None
     result = simulate(params, raw, exempt=exempt, progress=progress)
     write_summary(result.summary(), folder)
-    figures.run_figure(result, image, folder / "figure.png",
-                       title=f"{label}, {params.rows}x{params.cols} robots, {params.profile} profile, "
-                             f"seed {params.seed}, rho_meas {params.rho_meas:g}, rho_comm {params.rho_comm:g}")
+    figures.run_figure(
+        result,
+        image,
+        folder / "figure.png",
+        title=f"{label}, {params.rows}x{params.cols} robots, {params.profile} profile, "
+        f"seed {params.seed}, rho_meas {params.rho_meas:g}, rho_comm {params.rho_comm:g}",
+    )
     counts = ", ".join(f"{k} {v}" for k, v in result.selection_counts.items())
-    print(f"pattern: {result.majority_pattern} ({counts}); wrote {folder}/summary.json and figure.png "
-          f"in {result.elapsed_s:.3f} s")
+    print(
+        f"pattern: {result.majority_pattern} ({counts}); wrote {folder}/summary.json and figure.png "
+        f"in {result.elapsed_s:.3f} s"
+    )
     return 0
 
 
@@ -137,8 +174,12 @@ def cmd_errors(args: argparse.Namespace) -> int:
     folder = out_dir(args)
     points = errors.error_analysis(params, raw, rhos, args.trials)
     errors.write_csv(points, folder / "errors.csv")
-    figures.errors_figure([p.as_row() for p in points], params.count / 2, folder / "errors.png",
-                          title=f"{label}, {params.rows}x{params.cols} robots, {args.trials} trials per point")
+    figures.errors_figure(
+        [p.as_row() for p in points],
+        params.count / 2,
+        folder / "errors.png",
+        title=f"{label}, {params.rows}x{params.cols} robots, {args.trials} trials per point",
+    )
     print(f"wrote {folder}/errors.csv and errors.png")
     return 0
 
@@ -155,20 +196,30 @@ def build_parser() -> Parser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
     sim = sub.add_parser("sim", help="run the centralized reference simulator once")
     add_run_options(sim)
-    sim.add_argument("--sensed", action="append", default=[], metavar="ROW,COL=VALUE",
-                     help="this cell's sensed grey value is a real reading (e.g. a bridged Droplet's): it "
-                          "replaces the image's and gets no measurement noise (repeatable)")
+    sim.add_argument(
+        "--sensed",
+        action="append",
+        default=[],
+        metavar="ROW,COL=VALUE",
+        help="this cell's sensed grey value is a real reading (e.g. a bridged Droplet's): it "
+        "replaces the image's and gets no measurement noise (repeatable)",
+    )
     sim.set_defaults(func=cmd_sim)
     err = sub.add_parser("errors", help="the paper's error analysis")
     add_run_options(err)
     err.add_argument("--trials", type=int, default=10, help="trials per point (default 10)")
-    err.add_argument("--rhos", default=",".join(f"{x / 100:g}" for x in range(0, 51, 5)),
-                     help="comma-separated error probabilities (default 0,0.05,...,0.5)")
+    err.add_argument(
+        "--rhos",
+        default=",".join(f"{x / 100:g}" for x in range(0, 51, 5)),
+        help="comma-separated error probabilities (default 0,0.05,...,0.5)",
+    )
     err.set_defaults(func=cmd_errors)
     ben = sub.add_parser("bench", help="benchmarks")
     ben.add_argument("what", choices=["sim"], help="what to benchmark")
     ben.add_argument("--json", action="store_true", help="print one JSON object")
-    ben.add_argument("--sizes", default=None, help="grid sides, comma-separated (default 64,256,1024)")
+    ben.add_argument(
+        "--sizes", default=None, help="grid sides, comma-separated (default 64,256,1024)"
+    )
     ben.set_defaults(func=cmd_bench)
     return parser
 

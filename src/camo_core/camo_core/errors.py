@@ -1,4 +1,5 @@
 """The paper's error analysis (Fig. "errorAnalysis"): how far errors push the final pattern."""
+
 from __future__ import annotations
 
 import csv
@@ -36,8 +37,13 @@ def params_for(base: CamoParams, mode: str, rho: float, trial: int) -> CamoParam
     return base.with_(seed=base.seed + trial, rho_meas=rho_meas, rho_comm=rho_comm)
 
 
-def error_analysis(base: CamoParams, raw_sensed: np.ndarray, rhos: list[float], trials: int,
-                   show_progress: bool = True) -> list[ErrorPoint]:
+def error_analysis(
+    base: CamoParams,
+    raw_sensed: np.ndarray,
+    rhos: list[float],
+    trials: int,
+    show_progress: bool = True,
+) -> list[ErrorPoint]:
     reference = simulate(base.with_(rho_meas=0.0, rho_comm=0.0), raw_sensed)
     target = reference.majority_pattern
     bar = ProgressBar(len(MODES) * len(rhos) * trials, "error analysis") if show_progress else None
@@ -47,12 +53,22 @@ def error_analysis(base: CamoParams, raw_sensed: np.ndarray, rhos: list[float], 
             diffs, correct = [], 0
             for trial in range(trials):
                 result = simulate(params_for(base, mode, rho, trial), raw_sensed)
-                diffs.append(int(np.abs(result.final.astype(int) - reference.final.astype(int)).sum()))
+                diffs.append(
+                    int(np.abs(result.final.astype(int) - reference.final.astype(int)).sum())
+                )
                 correct += result.majority_pattern == target
                 if bar:
                     bar.update(note=f"{mode} rho={rho:g}")
-            points.append(ErrorPoint(mode, rho, trials, float(np.mean(diffs)), float(np.std(diffs)),
-                                     correct / trials))
+            points.append(
+                ErrorPoint(
+                    mode,
+                    rho,
+                    trials,
+                    float(np.mean(diffs)),
+                    float(np.std(diffs)),
+                    correct / trials,
+                )
+            )
     return points
 
 

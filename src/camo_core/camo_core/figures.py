@@ -1,4 +1,5 @@
 """The paper's simulation figure for one run, and the error-analysis figure."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -6,16 +7,18 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.patches  # noqa: E402
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.patches
+import matplotlib.pyplot as plt
+import numpy as np
 
-from .result import RunResult  # noqa: E402
+from .result import RunResult
 
 PATTERN_COLORS = {"horizontal": "tab:blue", "vertical": "tab:green", "mottled": "tab:orange"}
 
 
-def run_figure(result: RunResult, image: np.ndarray | None, path: str | Path, title: str = "") -> Path:
+def run_figure(
+    result: RunResult, image: np.ndarray | None, path: str | Path, title: str = ""
+) -> Path:
     """One row of five panels: input, sensed grid, consensus curves, initial and final states."""
     fig, axes = plt.subplots(1, 5, figsize=(17, 3.6))
     if image is not None:
@@ -26,14 +29,22 @@ def run_figure(result: RunResult, image: np.ndarray | None, path: str | Path, ti
     axes[1].set_title(f"sensed ({result.params.rows}x{result.params.cols})")
     trace = result.consensus_trace
     for k, name in enumerate(PATTERN_COLORS):
-        axes[2].plot(range(len(trace)), trace[:, k], label=f"p_{name[0]} ({name})", color=PATTERN_COLORS[name])
+        axes[2].plot(
+            range(len(trace)),
+            trace[:, k],
+            label=f"p_{name[0]} ({name})",
+            color=PATTERN_COLORS[name],
+        )
     axes[2].axhline(0.5, color="red", linewidth=1.2)
     axes[2].set_ylim(-0.02, 1.02)
     axes[2].set_xlabel("consensus step")
     axes[2].set_ylabel("mean p over robots")
     axes[2].legend(fontsize=7, loc="best")
     axes[2].set_title(f"consensus: {result.majority_pattern}")
-    for ax, states, label in ((axes[3], result.initial, "initial state"), (axes[4], result.final, "generated pattern")):
+    for ax, states, label in (
+        (axes[3], result.initial, "initial state"),
+        (axes[4], result.final, "generated pattern"),
+    ):
         shown = np.where(states == 1, 0, 255).astype(float)
         if result.alive is not None:
             shown[~result.alive] = 128
@@ -47,15 +58,28 @@ def run_figure(result: RunResult, image: np.ndarray | None, path: str | Path, ti
     return _save(fig, path)
 
 
-def errors_figure(rows: list[dict], random_level: float, path: str | Path, title: str = "") -> Path:
+def errors_figure(
+    rows: list[dict], random_level: float, path: str | Path, title: str = ""
+) -> Path:
     """Mean total absolute difference against error probability, one line per mode."""
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    for mode, label in (("measurement", "measurement error only"), ("communication", "communication error only"),
-                        ("both", "both, equal probability")):
+    for mode, label in (
+        ("measurement", "measurement error only"),
+        ("communication", "communication error only"),
+        ("both", "both, equal probability"),
+    ):
         data = [r for r in rows if r["mode"] == mode]
-        ax.errorbar([r["rho"] for r in data], [r["mean_diff"] for r in data], yerr=[r["std_diff"] for r in data],
-                    marker="o", capsize=3, label=label)
-    ax.axhline(random_level, color="gray", linestyle="--", label=f"random pattern ({random_level:g})")
+        ax.errorbar(
+            [r["rho"] for r in data],
+            [r["mean_diff"] for r in data],
+            yerr=[r["std_diff"] for r in data],
+            marker="o",
+            capsize=3,
+            label=label,
+        )
+    ax.axhline(
+        random_level, color="gray", linestyle="--", label=f"random pattern ({random_level:g})"
+    )
     ax.set_xlabel("error probability")
     ax.set_ylabel("total absolute difference to error-free pattern")
     ax.legend()
@@ -64,7 +88,9 @@ def errors_figure(rows: list[dict], random_level: float, path: str | Path, title
     return _save(fig, path)
 
 
-def timeline_figure(frames: list[tuple[str, np.ndarray]], path: str | Path, title: str = "") -> Path:
+def timeline_figure(
+    frames: list[tuple[str, np.ndarray]], path: str | Path, title: str = ""
+) -> Path:
     """A strip of small grids: selected pattern at each consensus step (c<k>), state at each formation step (f<k>).
 
     Consensus frames hold 0/1/2 (horizontal/vertical/mottled), formation frames 0/1 (off/on); -1 is
@@ -74,14 +100,20 @@ def timeline_figure(frames: list[tuple[str, np.ndarray]], path: str | Path, titl
     formation = [f for f in frames if f[0].startswith("f")]
     per_row = max(1, min(12, max(len(consensus), len(formation))))
     rows = -(-len(consensus) // per_row) + -(-len(formation) // per_row)
-    fig, axes = plt.subplots(rows, per_row, figsize=(1.2 * per_row, 1.35 * rows + 0.8), squeeze=False)
+    fig, axes = plt.subplots(
+        rows, per_row, figsize=(1.2 * per_row, 1.35 * rows + 0.8), squeeze=False
+    )
     for ax in axes.flat:
         ax.axis("off")
-    colors = np.array([matplotlib.colors.to_rgb(c) for c in PATTERN_COLORS.values()] + [(0.5, 0.5, 0.5)])
+    colors = np.array(
+        [matplotlib.colors.to_rgb(c) for c in PATTERN_COLORS.values()] + [(0.5, 0.5, 0.5)]
+    )
     grey = {0: 1.0, 1: 0.0, -1: 0.5}
     row = 0
-    for group, paint in ((consensus, lambda g: colors[np.where(g < 0, 3, g)]),
-                         (formation, lambda g: np.vectorize(grey.get)(g).astype(float)[..., None].repeat(3, -1))):
+    for group, paint in (
+        (consensus, lambda g: colors[np.where(g < 0, 3, g)]),
+        (formation, lambda g: np.vectorize(grey.get)(g).astype(float)[..., None].repeat(3, -1)),
+    ):
         for k, (label, grid) in enumerate(group):
             ax = axes[row + k // per_row, k % per_row]
             ax.imshow(paint(np.asarray(grid)), interpolation="nearest")
@@ -89,8 +121,12 @@ def timeline_figure(frames: list[tuple[str, np.ndarray]], path: str | Path, titl
         row += -(-len(group) // per_row)
     handles = [matplotlib.patches.Patch(color=c, label=n) for n, c in PATTERN_COLORS.items()]
     fig.legend(handles=handles, loc="upper right", fontsize=7, ncol=3)
-    fig.suptitle(title or "consensus steps (c: selected pattern), then formation steps (f: dark = on)",
-                 fontsize=9, x=0.02, ha="left")
+    fig.suptitle(
+        title or "consensus steps (c: selected pattern), then formation steps (f: dark = on)",
+        fontsize=9,
+        x=0.02,
+        ha="left",
+    )
     return _save(fig, path)
 
 

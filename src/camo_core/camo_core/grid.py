@@ -1,11 +1,21 @@
 """SPEC section 1: the grid, robot ids and the 12 neighbour slots."""
+
 from __future__ import annotations
 
 # Slot k sits at offset NEIGHBOR_OFFSETS[k] = (d_row, d_col) from the robot.
 NEIGHBOR_OFFSETS: tuple[tuple[int, int], ...] = (
-    (-1, 0), (0, 1), (1, 0), (0, -1),      # 0-3: top, right, bottom, left
-    (-1, 1), (1, 1), (1, -1), (-1, -1),    # 4-7: the diagonals
-    (-2, 0), (0, 2), (2, 0), (0, -2),      # 8-11: two cells away
+    (-1, 0),
+    (0, 1),
+    (1, 0),
+    (0, -1),  # 0-3: top, right, bottom, left
+    (-1, 1),
+    (1, 1),
+    (1, -1),
+    (-1, -1),  # 4-7: the diagonals
+    (-2, 0),
+    (0, 2),
+    (2, 0),
+    (0, -2),  # 8-11: two cells away
 )
 NUM_SLOTS = 12
 DESCRIPTOR_SLOTS = range(4)

@@ -5,13 +5,22 @@ order (no fast-math, so no reassociation or fused multiply-add); only the loop
 over robots is compiled, and rows run in parallel. The link's loss draws are
 SPEC section 3's hash, computed in place from (prefix, sender, receiver).
 """
+
 from __future__ import annotations
 
 import numpy as np
 from numba import njit, prange
 
 from .grid import NEIGHBOR_OFFSETS
-from .rules import ACTIVATORS, DIAGONAL_FALLBACKS, HORIZONTAL, INHIBITORS, MOTTLED, OPPOSITE_CARDINAL, VERTICAL
+from .rules import (
+    ACTIVATORS,
+    DIAGONAL_FALLBACKS,
+    HORIZONTAL,
+    INHIBITORS,
+    MOTTLED,
+    OPPOSITE_CARDINAL,
+    VERTICAL,
+)
 
 DI = np.array([o[0] for o in NEIGHBOR_OFFSETS], dtype=np.int64)
 DJ = np.array([o[1] for o in NEIGHBOR_OFFSETS], dtype=np.int64)
@@ -19,7 +28,7 @@ DJ = np.array([o[1] for o in NEIGHBOR_OFFSETS], dtype=np.int64)
 FALLBACK = np.full((12, 3), -1, dtype=np.int64)
 for _s in range(12):
     _chain = DIAGONAL_FALLBACKS.get(_s) or (OPPOSITE_CARDINAL[_s],)
-    FALLBACK[_s, :len(_chain)] = _chain
+    FALLBACK[_s, : len(_chain)] = _chain
 # ROLE[pattern, slot]: 1 activator, -1 inhibitor, 0 unused.
 ROLE = np.zeros((3, 12), dtype=np.int64)
 for _k in range(3):
@@ -97,7 +106,9 @@ def _state_in(state, known, i, j, s, prefix, rho):
 
 
 @njit(cache=True, parallel=True)
-def formation_step(state, out, known, selected, prefix, rho, w1, w2_stripes, w2_mottled, keep_on_zero):
+def formation_step(
+    state, out, known, selected, prefix, rho, w1, w2_stripes, w2_mottled, keep_on_zero
+):
     """One step of Young's rule for every robot: state (rows x cols uint8) -> out."""
     rows, cols = state.shape
     for i in prange(rows):
@@ -114,7 +125,9 @@ def formation_step(state, out, known, selected, prefix, rho, w1, w2_stripes, w2_
                     elif role < 0:
                         on_inh += state[i + DI[s], j + DJ[s]]
             else:
-                on_act, on_inh = _counts_with_fill(state, known, i, j, pattern, prefix, rho, on_act, on_inh)
+                on_act, on_inh = _counts_with_fill(
+                    state, known, i, j, pattern, prefix, rho, on_act, on_inh
+                )
             w2 = w2_mottled if pattern == MOTTLED else w2_stripes
             strength = w1 * on_act + w2 * on_inh
             if strength > 0:
@@ -129,19 +142,19 @@ def formation_step(state, out, known, selected, prefix, rho, w1, w2_stripes, w2_
 def _counts_with_fill(state, known, i, j, pattern, prefix, rho, on_act, on_inh):
     """Activator and inhibitor counts where slots may be missing (SPEC 2.4 mirror rules)."""
     for s in range(12):
-                role = ROLE[pattern, s]
-                if role == 0:
-                    continue
-                v = _state_in(state, known, i, j, s, prefix, rho)
-                f = 0
-                while v < 0 and f < 3 and FALLBACK[s, f] >= 0:
-                    v = _state_in(state, known, i, j, FALLBACK[s, f], prefix, rho)
-                    f += 1
-                if v > 0:
-                    if role > 0:
-                        on_act += v
-                    else:
-                        on_inh += v
+        role = ROLE[pattern, s]
+        if role == 0:
+            continue
+        v = _state_in(state, known, i, j, s, prefix, rho)
+        f = 0
+        while v < 0 and f < 3 and FALLBACK[s, f] >= 0:
+            v = _state_in(state, known, i, j, FALLBACK[s, f], prefix, rho)
+            f += 1
+        if v > 0:
+            if role > 0:
+                on_act += v
+            else:
+                on_inh += v
     return on_act, on_inh
 
 

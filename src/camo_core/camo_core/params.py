@@ -1,4 +1,5 @@
 """The parameters of one camouflage run, as one validated, typed object."""
+
 from __future__ import annotations
 
 import math
@@ -9,11 +10,21 @@ PROFILES = ("paper", "droplet")
 
 # SPEC section 2: steps per phase and Young's inhibitor weight, per profile.
 PROFILE_DEFAULTS: dict[str, dict[str, Any]] = {
-    "paper": {"consensus_steps": 35, "formation_steps": 10, "w2_stripes": -0.75, "w2_mottled": -0.75},
-    "droplet": {"consensus_steps": 10, "formation_steps": 20, "w2_stripes": -0.75, "w2_mottled": -0.60},
+    "paper": {
+        "consensus_steps": 35,
+        "formation_steps": 10,
+        "w2_stripes": -0.75,
+        "w2_mottled": -0.75,
+    },
+    "droplet": {
+        "consensus_steps": 10,
+        "formation_steps": 20,
+        "w2_stripes": -0.75,
+        "w2_mottled": -0.60,
+    },
 }
 
-MAX_SIDE = 8192          # robots per row or column; ids stay far inside uint32
+MAX_SIDE = 8192  # robots per row or column; ids stay far inside uint32
 MAX_STEPS = 100_000
 
 
@@ -40,7 +51,9 @@ class CamoParams:
 
     def __post_init__(self) -> None:
         if self.profile not in PROFILES:
-            raise ParameterError(f"profile must be one of {', '.join(PROFILES)} (got {self.profile!r})")
+            raise ParameterError(
+                f"profile must be one of {', '.join(PROFILES)} (got {self.profile!r})"
+            )
         for name, value in PROFILE_DEFAULTS[self.profile].items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
@@ -61,7 +74,7 @@ class CamoParams:
     def count(self) -> int:
         return self.rows * self.cols
 
-    def with_(self, **changes: Any) -> "CamoParams":
+    def with_(self, **changes: Any) -> CamoParams:
         return replace(self, **changes)
 
     def as_dict(self) -> dict[str, Any]:

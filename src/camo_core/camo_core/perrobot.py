@@ -4,6 +4,7 @@ Slow (a Python loop over robots and slots) but built from exactly the calls a
 robot node makes, so it is the bridge between the nodes and the vectorised
 simulator: tests require all three to agree bit for bit.
 """
+
 from __future__ import annotations
 
 import time
@@ -15,7 +16,9 @@ from .result import RunResult, mean_p
 from .robot import RobotCore
 
 
-def run_per_robot(params: CamoParams, raw_sensed: np.ndarray, exempt: np.ndarray | None = None) -> RunResult:
+def run_per_robot(
+    params: CamoParams, raw_sensed: np.ndarray, exempt: np.ndarray | None = None
+) -> RunResult:
     """`raw_sensed`: rows x cols block means before noise; `exempt`: real readings (no noise)."""
     start = time.perf_counter()
     rows, cols = params.rows, params.cols
@@ -24,7 +27,10 @@ def run_per_robot(params: CamoParams, raw_sensed: np.ndarray, exempt: np.ndarray
     for robot in robots:
         robot.discover([n is not None for n in robot.neighbors])
     for robot in robots:
-        robot.sense(raw_sensed[robot.row, robot.col], bool(exempt[robot.row, robot.col]) if exempt is not None else False)
+        robot.sense(
+            raw_sensed[robot.row, robot.col],
+            bool(exempt[robot.row, robot.col]) if exempt is not None else False,
+        )
     for robot in robots:
         robot.decide_vote([None if n is None else robots[n].sensed for n in robot.neighbors[:4]])
     votes = np.array([r.vote for r in robots]).reshape(rows, cols)

@@ -1,4 +1,5 @@
 """A small progress bar on stderr for long runs (a plain line per 10 % when not a terminal)."""
+
 from __future__ import annotations
 
 import sys

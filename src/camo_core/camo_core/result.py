@@ -1,4 +1,5 @@
 """What one camouflage run produced, and its summary.json form."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -11,8 +12,20 @@ from .params import CamoParams
 from .rules import MOTTLED, PATTERN_NAMES
 
 SUMMARY_KEYS = (
-    "rows", "cols", "profile", "seed", "rho_meas", "rho_comm", "pattern", "votes", "mean_p",
-    "sensed", "initial", "final", "consensus_trace", "elapsed_s",
+    "rows",
+    "cols",
+    "profile",
+    "seed",
+    "rho_meas",
+    "rho_comm",
+    "pattern",
+    "votes",
+    "mean_p",
+    "sensed",
+    "initial",
+    "final",
+    "consensus_trace",
+    "elapsed_s",
 )
 
 
@@ -24,12 +37,12 @@ def mean_p(p: np.ndarray) -> np.ndarray:
 @dataclass
 class RunResult:
     params: CamoParams
-    sensed: np.ndarray           # rows x cols float64, after measurement noise
-    votes: np.ndarray            # rows x cols int, the local one-hot votes (pattern index)
-    p: np.ndarray                # rows x cols x 3 float64, after the last consensus step
-    selected: np.ndarray         # rows x cols int, each robot's selected pattern
-    initial: np.ndarray          # rows x cols uint8, the binarised initial states
-    final: np.ndarray            # rows x cols uint8, the states after the last formation step
+    sensed: np.ndarray  # rows x cols float64, after measurement noise
+    votes: np.ndarray  # rows x cols int, the local one-hot votes (pattern index)
+    p: np.ndarray  # rows x cols x 3 float64, after the last consensus step
+    selected: np.ndarray  # rows x cols int, each robot's selected pattern
+    initial: np.ndarray  # rows x cols uint8, the binarised initial states
+    final: np.ndarray  # rows x cols uint8, the states after the last formation step
     consensus_trace: np.ndarray  # (consensus_steps + 1) x 3, mean p before step 0 and after each
     elapsed_s: float = 0.0
     alive: np.ndarray | None = None  # rows x cols bool; None means every robot took part
@@ -70,7 +83,9 @@ class RunResult:
             # A swarm run in which robots died: their cells hold null, and they are listed.
             dead = ~self.alive
             for key in ("initial", "final"):
-                summary[key] = [[None if dead[i, j] else v for j, v in enumerate(row)]
-                                for i, row in enumerate(summary[key])]
+                summary[key] = [
+                    [None if dead[i, j] else v for j, v in enumerate(row)]
+                    for i, row in enumerate(summary[key])
+                ]
             summary["dead"] = [[int(i), int(j)] for i, j in zip(*np.nonzero(dead))]
         return summary

@@ -5,6 +5,7 @@ these, so the distributed swarm and the reference simulator agree bit for bit
 whatever order messages arrive in. Scalar functions use Python integers; the
 vectorised ones use NumPy uint64, whose arithmetic wraps like the mask does.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -5,6 +5,7 @@ the ROS 2 robot node. It takes what was *delivered* to the robot, applies the
 simulated link (SPEC section 3: a message is lost by a deterministic draw keyed
 on sender, receiver and step) and calls the rules of `rules.py`.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -37,18 +38,24 @@ class RobotCore:
                 f"cell ({self.row}, {self.col}) is outside the {self.params.rows}x{self.params.cols} grid"
             )
         self.id = robot_id(self.row, self.col, self.params.cols)
-        self.neighbors: list[int | None] = neighbor_ids(self.row, self.col, self.params.rows, self.params.cols)
+        self.neighbors: list[int | None] = neighbor_ids(
+            self.row, self.col, self.params.rows, self.params.cols
+        )
 
     # ---- the simulated link -------------------------------------------------
 
     def arrives(self, stream: int, step: int, slot: int) -> bool:
         """Does the message of `stream`/`step` from slot's robot survive the link?"""
         src = self.neighbors[slot]
-        return src is not None and not rng.lost(self.params.seed, stream, step, src, self.id, self.params.rho_comm)
+        return src is not None and not rng.lost(
+            self.params.seed, stream, step, src, self.id, self.params.rho_comm
+        )
 
     def _filter(self, stream: int, step: int, delivered: Sequence, slots: range) -> list:
         return [
-            delivered[s] if delivered[s] is not None and self.known[s] and self.arrives(stream, step, s) else None
+            delivered[s]
+            if delivered[s] is not None and self.known[s] and self.arrives(stream, step, s)
+            else None
             for s in slots
         ]
 
@@ -56,7 +63,9 @@ class RobotCore:
 
     def discover(self, heard: Sequence[bool]) -> None:
         """`heard[s]`: a hello from slot s was delivered. Known = delivered and not lost."""
-        self.known = [bool(heard[s]) and self.arrives(rng.STREAM_HELLO, 0, s) for s in range(NUM_SLOTS)]
+        self.known = [
+            bool(heard[s]) and self.arrives(rng.STREAM_HELLO, 0, s) for s in range(NUM_SLOTS)
+        ]
 
     @property
     def degree(self) -> int:
@@ -70,7 +79,11 @@ class RobotCore:
 
     def sense(self, raw: float, exempt_from_noise: bool = False) -> float:
         """Keep the sensed value, after measurement error unless it is a real reading."""
-        self.sensed = float(raw) if exempt_from_noise else noisy_value(self.params.seed, self.id, raw, self.params.rho_meas)
+        self.sensed = (
+            float(raw)
+            if exempt_from_noise
+            else noisy_value(self.params.seed, self.id, raw, self.params.rho_meas)
+        )
         self.state = rules.initial_state(self.sensed)
         return self.sensed
 

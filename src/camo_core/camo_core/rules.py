@@ -3,6 +3,7 @@
 A robot node calls these with what it received; the per-robot driver of the
 reference simulator calls them for every cell. Missing messages are None.
 """
+
 from __future__ import annotations
 
 from collections.abc import Sequence
@@ -37,7 +38,10 @@ INHIBITORS: dict[int, tuple[int, ...]] = {
 
 # ---- phase 1: pattern descriptor ------------------------------------------------
 
-def reflect_four(own: float, received: Sequence[float | None]) -> tuple[float, float, float, float]:
+
+def reflect_four(
+    own: float, received: Sequence[float | None]
+) -> tuple[float, float, float, float]:
     """T, R, B, L: a missing side takes the opposite side, else the robot's own value."""
     filled = []
     for slot in range(4):
@@ -73,6 +77,7 @@ def one_hot(pattern: int) -> tuple[float, float, float]:
 
 
 # ---- phase 2: consensus ---------------------------------------------------------
+
 
 def consensus_step(
     p_own: Sequence[float],
@@ -111,6 +116,7 @@ def select_pattern(p: Sequence[float]) -> int:
 
 # ---- phase 3: pattern formation -------------------------------------------------
 
+
 def initial_state(sensed: float) -> int:
     """Dark (1) where the sensed grey value is below 127."""
     return 1 if sensed < 127 else 0
@@ -132,7 +138,9 @@ def w2_for(pattern: int, params: CamoParams) -> float:
     return params.w2_mottled if pattern == MOTTLED else params.w2_stripes
 
 
-def formation_step(state: int, pattern: int, received: Sequence[int | None], params: CamoParams) -> int:
+def formation_step(
+    state: int, pattern: int, received: Sequence[int | None], params: CamoParams
+) -> int:
     """Young's rule for one robot; the robot itself is an activator, on or off."""
     filled = fill_states(received)
     on_activators = state + sum(filled[s] for s in ACTIVATORS[pattern])

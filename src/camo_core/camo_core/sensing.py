@@ -1,4 +1,5 @@
 """SPEC section 2.1: what each robot senses of the projected background."""
+
 from __future__ import annotations
 
 import math
@@ -21,7 +22,9 @@ def load_image(path: str | Path) -> np.ndarray:
         raise ImageError(f"image not found: {path}")
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None or image.size == 0:
-        raise ImageError(f"cannot read image (not an image OpenCV understands, or corrupt): {path}")
+        raise ImageError(
+            f"cannot read image (not an image OpenCV understands, or corrupt): {path}"
+        )
     if image.dtype != np.uint8:
         # 16-bit or float images: bring to 0..255 the way OpenCV's IMREAD_COLOR does.
         image = cv2.imread(str(path), cv2.IMREAD_COLOR)
@@ -59,7 +62,9 @@ def block_means(gray: np.ndarray, rows: int, cols: int) -> np.ndarray:
     """Mean grey value of the image block each robot covers (rows x cols float64)."""
     height, width = gray.shape[:2]
     if height < rows or width < cols:
-        raise ImageError(f"image of {width}x{height} pixels is smaller than the {cols}x{rows} robot grid")
+        raise ImageError(
+            f"image of {width}x{height} pixels is smaller than the {cols}x{rows} robot grid"
+        )
     return cv2.resize(gray.astype(np.float64), (cols, rows), interpolation=cv2.INTER_AREA)
 
 
@@ -74,7 +79,9 @@ def noisy_value(seed: int, robot: int, value: float, rho_meas: float) -> float:
     return float(value)
 
 
-def apply_noise(sensed: np.ndarray, seed: int, rho_meas: float, exempt: np.ndarray | None = None) -> np.ndarray:
+def apply_noise(
+    sensed: np.ndarray, seed: int, rho_meas: float, exempt: np.ndarray | None = None
+) -> np.ndarray:
     """The whole grid's sensed values after measurement error (vectorised).
 
     `exempt` marks robots whose readings are real (a bridged Droplet): never replaced.

@@ -6,6 +6,7 @@ slot a shifted view of a padded array), the many consensus and formation steps
 with the compiled kernels of `kernels.py`. Float64 operations happen in the same
 order as the per-robot rules, so the results are bit-identical (tests check it).
 """
+
 from __future__ import annotations
 
 import time
@@ -31,19 +32,23 @@ class Grid:
     def __init__(self, rows: int, cols: int) -> None:
         self.rows, self.cols = rows, cols
         self.ids = np.arange(rows * cols, dtype=np.uint64).reshape(rows, cols)
-        self.exists = [self.view(self.pad(np.ones((rows, cols), bool)), s) for s in range(NUM_SLOTS)]
+        self.exists = [
+            self.view(self.pad(np.ones((rows, cols), bool)), s) for s in range(NUM_SLOTS)
+        ]
 
     def pad(self, a: np.ndarray) -> np.ndarray:
         shape = a.shape[:-2] + (self.rows + 2 * PAD, self.cols + 2 * PAD)
         out = np.zeros(shape, dtype=a.dtype)
-        out[..., PAD:PAD + self.rows, PAD:PAD + self.cols] = a
+        out[..., PAD : PAD + self.rows, PAD : PAD + self.cols] = a
         return out
 
     def view(self, padded: np.ndarray, slot: int) -> np.ndarray:
         di, dj = NEIGHBOR_OFFSETS[slot]
-        return padded[..., PAD + di:PAD + di + self.rows, PAD + dj:PAD + dj + self.cols]
+        return padded[..., PAD + di : PAD + di + self.rows, PAD + dj : PAD + dj + self.cols]
 
-    def arrivals(self, params: CamoParams, stream: int, step: int, slots: range) -> list[np.ndarray] | None:
+    def arrivals(
+        self, params: CamoParams, stream: int, step: int, slots: range
+    ) -> list[np.ndarray] | None:
         """Per slot, which robots receive their neighbour's message (None: the link loses nothing)."""
         if params.rho_comm <= 0.0:
             return None
@@ -70,7 +75,9 @@ def simulate(
 
     # Phase 0: a slot is known when its robot exists and its hello survived.
     hello = grid.arrivals(params, rng.STREAM_HELLO, 0, range(NUM_SLOTS))
-    known = [grid.exists[s] if hello is None else grid.exists[s] & hello[s] for s in range(NUM_SLOTS)]
+    known = [
+        grid.exists[s] if hello is None else grid.exists[s] & hello[s] for s in range(NUM_SLOTS)
+    ]
     known_mask = np.zeros((rows, cols), np.uint16)
     for s in range(NUM_SLOTS):
         known_mask |= known[s].astype(np.uint16) << np.uint16(s)
@@ -103,12 +110,25 @@ def simulate(
 def _vote(params: CamoParams, sensed: np.ndarray, known_mask: np.ndarray) -> np.ndarray:
     votes = np.empty(sensed.shape, np.int64)
     prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_COLOR, 0))
-    kernels.vote_all(sensed, known_mask, prefix, params.rho_comm, params.profile == "paper", params.threshold, votes)
+    kernels.vote_all(
+        sensed,
+        known_mask,
+        prefix,
+        params.rho_comm,
+        params.profile == "paper",
+        params.threshold,
+        votes,
+    )
     return votes
 
 
-def _consensus(grid: Grid, params: CamoParams, votes: np.ndarray, known_mask: np.ndarray,
-               progress: Progress | None) -> tuple[np.ndarray, np.ndarray]:
+def _consensus(
+    grid: Grid,
+    params: CamoParams,
+    votes: np.ndarray,
+    known_mask: np.ndarray,
+    progress: Progress | None,
+) -> tuple[np.ndarray, np.ndarray]:
     degree = np.zeros((grid.rows, grid.cols), np.uint8)
     for s in range(8):
         degree += ((known_mask >> s) & 1).astype(np.uint8)
@@ -132,14 +152,30 @@ def select_patterns(p: np.ndarray) -> np.ndarray:
     return np.where((h > v) & (h > m), HORIZONTAL, np.where((v > h) & (v > m), VERTICAL, MOTTLED))
 
 
-def _formation(grid: Grid, params: CamoParams, initial: np.ndarray, selected: np.ndarray,
-               known_mask: np.ndarray, progress: Progress | None) -> np.ndarray:
+def _formation(
+    grid: Grid,
+    params: CamoParams,
+    initial: np.ndarray,
+    selected: np.ndarray,
+    known_mask: np.ndarray,
+    progress: Progress | None,
+) -> np.ndarray:
     state = initial.copy()
     nxt = np.empty_like(state)
     for step in range(params.formation_steps):
         prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_STATE, step))
-        kernels.formation_step(state, nxt, known_mask, selected, prefix, params.rho_comm, params.w1,
-                               params.w2_stripes, params.w2_mottled, params.profile == "droplet")
+        kernels.formation_step(
+            state,
+            nxt,
+            known_mask,
+            selected,
+            prefix,
+            params.rho_comm,
+            params.w1,
+            params.w2_stripes,
+            params.w2_mottled,
+            params.profile == "droplet",
+        )
         state, nxt = nxt, state
         if progress:
             progress("formation", step + 1, params.formation_steps)

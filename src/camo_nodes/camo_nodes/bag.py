@@ -6,13 +6,14 @@ their `offered_qos_profiles` metadata, zstd chunks, message indexes and a
 summary; the file's own `rosbag2` metadata record repeats metadata.yaml. The
 container is the `mcap` library's; this module only decides what goes in.
 """
+
 from __future__ import annotations
 
 import os
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
 
 import yaml
 from mcap.exceptions import McapError
@@ -22,8 +23,8 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 MAGIC = b"\x89MCAP0\r\n"
-ROSBAG2_VERSION = 9           # Jazzy's metadata version
-CHUNK_SIZE = 256 * 1024       # small chunks: a killed recorder loses at most one
+ROSBAG2_VERSION = 9  # Jazzy's metadata version
+CHUNK_SIZE = 256 * 1024  # small chunks: a killed recorder loses at most one
 
 
 class BagError(Exception):
@@ -33,15 +34,15 @@ class BagError(Exception):
 @dataclass
 class TopicInfo:
     name: str
-    type: str                 # pkg/msg/Type
-    qos: str = ""             # offered_qos_profiles, YAML text
+    type: str  # pkg/msg/Type
+    qos: str = ""  # offered_qos_profiles, YAML text
     type_hash: str = ""
     count: int = 0
 
 
 @dataclass
 class BagSummary:
-    path: Path                # the .mcap file
+    path: Path  # the .mcap file
     start_ns: int
     end_ns: int
     topics: list[TopicInfo] = field(default_factory=list)
@@ -55,9 +56,9 @@ class BagSummary:
 class BagMessage:
     topic: str
     type: str
-    log_time: int             # ns since the epoch, when the recorder received it
-    publish_time: int         # ns since the epoch, from the message's header stamp
-    data: bytes               # CDR, exactly as published
+    log_time: int  # ns since the epoch, when the recorder received it
+    publish_time: int  # ns since the epoch, from the message's header stamp
+    data: bytes  # CDR, exactly as published
 
 
 # ---- writing ----------------------------------------------------------------------
@@ -69,7 +70,9 @@ class BagWriter:
     def __init__(self, folder: str | Path, library: str = "camo") -> None:
         self.folder = Path(folder)
         if self.folder.suffix == ".mcap":
-            raise BagError(f"{folder}: give a bag folder name, not a .mcap file (rosbag2 writes NAME/NAME_0.mcap)")
+            raise BagError(
+                f"{folder}: give a bag folder name, not a .mcap file (rosbag2 writes NAME/NAME_0.mcap)"
+            )
         if self.folder.exists() and any(self.folder.iterdir()):
             raise BagError(f"{folder} already exists and is not empty; choose another name")
         try:
@@ -78,7 +81,9 @@ class BagWriter:
             self._stream = open(self.file, "wb")
         except OSError as exc:
             raise BagError(f"cannot write the bag {folder}: {exc.strerror}") from None
-        self._writer = Writer(self._stream, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
+        self._writer = Writer(
+            self._stream, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD
+        )
         self._writer.start(profile="ros2", library=library)
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
@@ -93,17 +98,26 @@ class BagWriter:
             return
         if topic.type not in self._schemas:
             self._schemas[topic.type] = self._writer.register_schema(
-                name=topic.type, encoding="ros2msg", data=definition.encode())
+                name=topic.type, encoding="ros2msg", data=definition.encode()
+            )
         self._channels[topic.name] = self._writer.register_channel(
-            topic=topic.name, message_encoding="cdr", schema_id=self._schemas[topic.type],
-            metadata={"offered_qos_profiles": topic.qos})
+            topic=topic.name,
+            message_encoding="cdr",
+            schema_id=self._schemas[topic.type],
+            metadata={"offered_qos_profiles": topic.qos},
+        )
         self.topics[topic.name] = TopicInfo(topic.name, topic.type, topic.qos, topic.type_hash)
         self._sequence[topic.name] = 0
 
     def write(self, topic: str, data: bytes, log_time: int, publish_time: int) -> None:
         self._sequence[topic] += 1
-        self._writer.add_message(channel_id=self._channels[topic], log_time=log_time, data=data,
-                                 publish_time=publish_time, sequence=self._sequence[topic])
+        self._writer.add_message(
+            channel_id=self._channels[topic],
+            log_time=log_time,
+            data=data,
+            publish_time=publish_time,
+            sequence=self._sequence[topic],
+        )
         self.topics[topic].count += 1
         self.start_ns = log_time if self.start_ns is None else min(self.start_ns, log_time)
         self.end_ns = max(self.end_ns, log_time)
@@ -121,12 +135,19 @@ class BagWriter:
         if self.closed:
             return
         self.closed = True
-        metadata = metadata_yaml(self.file.name, list(self.topics.values()), self.start_ns or 0, self.end_ns)
-        self._writer.add_metadata("rosbag2", {"serialized_metadata": metadata, "ROS_DISTRO": "jazzy"})
+        metadata = metadata_yaml(
+            self.file.name, list(self.topics.values()), self.start_ns or 0, self.end_ns
+        )
+        self._writer.add_metadata(
+            "rosbag2", {"serialized_metadata": metadata, "ROS_DISTRO": "jazzy"}
+        )
         self._writer.finish()
         self._stream.close()
         (self.folder / "metadata.yaml").write_text(
-            yaml.safe_dump({"rosbag2_bagfile_information": yaml.safe_load(metadata)}, sort_keys=False))
+            yaml.safe_dump(
+                {"rosbag2_bagfile_information": yaml.safe_load(metadata)}, sort_keys=False
+            )
+        )
 
 
 def metadata_yaml(file_name: str, topics: list[TopicInfo], start_ns: int, end_ns: int) -> str:
@@ -140,15 +161,29 @@ def metadata_yaml(file_name: str, topics: list[TopicInfo], start_ns: int, end_ns
         "starting_time": {"nanoseconds_since_epoch": start_ns},
         "message_count": count,
         "topics_with_message_count": [
-            {"topic_metadata": {"name": t.name, "type": t.type, "serialization_format": "cdr",
-                                "offered_qos_profiles": yaml.safe_load(t.qos) or [],
-                                "type_description_hash": t.type_hash},
-             "message_count": t.count} for t in topics],
+            {
+                "topic_metadata": {
+                    "name": t.name,
+                    "type": t.type,
+                    "serialization_format": "cdr",
+                    "offered_qos_profiles": yaml.safe_load(t.qos) or [],
+                    "type_description_hash": t.type_hash,
+                },
+                "message_count": t.count,
+            }
+            for t in topics
+        ],
         "compression_format": "",
         "compression_mode": "",
         "relative_file_paths": [file_name],
-        "files": [{"path": file_name, "starting_time": {"nanoseconds_since_epoch": start_ns},
-                   "duration": {"nanoseconds": duration}, "message_count": count}],
+        "files": [
+            {
+                "path": file_name,
+                "starting_time": {"nanoseconds_since_epoch": start_ns},
+                "duration": {"nanoseconds": duration},
+                "message_count": count,
+            }
+        ],
         "custom_data": None,
         "ros_distro": "jazzy",
     }
@@ -179,8 +214,10 @@ def mcap_file(path: str | Path) -> Path:
 
 
 def _truncated(path: Path) -> BagError:
-    return BagError(f"{path} is truncated or was not closed (no index); `./camo bag repair {path}` "
-                    f"writes a readable copy of its complete chunks")
+    return BagError(
+        f"{path} is truncated or was not closed (no index); `./camo bag repair {path}` "
+        f"writes a readable copy of its complete chunks"
+    )
 
 
 def _qos_of(channel: Channel) -> str:
@@ -200,9 +237,17 @@ def read_summary(path: str | Path) -> BagSummary:
     topics = []
     for channel_id, channel in sorted(summary.channels.items()):
         schema = summary.schemas.get(channel.schema_id)
-        topics.append(TopicInfo(channel.topic, schema.name if schema else "", _qos_of(channel),
-                                count=counts.get(channel_id, 0)))
-    return BagSummary(file, summary.statistics.message_start_time, summary.statistics.message_end_time, topics)
+        topics.append(
+            TopicInfo(
+                channel.topic,
+                schema.name if schema else "",
+                _qos_of(channel),
+                count=counts.get(channel_id, 0),
+            )
+        )
+    return BagSummary(
+        file, summary.statistics.message_start_time, summary.statistics.message_end_time, topics
+    )
 
 
 def read_messages(path: str | Path, topics: list[str] | None = None) -> Iterator[BagMessage]:
@@ -210,9 +255,16 @@ def read_messages(path: str | Path, topics: list[str] | None = None) -> Iterator
     file = read_summary(path).path
     with open(file, "rb") as stream:
         try:
-            for schema, channel, message in make_reader(stream).iter_messages(topics=topics, log_time_order=True):
-                yield BagMessage(channel.topic, schema.name if schema else "", message.log_time,
-                                 message.publish_time, message.data)
+            for schema, channel, message in make_reader(stream).iter_messages(
+                topics=topics, log_time_order=True
+            ):
+                yield BagMessage(
+                    channel.topic,
+                    schema.name if schema else "",
+                    message.log_time,
+                    message.publish_time,
+                    message.data,
+                )
         except (McapError, EOFError, ValueError) as exc:
             raise BagError(f"{file} is corrupt: {exc}") from None
 
@@ -226,7 +278,9 @@ def salvage(path: str | Path) -> tuple[list[Schema], list[Channel], list[Message
     ending = "complete"
     with open(file, "rb") as stream:
         try:
-            for record in StreamReader(stream, skip_magic=False, emit_chunks=False, validate_crcs=True).records:
+            for record in StreamReader(
+                stream, skip_magic=False, emit_chunks=False, validate_crcs=True
+            ).records:
                 if isinstance(record, Schema):
                     schemas[record.id] = record
                 elif isinstance(record, Channel):
@@ -249,7 +303,9 @@ def repair(src: str | Path, dst: str | Path) -> tuple[int, str]:
             schema = by_schema.get(channel.schema_id)
             if schema is None:
                 continue
-            writer.add_topic(TopicInfo(channel.topic, schema.name, _qos_of(channel)), schema.data.decode())
+            writer.add_topic(
+                TopicInfo(channel.topic, schema.name, _qos_of(channel)), schema.data.decode()
+            )
         topic_of = {c.id: c.topic for c in channels}
         for message in sorted(messages, key=lambda m: m.log_time):
             topic = topic_of[message.channel_id]
@@ -262,13 +318,19 @@ def repair(src: str | Path, dst: str | Path) -> tuple[int, str]:
 
 def format_info(summary: BagSummary) -> str:
     """What `ros2 bag info` prints."""
+
     def stamp(ns: int) -> str:
-        return time.strftime("%b %d %Y %H:%M:%S", time.localtime(ns / 1e9)) + f".{ns % 10**9 // 10**6:03d} ({ns / 1e9:.9f})"
+        return (
+            time.strftime("%b %d %Y %H:%M:%S", time.localtime(ns / 1e9))
+            + f".{ns % 10**9 // 10**6:03d} ({ns / 1e9:.9f})"
+        )
 
     size = os.path.getsize(summary.path)
     lines = [
         f"Files:             {summary.path.name}",
-        f"Bag size:          {size / 1024 / 1024:.1f} MiB" if size >= 1024 * 1024 else f"Bag size:          {size / 1024:.1f} KiB",
+        f"Bag size:          {size / 1024 / 1024:.1f} MiB"
+        if size >= 1024 * 1024
+        else f"Bag size:          {size / 1024:.1f} KiB",
         "Storage id:        mcap",
         f"Duration:          {(summary.end_ns - summary.start_ns) / 1e9:.9f}s",
         f"Start:             {stamp(summary.start_ns)}",
@@ -278,6 +340,8 @@ def format_info(summary: BagSummary) -> str:
     width = max((len(t.name) for t in summary.topics), default=0)
     for k, topic in enumerate(sorted(summary.topics, key=lambda t: t.name)):
         head = "Topic information: " if k == 0 else " " * 19
-        lines.append(f"{head}Topic: {topic.name:<{width}} | Type: {topic.type} | Count: {topic.count} | "
-                     f"Serialization Format: cdr")
+        lines.append(
+            f"{head}Topic: {topic.name:<{width}} | Type: {topic.type} | Count: {topic.count} | "
+            f"Serialization Format: cdr"
+        )
     return "\n".join(lines)

@@ -1,4 +1,5 @@
 """`./camo bag info BAG` and `./camo bag repair BAG [--out NEW]`."""
+
 from __future__ import annotations
 
 import sys
@@ -12,11 +13,17 @@ from .bag import BagError, format_info, mcap_file, read_summary, repair
 def build_parser() -> cli.Parser:
     parser = cli.Parser(prog="camo bag", description="inspect and repair MCAP bags")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=cli.Parser)
-    info = sub.add_parser("info", help="duration, topics, types and message counts (like ros2 bag info)")
+    info = sub.add_parser(
+        "info", help="duration, topics, types and message counts (like ros2 bag info)"
+    )
     info.add_argument("bag", help="bag folder or .mcap file")
-    fix = sub.add_parser("repair", help="write a complete, indexed copy of what a damaged bag still holds")
+    fix = sub.add_parser(
+        "repair", help="write a complete, indexed copy of what a damaged bag still holds"
+    )
     fix.add_argument("bag", help="bag folder or .mcap file, e.g. from a recorder that was killed")
-    fix.add_argument("--out", type=Path, default=None, help="new bag folder (default: BAG_repaired)")
+    fix.add_argument(
+        "--out", type=Path, default=None, help="new bag folder (default: BAG_repaired)"
+    )
     return parser
 
 

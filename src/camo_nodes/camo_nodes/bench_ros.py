@@ -6,6 +6,7 @@ split over processes as `./camo run`, and does nothing else: publish step t,
 wait for every neighbour's step t, publish step t+1. The ratio of the swarm's
 step rate to the bare rate is the cost of the algorithm and its bookkeeping.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -72,18 +73,39 @@ def bare_worker(rows: int, cols: int, steps: int, cells: list[int]) -> dict:
     linger = time.monotonic() + 3
     while time.monotonic() < linger:
         executor.spin_once(timeout_sec=0.1)
-    report = {"start": min(n.started for n in nodes if n.started), "end": max(n.finished or 0 for n in nodes),
-              "finished": sum(n.finished is not None for n in nodes)}
+    report = {
+        "start": min(n.started for n in nodes if n.started),
+        "end": max(n.finished or 0 for n in nodes),
+        "finished": sum(n.finished is not None for n in nodes),
+    }
     rclpy.shutdown()
     return report
 
 
 def bare_rate(side: int, steps: int, procs: int, domain: int) -> float:
     """Steps per second of the bare exchange (first step-0 completion to last finish)."""
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-    workers = [subprocess.Popen([sys.executable, "-m", "camo_nodes.bench_ros", "--bare-worker", str(side),
-                                 str(steps), ",".join(map(str, cells))], env=env, stdout=subprocess.PIPE, text=True)
-               for cells in split_cells(side * side, procs)]
+    env = {
+        **os.environ,
+        "ROS_DOMAIN_ID": str(domain),
+        "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+    }
+    workers = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "camo_nodes.bench_ros",
+                "--bare-worker",
+                str(side),
+                str(steps),
+                ",".join(map(str, cells)),
+            ],
+            env=env,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        for cells in split_cells(side * side, procs)
+    ]
     reports = [json.loads(w.communicate(timeout=900)[0].strip().splitlines()[-1]) for w in workers]
     if sum(r["finished"] for r in reports) != side * side:
         raise RuntimeError(f"bare exchange at {side}x{side} did not finish")
@@ -94,13 +116,35 @@ def swarm_run(side: int, procs: int, domain: int, out: Path, steps: int | None =
     """Run `./camo run` once (paper profile; `steps` consensus + formation steps if given);
     its timing.json has the wall time and the step rate."""
     start = time.monotonic()
-    length = [] if steps is None else ["--consensus-steps", str(steps - 10), "--formation-steps", "10"]
-    proc = subprocess.run([sys.executable, "-m", "camo_nodes.launcher", "--rows", str(side), "--cols", str(side),
-                           "--procs", str(procs), "--domain-id", str(domain), "--out", str(out), *length],
-                          capture_output=True, text=True, timeout=1800)
+    length = (
+        [] if steps is None else ["--consensus-steps", str(steps - 10), "--formation-steps", "10"]
+    )
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "camo_nodes.launcher",
+            "--rows",
+            str(side),
+            "--cols",
+            str(side),
+            "--procs",
+            str(procs),
+            "--domain-id",
+            str(domain),
+            "--out",
+            str(out),
+            *length,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
     wall = time.monotonic() - start
     if proc.returncode != 0:
-        raise RuntimeError(f"camo run {side}x{side} failed: {proc.stderr.strip().splitlines()[-1:]}")
+        raise RuntimeError(
+            f"camo run {side}x{side} failed: {proc.stderr.strip().splitlines()[-1:]}"
+        )
     timing = json.loads((out / "timing.json").read_text())
     return {"robots": f"{side}x{side}", "procs": procs, "wall_s": wall, **timing}
 
@@ -113,19 +157,35 @@ def default_steps(side: int) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="camo bench ros")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--sides", default="8,16", help="grid sides for the rate comparison (default 8,16)")
-    parser.add_argument("--wall-sides", default="8,32", help="grid sides for whole-run wall times (default 8,32)")
+    parser.add_argument(
+        "--sides", default="8,16", help="grid sides for the rate comparison (default 8,16)"
+    )
+    parser.add_argument(
+        "--wall-sides", default="8,32", help="grid sides for whole-run wall times (default 8,32)"
+    )
     parser.add_argument("--procs", type=int, default=os.cpu_count() or 1)
-    parser.add_argument("--steps", type=int, default=None,
-                        help="steps per rate measurement, swarm and bare alike (default 100000 / robots, at "
-                             "least 300: 1562 at 8x8, 390 at 16x16; 300-step 8x8 runs last under 3 s and "
-                             "their rates varied by a factor of 4)")
-    parser.add_argument("--repeat", type=int, default=3, help="runs per rate; the median is reported (default 3)")
-    parser.add_argument("--out", type=Path, default=Path("results") / time.strftime("bench-ros-%Y%m%d-%H%M%S"))
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="steps per rate measurement, swarm and bare alike (default 100000 / robots, at "
+        "least 300: 1562 at 8x8, 390 at 16x16; 300-step 8x8 runs last under 3 s and "
+        "their rates varied by a factor of 4)",
+    )
+    parser.add_argument(
+        "--repeat", type=int, default=3, help="runs per rate; the median is reported (default 3)"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=Path("results") / time.strftime("bench-ros-%Y%m%d-%H%M%S")
+    )
     parser.add_argument("--bare-worker", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.bare_worker:
-        side, steps, cells = int(args.bare_worker[0]), int(args.bare_worker[1]), args.bare_worker[2]
+        side, steps, cells = (
+            int(args.bare_worker[0]),
+            int(args.bare_worker[1]),
+            args.bare_worker[2],
+        )
         print(json.dumps(bare_worker(side, side, steps, [int(c) for c in cells.split(",")])))
         return 0
     if not ((args.steps is None or 20 <= args.steps <= 100_000) and args.repeat >= 1):
@@ -140,11 +200,21 @@ def main(argv: list[str] | None = None) -> int:
             swarm = swarm_run(side, args.procs, domain, args.out / f"swarm_{side}_{k}", steps)
             swarm_rates.append(swarm["steps_per_s"])
             bare_rates.append(bare_rate(side, steps, args.procs, domain))
-            print(f"{side}x{side}: swarm {swarm_rates[-1]:.2f} steps/s, bare exchange {bare_rates[-1]:.2f} steps/s",
-                  file=sys.stderr)
+            print(
+                f"{side}x{side}: swarm {swarm_rates[-1]:.2f} steps/s, bare exchange {bare_rates[-1]:.2f} steps/s",
+                file=sys.stderr,
+            )
         swarm_rate, bare = statistics.median(swarm_rates), statistics.median(bare_rates)
-        rates.append({"robots": f"{side}x{side}", "swarm_steps_per_s": swarm_rate, "bare_steps_per_s": bare,
-                      "ratio": swarm_rate / bare, "steps": steps, "repeat": args.repeat})
+        rates.append(
+            {
+                "robots": f"{side}x{side}",
+                "swarm_steps_per_s": swarm_rate,
+                "bare_steps_per_s": bare,
+                "ratio": swarm_rate / bare,
+                "steps": steps,
+                "repeat": args.repeat,
+            }
+        )
     for side in (int(s) for s in args.wall_sides.split(",")):
         walls.append(swarm_run(side, args.procs, domain, args.out / f"wall_{side}"))
         print(f"{side}x{side}: whole run {walls[-1]['wall_s']:.1f} s", file=sys.stderr)
@@ -153,15 +223,23 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(report))
     else:
         print(f"rates: median of {args.repeat} runs each")
-        print(f"{'robots':>8} {'steps':>6} {'swarm steps/s':>14} {'bare steps/s':>13} {'ratio':>6}")
+        print(
+            f"{'robots':>8} {'steps':>6} {'swarm steps/s':>14} {'bare steps/s':>13} {'ratio':>6}"
+        )
         for r in rates:
-            print(f"{r['robots']:>8} {r['steps']:>6} {r['swarm_steps_per_s']:>14.2f} {r['bare_steps_per_s']:>13.2f} "
-                  f"{r['ratio']:>6.2f}")
+            print(
+                f"{r['robots']:>8} {r['steps']:>6} {r['swarm_steps_per_s']:>14.2f} {r['bare_steps_per_s']:>13.2f} "
+                f"{r['ratio']:>6.2f}"
+            )
         print()
-        print(f"{'robots':>8} {'procs':>5} {'launch to exit s':>17} {'nodes up s':>11} {'steps/s':>8}")
+        print(
+            f"{'robots':>8} {'procs':>5} {'launch to exit s':>17} {'nodes up s':>11} {'steps/s':>8}"
+        )
         for w in walls:
-            print(f"{w['robots']:>8} {w['procs']:>5} {w['wall_s']:>17.1f} {w['startup_s']:>11.1f} "
-                  f"{w['steps_per_s']:>8.2f}")
+            print(
+                f"{w['robots']:>8} {w['procs']:>5} {w['wall_s']:>17.1f} {w['startup_s']:>11.1f} "
+                f"{w['steps_per_s']:>8.2f}"
+            )
     return 0
 
 

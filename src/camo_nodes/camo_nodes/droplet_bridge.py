@@ -12,6 +12,7 @@ itself; its printouts become this cell's RobotStatus messages, so a hardware
 run can be watched and recorded like a simulated one. `transcript:=FILE`
 reads a recorded printout instead of a port.
 """
+
 from __future__ import annotations
 
 import sys
@@ -40,7 +41,9 @@ def parse_rgb(text: str) -> tuple[int, int, int]:
     except ValueError:
         rgb = ()
     if len(rgb) != 3 or not all(0 <= c <= 255 for c in rgb):
-        raise ParameterError(f"an LED colour is three integers 0..255, e.g. '255 0 0' (got {text!r})")
+        raise ParameterError(
+            f"an LED colour is three integers 0..255, e.g. '255 0 0' (got {text!r})"
+        )
     return rgb
 
 
@@ -67,7 +70,7 @@ class Reconnector:
             self.backoff = min(MAX_BACKOFF, self.backoff * 2)
             return False
         self.backoff = 0.5
-        if self.next_try:                      # an earlier open failed or the port went away
+        if self.next_try:  # an earlier open failed or the port went away
             self.logger.info(f"reconnected to {self.link.path}")
         return True
 
@@ -78,9 +81,18 @@ class Reconnector:
 
 
 class DropletBridgeNode(RobotNode):
-    def __init__(self, params: CamoParams, row: int, col: int, port: str, calibration: Calibration = Calibration(),
-                 led_on: tuple[int, int, int] = (255, 0, 0), led_off: tuple[int, int, int] = (255, 255, 255),
-                 link: DropletLink | None = None, **kwargs) -> None:
+    def __init__(
+        self,
+        params: CamoParams,
+        row: int,
+        col: int,
+        port: str,
+        calibration: Calibration = Calibration(),
+        led_on: tuple[int, int, int] = (255, 0, 0),
+        led_off: tuple[int, int, int] = (255, 255, 255),
+        link: DropletLink | None = None,
+        **kwargs,
+    ) -> None:
         self.link = link or DropletLink(port)
         self.calibration = calibration
         self.led = {1: led_on, 0: led_off}
@@ -98,8 +110,10 @@ class DropletBridgeNode(RobotNode):
         try:
             if self.droplet_id is None:
                 self.droplet_id = self.link.get_id()
-                self.get_logger().info(f"Droplet {self.droplet_id:04X} on {self.link.path} is robot "
-                                       f"({self.core.row}, {self.core.col})")
+                self.get_logger().info(
+                    f"Droplet {self.droplet_id:04X} on {self.link.path} is robot "
+                    f"({self.core.row}, {self.core.col})"
+                )
             if self.wanted is not None and self.wanted != self.shown:
                 self.link.set_led(*self.wanted)
                 self.shown = self.wanted
@@ -140,12 +154,21 @@ class DropletBridgeNode(RobotNode):
 class DropletMonitorNode(Node):
     """A Droplet running the camouflage firmware, watched: its printouts as this cell's statuses."""
 
-    def __init__(self, params: CamoParams, row: int, col: int, link: DropletLink | None = None,
-                 transcript: Path | None = None, **kwargs) -> None:
+    def __init__(
+        self,
+        params: CamoParams,
+        row: int,
+        col: int,
+        link: DropletLink | None = None,
+        transcript: Path | None = None,
+        **kwargs,
+    ) -> None:
         super().__init__(f"droplet_monitor_{row}_{col}", namespace="/camo", **kwargs)
         self.params, self.row, self.col = params, row, col
         self.link = link
-        self.lines = list(Path(transcript).read_text(errors="replace").splitlines()) if transcript else None
+        self.lines = (
+            list(Path(transcript).read_text(errors="replace").splitlines()) if transcript else None
+        )
         self.state: FirmwareState | None = None
         self.status_pub = self.create_publisher(RobotStatus, STATUS_TOPIC, history_qos(10_000))
         self.reconnector = Reconnector(link, self.get_logger()) if link else None
@@ -179,7 +202,7 @@ class DropletMonitorNode(Node):
         for line in self.lines:
             if line.strip().startswith("My ID is: "):
                 try:
-                    return int(line.strip()[len("My ID is: "):], 16)
+                    return int(line.strip()[len("My ID is: ") :], 16)
                 except ValueError:
                     break
         return 0
@@ -188,11 +211,20 @@ class DropletMonitorNode(Node):
         state = self.state
         phase = RobotStatus.PHASE_CONSENSUS if state.p is not None else RobotStatus.PHASE_SENSING
         pattern = state.pattern
-        status = RobotStatus(sender_id=self.row * self.params.cols + self.col, row=self.row, col=self.col,
-                             phase=phase, step=state.steps, round=0, sensed=state.sensed,
-                             p=list(state.p) if state.p else [0.0, 0.0, 0.0],
-                             pattern=RobotStatus.PATTERN_NONE if pattern is None else pattern, state=0,
-                             alive=self.link.connected if self.link else True, known_slots=0)
+        status = RobotStatus(
+            sender_id=self.row * self.params.cols + self.col,
+            row=self.row,
+            col=self.col,
+            phase=phase,
+            step=state.steps,
+            round=0,
+            sensed=state.sensed,
+            p=list(state.p) if state.p else [0.0, 0.0, 0.0],
+            pattern=RobotStatus.PATTERN_NONE if pattern is None else pattern,
+            state=0,
+            alive=self.link.connected if self.link else True,
+            known_slots=0,
+        )
         status.header.stamp = self.get_clock().now().to_msg()
         status.header.frame_id = "camo"
         self.status_pub.publish(status)
@@ -206,9 +238,22 @@ def main(args=None) -> int:
         reader = Node("droplet_parameters", start_parameter_services=False)
         try:
             params, row, col, timeout, discovery_timeout = params_from_node(reader)
-            extra = {"port": "", "monitor": False, "transcript": "", "calibration": "", "gain": 1.0, "offset": 0.0,
-                     "led_on": "255 0 0", "led_off": "255 255 255", "serial_timeout": 0.5, "retries": 3}
-            values = {name: reader.declare_parameter(name, default).value for name, default in extra.items()}
+            extra = {
+                "port": "",
+                "monitor": False,
+                "transcript": "",
+                "calibration": "",
+                "gain": 1.0,
+                "offset": 0.0,
+                "led_on": "255 0 0",
+                "led_off": "255 255 255",
+                "serial_timeout": 0.5,
+                "retries": 3,
+            }
+            values = {
+                name: reader.declare_parameter(name, default).value
+                for name, default in extra.items()
+            }
         finally:
             reader.destroy_node()
         if not values["port"] and not values["transcript"]:
@@ -221,17 +266,31 @@ def main(args=None) -> int:
             calibration = Calibration(values["gain"], values["offset"])
         if not (values["serial_timeout"] > 0 and values["retries"] >= 0):
             raise ParameterError("serial_timeout must be positive and retries not negative")
-        link = DropletLink(values["port"], timeout=values["serial_timeout"], retries=values["retries"]) \
-            if values["port"] else None
+        link = (
+            DropletLink(
+                values["port"], timeout=values["serial_timeout"], retries=values["retries"]
+            )
+            if values["port"]
+            else None
+        )
         if values["monitor"] or values["transcript"]:
             transcript = Path(values["transcript"]) if values["transcript"] else None
             if transcript is not None and not transcript.is_file():
                 raise ParameterError(f"transcript not found: {transcript}")
             node = DropletMonitorNode(params, row, col, link=link, transcript=transcript)
         else:
-            node = DropletBridgeNode(params, row, col, values["port"], calibration, parse_rgb(values["led_on"]),
-                                     parse_rgb(values["led_off"]), link=link, step_timeout=timeout,
-                                     discovery_timeout=discovery_timeout)
+            node = DropletBridgeNode(
+                params,
+                row,
+                col,
+                values["port"],
+                calibration,
+                parse_rgb(values["led_on"]),
+                parse_rgb(values["led_off"]),
+                link=link,
+                step_timeout=timeout,
+                discovery_timeout=discovery_timeout,
+            )
         while rclpy.ok():
             rclpy.spin_once(node, timeout_sec=0.1)
     except (ParameterError, ValueError) as exc:

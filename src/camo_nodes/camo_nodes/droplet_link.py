@@ -9,21 +9,22 @@ retried; `\\tCommand ( X ) not recognized.` is an error naming the command; a
 port that disappears raises DropletDisconnected, and reconnect() opens it
 again.
 """
+
 from __future__ import annotations
 
 import logging
 import re
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import yaml
 
 BAUD = 115200
-REFUSAL_WAIT = 0.05                 # seconds to listen for "not recognized" after a command without reply
-MAX_LINE = 200                      # longer lines are noise: the firmware's longest print is ~60 bytes
+REFUSAL_WAIT = 0.05  # seconds to listen for "not recognized" after a command without reply
+MAX_LINE = 200  # longer lines are noise: the firmware's longest print is ~60 bytes
 NOT_RECOGNIZED = re.compile(r"^\s*Command \( (.*) \) not recognized\.\s*$")
 ID_REPLY = re.compile(r"^My ID is: ([0-9A-Fa-f]{4})$")
 RGB_REPLY = re.compile(r"^r: (\d+), g: (\d+), b: (\d+)$")
@@ -50,7 +51,7 @@ class Calibration:
         return min(255.0, max(0.0, self.gain * grey + self.offset))
 
     @classmethod
-    def from_yaml(cls, path: str | Path) -> "Calibration":
+    def from_yaml(cls, path: str | Path) -> Calibration:
         """A YAML file with `gain` and/or `offset` (numbers)."""
         try:
             data = yaml.safe_load(Path(path).read_text()) or {}
@@ -75,18 +76,18 @@ class LineReader:
     def __init__(self) -> None:
         self.buffer = bytearray()
         self.skipping = False
-        self.discarded = 0            # garbage lines and over-long lines
+        self.discarded = 0  # garbage lines and over-long lines
         self._warned = False
 
     def feed(self, data: bytes) -> list[str]:
         lines = []
         for byte in data:
-            if byte in (10, 13):                       # \r or \n ends a line; \r\n gives one empty line
+            if byte in (10, 13):  # \r or \n ends a line; \r\n gives one empty line
                 if self.buffer:
                     lines.extend(self._finish())
                 self.skipping = False
                 continue
-            if self.skipping:                          # the rest of an over-long line
+            if self.skipping:  # the rest of an over-long line
                 continue
             self.buffer.append(byte)
             if len(self.buffer) > MAX_LINE:
@@ -112,15 +113,22 @@ class LineReader:
 class DropletLink:
     """Commands over one serial port. `opener(path)` returns a pyserial-like port (read/write/close)."""
 
-    def __init__(self, path: str, opener: Callable[[str], object] | None = None, timeout: float = 0.5,
-                 retries: int = 3) -> None:
+    def __init__(
+        self,
+        path: str,
+        opener: Callable[[str], object] | None = None,
+        timeout: float = 0.5,
+        retries: int = 3,
+    ) -> None:
         self.path = path
         self.opener = opener or open_serial
         self.timeout = timeout
         self.retries = retries
         self.reader = LineReader()
         self.lines: deque[str] = deque()
-        self.asynchronous: deque[str] = deque(maxlen=10_000)     # the robot's own prints, for monitor mode
+        self.asynchronous: deque[str] = deque(
+            maxlen=10_000
+        )  # the robot's own prints, for monitor mode
         self.port = None
 
     # ---- connection -------------------------------------------------------------
@@ -128,7 +136,7 @@ class DropletLink:
     def open(self) -> None:
         try:
             self.port = self.opener(self.path)
-        except (OSError, ValueError) as exc:          # serial.SerialException is an OSError
+        except (OSError, ValueError) as exc:  # serial.SerialException is an OSError
             self.port = None
             raise DropletDisconnected(f"cannot open {self.path}: {exc}") from None
         self.lines.clear()
@@ -182,7 +190,7 @@ class DropletLink:
             if line is None:
                 break
             self.asynchronous.append(line)
-            deadline = time.monotonic()          # take what is there, do not wait again
+            deadline = time.monotonic()  # take what is there, do not wait again
         out = list(self.asynchronous)
         self.asynchronous.clear()
         return out
@@ -201,11 +209,13 @@ class DropletLink:
                 if line is None:
                     if echoed and reply is None:
                         return None
-                    break                                 # silence: try again
+                    break  # silence: try again
                 refused = NOT_RECOGNIZED.match(line)
                 if refused:
-                    raise DropletError(f"the Droplet on {self.path} does not know the command "
-                                       f"'{refused.group(1)}' (old firmware?)")
+                    raise DropletError(
+                        f"the Droplet on {self.path} does not know the command "
+                        f"'{refused.group(1)}' (old firmware?)"
+                    )
                 if not echoed and line.strip() == text:
                     echoed = True
                     if reply is None:
@@ -217,8 +227,10 @@ class DropletLink:
                     return match
                 self.asynchronous.append(line)
             log.debug("no answer to %r from %s (attempt %d)", text, self.path, attempt + 1)
-        raise DropletError(f"the Droplet on {self.path} did not answer '{text}' "
-                           f"({1 + self.retries} tries, {self.timeout:g} s each)")
+        raise DropletError(
+            f"the Droplet on {self.path} did not answer '{text}' "
+            f"({1 + self.retries} tries, {self.timeout:g} s each)"
+        )
 
     def get_id(self) -> int:
         return int(self.command("get_id", ID_REPLY).group(1), 16)
@@ -237,5 +249,13 @@ class DropletLink:
 def open_serial(path: str):
     """115200 8N1 with a short read timeout, as the Droplets talk."""
     import serial
-    return serial.Serial(path, BAUD, bytesize=serial.EIGHTBITS, parity=serial.PARITY_NONE,
-                         stopbits=serial.STOPBITS_ONE, timeout=0.05, write_timeout=1.0)
+
+    return serial.Serial(
+        path,
+        BAUD,
+        bytesize=serial.EIGHTBITS,
+        parity=serial.PARITY_NONE,
+        stopbits=serial.STOPBITS_ONE,
+        timeout=0.05,
+        write_timeout=1.0,
+    )

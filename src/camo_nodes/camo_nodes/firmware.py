@@ -10,6 +10,7 @@ SPEC, so this is documented in docs/hardware.md):
   to; the robot's own id gives its sensed value, other ids are neighbours'.
 Every other line is ignored (and counted).
 """
+
 from __future__ import annotations
 
 import math
@@ -28,7 +29,7 @@ class FirmwareState:
     droplet_id: int
     sensed: float = math.nan
     p: tuple[float, float, float] | None = None
-    steps: int = 0                                   # consensus steps seen (Pre/Cur-pattern lines)
+    steps: int = 0  # consensus steps seen (Pre/Cur-pattern lines)
     neighbour_colors: dict[int, int] = field(default_factory=dict)
     ignored: int = 0
 

@@ -5,6 +5,7 @@ off, grey = not reported yet) and, once every live robot has finished a round,
 builds the same RunResult the reference simulator returns, for summary.json
 and figure.png. A robot that stops reporting is marked dead.
 """
+
 from __future__ import annotations
 
 import time
@@ -47,7 +48,7 @@ class RoundRecord:
         self.phase = np.zeros(n, np.int64)
         self.step = np.zeros(n, np.int64)
         self.finished = np.zeros(n, bool)
-        self.deadlines = np.zeros(n, np.int64)     # step deadlines each robot let pass
+        self.deadlines = np.zeros(n, np.int64)  # step deadlines each robot let pass
 
     def add(self, msg: RobotStatus) -> None:
         i = msg.sender_id
@@ -76,7 +77,9 @@ class RoundRecord:
             unknown = np.isnan(p).any(axis=1)
             chosen = select_patterns(np.nan_to_num(p).reshape(shape + (3,))).reshape(-1)
             frames.append((f"c{step}", np.where(unknown, -1, chosen).reshape(shape)))
-        frames += [(f"f{step}", states.reshape(shape)) for step, states in enumerate(self.state_trace)]
+        frames += [
+            (f"f{step}", states.reshape(shape)) for step, states in enumerate(self.state_trace)
+        ]
         return frames
 
     def result(self, dead: np.ndarray, partial: bool = False) -> RunResult:
@@ -86,7 +89,11 @@ class RoundRecord:
         their latest report, and the consensus trace ends where the slowest robot was.
         """
         shape = (self.params.rows, self.params.cols)
-        alive = ~dead & (self.phase >= RobotStatus.PHASE_CONSENSUS) if partial else self.finished & ~dead
+        alive = (
+            ~dead & (self.phase >= RobotStatus.PHASE_CONSENSUS)
+            if partial
+            else self.finished & ~dead
+        )
         trace = []
         for step in self.p_trace:
             if np.isnan(step[alive]).any():
@@ -100,8 +107,13 @@ class RoundRecord:
             votes=votes.reshape(shape),
             p=self.p_latest.reshape(shape + (3,)),
             # Stopped early: a robot still in consensus shows what its current p would select.
-            selected=np.where(self.selected < 0, select_patterns(np.nan_to_num(self.p_latest)[None])[0],
-                              self.selected).reshape(shape) if partial else self.selected.reshape(shape),
+            selected=np.where(
+                self.selected < 0,
+                select_patterns(np.nan_to_num(self.p_latest)[None])[0],
+                self.selected,
+            ).reshape(shape)
+            if partial
+            else self.selected.reshape(shape),
             initial=self.initial.reshape(shape),
             final=self.state.reshape(shape),
             consensus_trace=np.array(trace).reshape(-1, 3),
@@ -126,34 +138,48 @@ def add_background(images: list[np.ndarray], stamps: list[tuple[int, int]], msg:
         images.append(from_msg(msg))
 
 
-def write_round(result: RunResult, image: np.ndarray | None, folder: Path, label: str,
-                incomplete: str | None = None) -> dict:
+def write_round(
+    result: RunResult,
+    image: np.ndarray | None,
+    folder: Path,
+    label: str,
+    incomplete: str | None = None,
+) -> dict:
     """summary.json and figure.png of one round, as `./camo sim` writes them."""
     summary = result.summary()
     if incomplete is not None:
         summary["incomplete"] = incomplete
     cli.write_summary(summary, folder)
     params = result.params
-    figures.run_figure(result, image, folder / "figure.png",
-                       title=f"{label}: {params.rows}x{params.cols} robot nodes, {params.profile} profile, "
-                             f"seed {params.seed}, rho_meas {params.rho_meas:g}, rho_comm {params.rho_comm:g}")
+    figures.run_figure(
+        result,
+        image,
+        folder / "figure.png",
+        title=f"{label}: {params.rows}x{params.cols} robot nodes, {params.profile} profile, "
+        f"seed {params.seed}, rho_meas {params.rho_meas:g}, rho_comm {params.rho_comm:g}",
+    )
     return summary
 
 
 class MonitorNode(Node):
-    def __init__(self, params: CamoParams, silence_timeout: float = 30.0, startup_timeout: float = 600.0,
-                 **kwargs) -> None:
+    def __init__(
+        self,
+        params: CamoParams,
+        silence_timeout: float = 30.0,
+        startup_timeout: float = 600.0,
+        **kwargs,
+    ) -> None:
         super().__init__("monitor", namespace="/swarm", **kwargs)
         self.params = params
         self.silence_timeout = silence_timeout
         self.startup_timeout = startup_timeout
         self.rounds: dict[int, RoundRecord] = {0: RoundRecord(params)}
-        self.images: list[np.ndarray] = []          # background of round k is images[k]
+        self.images: list[np.ndarray] = []  # background of round k is images[k]
         self._image_stamps: list[tuple[int, int]] = []
         self.last_heard = np.zeros(params.count)
         self.heard = np.zeros(params.count, bool)
         self.offline = np.zeros(params.count, bool)
-        self.statuses_heard = 0        # a recording of the run must hold at least these
+        self.statuses_heard = 0  # a recording of the run must hold at least these
         self.started = time.monotonic()
         self.create_subscription(RobotStatus, STATUS_TOPIC, self._on_status, status_listener_qos())
         self.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
@@ -169,7 +195,7 @@ class MonitorNode(Node):
             return
         self.last_heard[msg.sender_id] = time.monotonic()
         self.heard[msg.sender_id] = True
-        self.offline[msg.sender_id] = not msg.alive      # a bridged Droplet whose port went away
+        self.offline[msg.sender_id] = not msg.alive  # a bridged Droplet whose port went away
         self.record(msg.round).add(msg)
 
     # ---- views ------------------------------------------------------------------
@@ -177,8 +203,11 @@ class MonitorNode(Node):
     def dead(self, round_index: int = 0) -> np.ndarray:
         """Robots that stopped reporting before finishing this round (or never reported at all)."""
         now = time.monotonic()
-        quiet = np.where(self.heard, now - self.last_heard > self.silence_timeout,
-                         now - self.started > self.startup_timeout)
+        quiet = np.where(
+            self.heard,
+            now - self.last_heard > self.silence_timeout,
+            now - self.started > self.startup_timeout,
+        )
         return ~self.record(round_index).finished & quiet
 
     def all_voted(self, round_index: int = 0) -> bool:
@@ -200,14 +229,20 @@ class MonitorNode(Node):
         for k in range(4):
             if counts[k]:
                 steps = record.step[record.phase == k]
-                where = f" (step {steps.min()}-{steps.max()})" if k >= RobotStatus.PHASE_CONSENSUS else ""
+                where = (
+                    f" (step {steps.min()}-{steps.max()})"
+                    if k >= RobotStatus.PHASE_CONSENSUS
+                    else ""
+                )
                 parts.append(f"{PHASE_NAMES[k]} {counts[k]}{where}")
         busy = ", ".join(parts)
         offline = f"; hardware offline {int(self.offline.sum())}" if self.offline.any() else ""
         if record.deadlines.any():
             offline += f"; step deadlines passed {int(record.deadlines.sum())}"
-        return (f"round {round_index}: robots done {int(record.finished.sum())}/{self.params.count}"
-                f"{', ' + busy if busy else ''}; silent {int(self.dead(round_index).sum())}{offline}")
+        return (
+            f"round {round_index}: robots done {int(record.finished.sum())}/{self.params.count}"
+            f"{', ' + busy if busy else ''}; silent {int(self.dead(round_index).sum())}{offline}"
+        )
 
     def result(self, round_index: int = 0, partial: bool = False) -> RunResult:
         return self.record(round_index).result(self.dead(round_index), partial)
@@ -215,7 +250,9 @@ class MonitorNode(Node):
     def _publish_pattern(self) -> None:
         latest = self.rounds[max(self.rounds)]
         shape = (self.params.rows, self.params.cols)
-        pixels = np.where(latest.state < 0, 128, np.where(latest.state == 1, 0, 255)).astype(np.uint8)
+        pixels = np.where(latest.state < 0, 128, np.where(latest.state == 1, 0, 255)).astype(
+            np.uint8
+        )
         msg = to_msg(pixels.reshape(shape), frame_id="swarm")
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pattern_pub.publish(msg)

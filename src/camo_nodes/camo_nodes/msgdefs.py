@@ -5,19 +5,35 @@ A schema's text is the type's own .msg file followed, for every type it uses
 type's .msg file. The files come from the installed packages' share folders
 (the ament index), so comments and constants are kept as written.
 """
+
 from __future__ import annotations
 
 import importlib
 import json
 import re
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 
 SEPARATOR = "=" * 80
-PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16", "int32",
-              "uint32", "int64", "uint64", "string", "wstring"}
+PRIMITIVES = {
+    "bool",
+    "byte",
+    "char",
+    "float32",
+    "float64",
+    "int8",
+    "uint8",
+    "int16",
+    "uint16",
+    "int32",
+    "uint32",
+    "int64",
+    "uint64",
+    "string",
+    "wstring",
+}
 
 
 class DefinitionError(Exception):
@@ -48,12 +64,14 @@ def message_class(type_name: str):
         raise DefinitionError(f"message type {type_name} is not installed") from None
 
 
-@lru_cache(maxsize=None)
+@cache
 def _msg_file(package: str, name: str) -> Path:
     try:
         path = Path(get_package_share_directory(package)) / "msg" / f"{name}.msg"
     except PackageNotFoundError:
-        raise DefinitionError(f"package {package} is not installed (needed for {package}/{name})") from None
+        raise DefinitionError(
+            f"package {package} is not installed (needed for {package}/{name})"
+        ) from None
     if not path.is_file():
         raise DefinitionError(f"no definition file {path}")
     return path
@@ -66,7 +84,7 @@ def _used_types(package: str, text: str) -> list[tuple[str, str]]:
         line = line.split("#", 1)[0].strip()
         if not line:
             continue
-        field_type = re.sub(r"\[.*\]$|<=\d+", "", line.split()[0])     # arrays and bounded strings
+        field_type = re.sub(r"\[.*\]$|<=\d+", "", line.split()[0])  # arrays and bounded strings
         if field_type in PRIMITIVES:
             continue
         if "/" in field_type:
@@ -78,7 +96,7 @@ def _used_types(package: str, text: str) -> list[tuple[str, str]]:
     return used
 
 
-@lru_cache(maxsize=None)
+@cache
 def message_definition(type_name: str) -> str:
     """The ros2msg schema text of a type, with its dependencies after 80 '=' lines."""
     package, name = split_type(type_name)
@@ -93,11 +111,13 @@ def message_definition(type_name: str) -> str:
         pending.extend(_used_types(dep[0], _msg_file(*dep).read_text()))
     parts = [root.rstrip("\n")]
     for dep_package, dep_name in seen:
-        parts.append(f"{SEPARATOR}\nMSG: {dep_package}/{dep_name}\n{_msg_file(dep_package, dep_name).read_text().rstrip()}")
+        parts.append(
+            f"{SEPARATOR}\nMSG: {dep_package}/{dep_name}\n{_msg_file(dep_package, dep_name).read_text().rstrip()}"
+        )
     return "\n".join(parts) + "\n"
 
 
-@lru_cache(maxsize=None)
+@cache
 def type_hash(type_name: str) -> str:
     """The type's RIHS01 hash from its installed type description, or '' when there is none."""
     package, name = split_type(type_name)

@@ -1,11 +1,18 @@
 """QoS profiles to and from rosbag2's `offered_qos_profiles` YAML (metadata version 9)."""
+
 from __future__ import annotations
 
 import yaml
 from rclpy.duration import Duration
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy)
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    LivelinessPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
 
-INFINITE_NS = 9223372036854775807     # RMW_DURATION_INFINITE, as rosbag2 writes it
+INFINITE_NS = 9223372036854775807  # RMW_DURATION_INFINITE, as rosbag2 writes it
 
 
 def _time(duration: Duration) -> dict:
@@ -58,7 +65,9 @@ def load_first(text: str) -> QoSProfile:
     return QoSProfile(
         history=history,
         depth=depth,
-        reliability=_policy(ReliabilityPolicy, first.get("reliability"), ReliabilityPolicy.RELIABLE),
+        reliability=_policy(
+            ReliabilityPolicy, first.get("reliability"), ReliabilityPolicy.RELIABLE
+        ),
         durability=_policy(DurabilityPolicy, first.get("durability"), DurabilityPolicy.VOLATILE),
         liveliness=_policy(LivelinessPolicy, first.get("liveliness"), LivelinessPolicy.AUTOMATIC),
     )

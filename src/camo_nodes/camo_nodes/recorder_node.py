@@ -8,6 +8,7 @@ message's header stamp (the receive time for types without a header). It
 flushes a chunk every second, so a recorder killed with SIGKILL loses at
 most the last second; Ctrl-C closes the bag with its index and summary.
 """
+
 from __future__ import annotations
 
 import struct
@@ -39,8 +40,14 @@ def header_stamp_ns(data: bytes) -> int | None:
 
 
 class RecorderNode(Node):
-    def __init__(self, path: str, topics: list[str] | None = None, discovery_period: float = 0.5,
-                 flush_period: float = 1.0, **kwargs) -> None:
+    def __init__(
+        self,
+        path: str,
+        topics: list[str] | None = None,
+        discovery_period: float = 0.5,
+        flush_period: float = 1.0,
+        **kwargs,
+    ) -> None:
         super().__init__("recorder", namespace="/camo", **kwargs)
         self.bag = BagWriter(path, library="camo recorder_node")
         self.wanted = set(topics) if topics else None
@@ -62,14 +69,21 @@ class RecorderNode(Node):
         info = self.bag.topics.get(topic)
         return 0 if info is None else info.count
 
-    def settled(self, topics: set[str], quiet: float, ignoring: frozenset[str] = frozenset()) -> bool:
+    def settled(
+        self, topics: set[str], quiet: float, ignoring: frozenset[str] = frozenset()
+    ) -> bool:
         """Subscribed to every one of these topics, matched with their publishers for `quiet` seconds
         (a latched topic's history has come in), and no message for `quiet` seconds."""
         if not topics <= self.recording_now():
             return False
         now = time.monotonic()
-        return all(self._recorded[name].get_publisher_count() > 0 and now - self._since[name] > quiet
-                   for name in topics) and self.idle_for(ignoring) > quiet
+        return (
+            all(
+                self._recorded[name].get_publisher_count() > 0 and now - self._since[name] > quiet
+                for name in topics
+            )
+            and self.idle_for(ignoring) > quiet
+        )
 
     def idle_for(self, ignoring: frozenset[str] = frozenset()) -> float:
         """Seconds since the last message arrived on a topic not ignored (e.g. a periodic one)."""
@@ -78,7 +92,11 @@ class RecorderNode(Node):
 
     def discover(self) -> None:
         for name, types in self.get_topic_names_and_types():
-            if name in self._recorded or name in SKIPPED or (self.wanted and name not in self.wanted):
+            if (
+                name in self._recorded
+                or name in SKIPPED
+                or (self.wanted and name not in self.wanted)
+            ):
                 continue
             if len(types) != 1:
                 self.get_logger().warning(f"{name} carries several types {types}; not recorded")
@@ -86,7 +104,7 @@ class RecorderNode(Node):
                 continue
             publishers = self.get_publishers_info_by_topic(name)
             if not publishers:
-                continue            # only subscribers so far: wait for a publisher's QoS
+                continue  # only subscribers so far: wait for a publisher's QoS
             self._subscribe(name, msgdefs.full_name(types[0]), [p.qos_profile for p in publishers])
 
     def _subscribe(self, name: str, type_name: str, offered: list[QoSProfile]) -> None:
@@ -97,19 +115,25 @@ class RecorderNode(Node):
             self.get_logger().warning(f"{name} not recorded: {exc}")
             self._recorded[name] = None
             return
-        self.bag.add_topic(TopicInfo(name, type_name, qos_yaml.dump(offered), msgdefs.type_hash(type_name)),
-                           definition)
+        self.bag.add_topic(
+            TopicInfo(name, type_name, qos_yaml.dump(offered), msgdefs.type_hash(type_name)),
+            definition,
+        )
         fields = list(cls.get_fields_and_field_types().items())
         self._stamped[name] = bool(fields) and fields[0] == ("header", "std_msgs/Header")
         # As rosbag2 adapts: reliable and transient-local only when every publisher offers it.
         reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
         latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
-        qos = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1,
-                         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_ALL,
+            depth=1,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+        )
         self._since[name] = time.monotonic()
         self._recorded[name] = self.create_subscription(
-            cls, name, lambda data, topic=name: self._on_message(topic, data), qos, raw=True)
+            cls, name, lambda data, topic=name: self._on_message(topic, data), qos, raw=True
+        )
 
     def _on_message(self, topic: str, data: bytes) -> None:
         if self.bag.closed:
@@ -118,7 +142,7 @@ class RecorderNode(Node):
         published = header_stamp_ns(data) if self._stamped[topic] else None
         self.bag.write(topic, data, received, published if published is not None else received)
         now = self.last_message[topic] = time.monotonic()
-        if now - self._flushed > self.flush_period:      # timers can starve under a flood of messages
+        if now - self._flushed > self.flush_period:  # timers can starve under a flood of messages
             self._flush()
 
     def _flush(self) -> None:
@@ -131,8 +155,12 @@ class RecorderNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     parser = cli.Parser(prog="recorder_node", description="record topics into an MCAP bag folder")
-    parser.add_argument("path", help="bag folder to create (NAME/ with NAME_0.mcap and metadata.yaml)")
-    parser.add_argument("--topics", nargs="+", default=None, help="only these topics (default: every topic)")
+    parser.add_argument(
+        "path", help="bag folder to create (NAME/ with NAME_0.mcap and metadata.yaml)"
+    )
+    parser.add_argument(
+        "--topics", nargs="+", default=None, help="only these topics (default: every topic)"
+    )
     try:
         args, ros_args = parser.parse_known_args(argv)
     except cli.UsageError as exc:
@@ -158,8 +186,11 @@ def main(argv: list[str] | None = None) -> int:
         if node is not None:
             executor.remove_node(node)
             node.close()
-            print(f"recorder_node: wrote {node.bag.message_count} messages on {len(node.bag.topics)} topics "
-                  f"to {node.bag.folder}", file=sys.stderr)
+            print(
+                f"recorder_node: wrote {node.bag.message_count} messages on {len(node.bag.topics)} topics "
+                f"to {node.bag.folder}",
+                file=sys.stderr,
+            )
             node.destroy_node()
         rclpy.try_shutdown()
     return 0

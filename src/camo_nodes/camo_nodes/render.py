@@ -6,6 +6,7 @@ monitor's own RoundRecord, so the summary equals the live run's (elapsed_s
 aside). A robot that never reported done is dead, as the live monitor decides
 at the end of a run.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -16,13 +17,13 @@ from pathlib import Path
 
 import numpy as np
 from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import Image
+from std_msgs.msg import String
 
 from camo_core import cli, figures
 from camo_core.params import CamoParams, ParameterError
 from camo_msgs.msg import RobotStatus
 from camo_projector.qos import BACKGROUND_TOPIC
-from sensor_msgs.msg import Image
-from std_msgs.msg import String
 
 from .bag import BagError, read_messages
 from .monitor_node import RoundRecord, add_background, round_record, write_round
@@ -34,10 +35,10 @@ class RecordedRun:
     """What a bag tells of a run: enough to write its summaries and figures."""
 
     params: CamoParams
-    labels: list[str]                   # the backgrounds, in round order
+    labels: list[str]  # the backgrounds, in round order
     rounds: dict[int, RoundRecord]
-    images: list[np.ndarray]            # round k camouflaged images[k]
-    elapsed_s: dict[int, float]         # span of each round's statuses in the bag
+    images: list[np.ndarray]  # round k camouflaged images[k]
+    elapsed_s: dict[int, float]  # span of each round's statuses in the bag
 
 
 def load_run(path: str | Path) -> RecordedRun:
@@ -59,7 +60,9 @@ def load_run(path: str | Path) -> RecordedRun:
     except Exception as exc:  # noqa: BLE001 - bytes that do not decode as their recorded type
         raise BagError(f"{path}: a message does not decode as its recorded type ({exc})") from None
     if setup is None:
-        raise BagError(f"{path} has no {PARAMS_TOPIC} message: it was not recorded from `./camo run`")
+        raise BagError(
+            f"{path} has no {PARAMS_TOPIC} message: it was not recorded from `./camo run`"
+        )
     params = CamoParams(**setup["params"])
     rounds: dict[int, RoundRecord] = {}
     times: dict[int, list[int]] = {}
@@ -85,16 +88,25 @@ def render(path: str | Path, out: Path) -> list[dict]:
         label = run.labels[index] if index < len(run.labels) else f"round {index}"
         image = run.images[index] if index < len(run.images) else None
         summaries.append(write_round(result, image, folder, f"{label} (from {Path(path).name})"))
-        figures.timeline_figure(record.timeline(), folder / "timeline.png",
-                                title=f"{label}: {params.rows}x{params.cols} robots; consensus steps c0.., "
-                                      f"formation steps f0..")
+        figures.timeline_figure(
+            record.timeline(),
+            folder / "timeline.png",
+            title=f"{label}: {params.rows}x{params.cols} robots; consensus steps c0.., "
+            f"formation steps f0..",
+        )
     return summaries
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = cli.Parser(prog="camo render", description="rebuild a run's figures and summary from its bag")
-    parser.add_argument("bag", help="bag folder (or its .mcap file) recorded by ./camo run --record")
-    parser.add_argument("--out", type=Path, default=None, help="output folder (default results/<timestamp>/)")
+    parser = cli.Parser(
+        prog="camo render", description="rebuild a run's figures and summary from its bag"
+    )
+    parser.add_argument(
+        "bag", help="bag folder (or its .mcap file) recorded by ./camo run --record"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output folder (default results/<timestamp>/)"
+    )
     try:
         args = parser.parse_args(argv)
         out = cli.out_dir(argparse.Namespace(out=args.out))
@@ -103,7 +115,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"camo render: error: {exc}", file=sys.stderr)
         return 2
     for k, summary in enumerate(summaries):
-        print(f"round {k}: pattern {summary['pattern']} ({', '.join(f'{n} {c}' for n, c in summary['votes'].items())})")
+        print(
+            f"round {k}: pattern {summary['pattern']} ({', '.join(f'{n} {c}' for n, c in summary['votes'].items())})"
+        )
     print(f"wrote summary.json, figure.png and timeline.png to {out}/")
     return 0
 

@@ -6,6 +6,7 @@ offered_qos_profiles), so Foxglove, a monitor or a fresh swarm see the run
 again. Publishers stay up `--linger` seconds after the last message, so that
 latched (transient-local) topics still reach subscribers that join late.
 """
+
 from __future__ import annotations
 
 import os
@@ -26,17 +27,33 @@ from .swarm_worker import LEAN_NODE
 
 
 def build_parser() -> cli.Parser:
-    parser = cli.Parser(prog="camo replay", description="republish a recorded bag with its timing and QoS")
+    parser = cli.Parser(
+        prog="camo replay", description="republish a recorded bag with its timing and QoS"
+    )
     parser.add_argument("bag", help="bag folder (or its .mcap file)")
-    parser.add_argument("--rate", type=float, default=1.0, help="playback speed factor (default 1)")
-    parser.add_argument("--topics", nargs="+", default=None, help="only these topics (default: all)")
+    parser.add_argument(
+        "--rate", type=float, default=1.0, help="playback speed factor (default 1)"
+    )
+    parser.add_argument(
+        "--topics", nargs="+", default=None, help="only these topics (default: all)"
+    )
     parser.add_argument("--loop", action="store_true", help="start again at the end, until Ctrl-C")
-    parser.add_argument("--delay", type=float, default=1.0,
-                        help="seconds between creating the publishers and the first message, so that "
-                             "subscribers are matched first (default 1)")
-    parser.add_argument("--linger", type=float, default=2.0,
-                        help="seconds to keep publishers up after the last message (default 2)")
-    parser.add_argument("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited)")
+    parser.add_argument(
+        "--delay",
+        type=float,
+        default=1.0,
+        help="seconds between creating the publishers and the first message, so that "
+        "subscribers are matched first (default 1)",
+    )
+    parser.add_argument(
+        "--linger",
+        type=float,
+        default=2.0,
+        help="seconds to keep publishers up after the last message (default 2)",
+    )
+    parser.add_argument(
+        "--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited)"
+    )
     return parser
 
 
@@ -50,11 +67,17 @@ def replay(args, summary: BagSummary, stop: StopFlag) -> int:
     if args.topics:
         unknown = sorted(set(args.topics) - {t.name for t in summary.topics})
         if unknown:
-            raise cli.UsageError(f"the bag has no topic {unknown[0]} (see ./camo bag info {args.bag})")
+            raise cli.UsageError(
+                f"the bag has no topic {unknown[0]} (see ./camo bag info {args.bag})"
+            )
     node = Node("replay", namespace="/camo", **LEAN_NODE)
     try:
-        publishers = {t.name: node.create_publisher(msgdefs.message_class(t.type), t.name, qos_yaml.load_first(t.qos))
-                      for t in topics}
+        publishers = {
+            t.name: node.create_publisher(
+                msgdefs.message_class(t.type), t.name, qos_yaml.load_first(t.qos)
+            )
+            for t in topics
+        }
         total = sum(t.count for t in topics)
         passes = 0
         sleep_until(time.monotonic() + args.delay, stop)
@@ -71,8 +94,11 @@ def replay(args, summary: BagSummary, stop: StopFlag) -> int:
             if not args.loop:
                 break
         sleep_until(time.monotonic() + args.linger, stop)
-        print(f"camo replay: published {total} messages on {len(publishers)} topics"
-              f"{f' ({passes} passes)' if passes > 1 else ''}", file=sys.stderr)
+        print(
+            f"camo replay: published {total} messages on {len(publishers)} topics"
+            f"{f' ({passes} passes)' if passes > 1 else ''}",
+            file=sys.stderr,
+        )
     finally:
         node.destroy_node()
     return 130 if stop else 0
@@ -85,10 +111,12 @@ def main(argv: list[str] | None = None) -> int:
             raise cli.UsageError(f"--rate must be in (0, 1000] (got {args.rate})")
         for name in ("delay", "linger"):
             if not 0 <= getattr(args, name) <= 3600:
-                raise cli.UsageError(f"--{name} must be in 0..3600 seconds (got {getattr(args, name)})")
+                raise cli.UsageError(
+                    f"--{name} must be in 0..3600 seconds (got {getattr(args, name)})"
+                )
         if args.domain_id is not None and not 0 <= args.domain_id <= 232:
             raise cli.UsageError(f"--domain-id must be in 0..232 (got {args.domain_id})")
-        summary = read_summary(args.bag)          # a bad bag fails before ROS starts
+        summary = read_summary(args.bag)  # a bad bag fails before ROS starts
     except (cli.UsageError, BagError) as exc:
         print(f"camo replay: error: {exc}", file=sys.stderr)
         return 2

@@ -9,6 +9,7 @@ when the step's deadline passes. A neighbour that misses a deadline is not
 waited for again until it speaks again. The rules themselves are
 camo_core's RobotCore; this class only moves messages.
 """
+
 from __future__ import annotations
 
 import math
@@ -31,25 +32,43 @@ from camo_projector.qos import BACKGROUND_TOPIC, LATCHED
 
 from .topics import STATUS_TOPIC, history_qos, robot_topic
 
-DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = (RobotStatus.PHASE_DISCOVERY, RobotStatus.PHASE_SENSING,
-                                                  RobotStatus.PHASE_CONSENSUS, RobotStatus.PHASE_FORMATION,
-                                                  RobotStatus.PHASE_DONE)
+DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = (
+    RobotStatus.PHASE_DISCOVERY,
+    RobotStatus.PHASE_SENSING,
+    RobotStatus.PHASE_CONSENSUS,
+    RobotStatus.PHASE_FORMATION,
+    RobotStatus.PHASE_DONE,
+)
 MESSAGE_TYPES = {"hello": Hello, "color": Color, "vote": Vote, "state": State}
-TICK = 0.05          # s between checks of the step deadline
-STALL = 0.5          # s: a tick this late means the process itself stalled
+TICK = 0.05  # s between checks of the step deadline
+STALL = 0.5  # s: a tick this late means the process itself stalled
 
 
 def inputs(neighbors: list[int | None]) -> list[tuple[int, str]]:
     """(slot, kind) a robot listens to: hellos and states from slots 0-11, colours 0-3, votes 0-7."""
     limit = {"hello": 12, "color": 4, "vote": 8, "state": 12}
-    return [(slot, kind) for slot, n in enumerate(neighbors) if n is not None
-            for kind in MESSAGE_TYPES if slot < limit[kind]]
+    return [
+        (slot, kind)
+        for slot, n in enumerate(neighbors)
+        if n is not None
+        for kind in MESSAGE_TYPES
+        if slot < limit[kind]
+    ]
 
 
 class RobotNode(Node):
-    def __init__(self, params: CamoParams, row: int, col: int, step_timeout: float = 10.0,
-                 discovery_timeout: float = 300.0, autostart: bool = True, hub=None, **node_kwargs) -> None:
-        self.core = RobotCore(params, row, col)        # raises ValueError for a cell outside the grid
+    def __init__(
+        self,
+        params: CamoParams,
+        row: int,
+        col: int,
+        step_timeout: float = 10.0,
+        discovery_timeout: float = 300.0,
+        autostart: bool = True,
+        hub=None,
+        **node_kwargs,
+    ) -> None:
+        self.core = RobotCore(params, row, col)  # raises ValueError for a cell outside the grid
         super().__init__(f"robot_{row}_{col}", namespace="/camo", **node_kwargs)
         self.params = params
         self.step_timeout = step_timeout
@@ -57,14 +76,23 @@ class RobotNode(Node):
         depth = max(params.consensus_steps, params.formation_steps) + 4
         qos = history_qos(depth)
         me = self.core.id
-        self.pub = {kind: self.create_publisher(t, robot_topic(me, kind), qos) for kind, t in MESSAGE_TYPES.items()}
+        self.pub = {
+            kind: self.create_publisher(t, robot_topic(me, kind), qos)
+            for kind, t in MESSAGE_TYPES.items()
+        }
         if hub is None:
             # Every status of a round stays available to a monitor or recorder that joins late.
             statuses = params.consensus_steps + params.formation_steps + 8
-            self.status_pub = self.create_publisher(RobotStatus, STATUS_TOPIC, history_qos(statuses))
+            self.status_pub = self.create_publisher(
+                RobotStatus, STATUS_TOPIC, history_qos(statuses)
+            )
             for slot, kind in inputs(self.core.neighbors):
-                self.create_subscription(MESSAGE_TYPES[kind], robot_topic(self.core.neighbors[slot], kind),
-                                         lambda msg, s=slot, k=kind: self._on_message(k, s, msg), qos)
+                self.create_subscription(
+                    MESSAGE_TYPES[kind],
+                    robot_topic(self.core.neighbors[slot], kind),
+                    lambda msg, s=slot, k=kind: self._on_message(k, s, msg),
+                    qos,
+                )
             self.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
         else:
             # Hosted by a worker: its hub subscribes once per topic for all the robots it hosts
@@ -74,16 +102,16 @@ class RobotNode(Node):
         # What has been delivered, by (round, kind, step, slot); early messages wait here for their step.
         self.inbox: dict[tuple[int, str, int, int], object] = {}
         self.silent: set[int] = set()
-        self.deadlines = 0            # step deadlines passed in this round
+        self.deadlines = 0  # step deadlines passed in this round
         self.image = None
         self.image_stamp = None
-        self.next_image = None        # a background that arrived mid-round: camouflaged next
+        self.next_image = None  # a background that arrived mid-round: camouflaged next
         self.round = 0
         self.phase = DISCOVERY
         self.step = 0
         self.wait_started = time.monotonic()
         self.started = False
-        self.ticking = False          # in the timer's call to _advance: deadlines may pass
+        self.ticking = False  # in the timer's call to _advance: deadlines may pass
         self.last_tick = time.monotonic()
         self.create_timer(TICK, self._on_timer)
         if autostart:
@@ -110,7 +138,7 @@ class RobotNode(Node):
             # This process could not listen (busy or descheduled): that time is not the neighbours'
             # fault, and their messages may still be queued behind this tick. Extend the deadline.
             self.wait_started += stalled
-        if self.started and self.context.ok():          # not while the process is shutting down
+        if self.started and self.context.ok():  # not while the process is shutting down
             self.ticking = True
             try:
                 self._advance()
@@ -118,7 +146,7 @@ class RobotNode(Node):
                 self.ticking = False
 
     def _on_message(self, kind: str, slot: int, msg) -> None:
-        self.silent.discard(slot)          # it speaks again: wait for it again
+        self.silent.discard(slot)  # it speaks again: wait for it again
         if msg.round < self.round:
             return
         if kind == "hello":
@@ -185,22 +213,40 @@ class RobotNode(Node):
         core = self.core
         if self.phase >= FORMATION:
             self._show(core.state)
-        status = RobotStatus(sender_id=core.id, row=core.row, col=core.col, phase=self.phase, step=self.step,
-                             sensed=core.sensed, p=list(core.p), state=core.state, alive=self._hardware_ok(),
-                             known_slots=core.known_mask, round=self.round, deadlines=self.deadlines,
-                             pattern=RobotStatus.PATTERN_NONE if core.pattern is None else core.pattern)
+        status = RobotStatus(
+            sender_id=core.id,
+            row=core.row,
+            col=core.col,
+            phase=self.phase,
+            step=self.step,
+            sensed=core.sensed,
+            p=list(core.p),
+            state=core.state,
+            alive=self._hardware_ok(),
+            known_slots=core.known_mask,
+            round=self.round,
+            deadlines=self.deadlines,
+            pattern=RobotStatus.PATTERN_NONE if core.pattern is None else core.pattern,
+        )
         status.header.stamp = self.get_clock().now().to_msg()
         status.header.frame_id = "camo"
         self.status_pub.publish(status)
 
     # ---- stepping -------------------------------------------------------------
 
-    def _waiting_for(self, kind: str, stream: int, step: int, slots, known_only: bool = True) -> list[int]:
+    def _waiting_for(
+        self, kind: str, stream: int, step: int, slots, known_only: bool = True
+    ) -> list[int]:
         """Slots whose message for `step` is still to come: expected, not dropped, not silent."""
-        return [s for s in slots
-                if self.core.neighbors[s] is not None and (self.core.known[s] or not known_only)
-                and s not in self.silent and (self.round, kind, step, s) not in self.inbox
-                and self.core.arrives(stream, step, s)]
+        return [
+            s
+            for s in slots
+            if self.core.neighbors[s] is not None
+            and (self.core.known[s] or not known_only)
+            and s not in self.silent
+            and (self.round, kind, step, s) not in self.inbox
+            and self.core.arrives(stream, step, s)
+        ]
 
     def _ready(self, pending: list[int], timeout: float) -> bool:
         if not pending:
@@ -211,7 +257,9 @@ class RobotNode(Node):
             return False
         self.silent.update(pending)
         self.deadlines += 1
-        self.get_logger().warning(f"step deadline passed; neighbours in slots {pending} are silent")
+        self.get_logger().warning(
+            f"step deadline passed; neighbours in slots {pending} are silent"
+        )
         return True
 
     def _next(self, phase: int, step: int = 0) -> None:
@@ -224,8 +272,10 @@ class RobotNode(Node):
     def _advance(self) -> None:
         while True:
             if self.phase == DISCOVERY:
-                if not self._ready(self._waiting_for("hello", rng.STREAM_HELLO, 0, range(NUM_SLOTS), False),
-                                   self.discovery_timeout):
+                if not self._ready(
+                    self._waiting_for("hello", rng.STREAM_HELLO, 0, range(NUM_SLOTS), False),
+                    self.discovery_timeout,
+                ):
                     return
                 heard = self._take("hello", 0, range(NUM_SLOTS))
                 self.core.discover([h is not None for h in heard])
@@ -235,12 +285,14 @@ class RobotNode(Node):
                     return
                 if math.isnan(self.core.sensed):
                     reading = self._read_sensor()
-                    if reading is None:          # the sensor is not available yet: try again later
+                    if reading is None:  # the sensor is not available yet: try again later
                         return
                     self.core.sense(*reading)
                     self._send("color", Color(phase=SENSING, step=0, value=self.core.sensed))
                     self.wait_started = time.monotonic()
-                if not self._ready(self._waiting_for("color", rng.STREAM_COLOR, 0, range(4)), self.step_timeout):
+                if not self._ready(
+                    self._waiting_for("color", rng.STREAM_COLOR, 0, range(4)), self.step_timeout
+                ):
                     return
                 self.core.decide_vote(self._take("color", 0, range(4)))
                 self._next(CONSENSUS)
@@ -253,8 +305,10 @@ class RobotNode(Node):
                     self._report()
                     self._send_state()
                     continue
-                if not self._ready(self._waiting_for("vote", rng.STREAM_CONSENSUS, self.step, range(8)),
-                                   self.step_timeout):
+                if not self._ready(
+                    self._waiting_for("vote", rng.STREAM_CONSENSUS, self.step, range(8)),
+                    self.step_timeout,
+                ):
                     return
                 self.core.consensus(self.step, self._take("vote", self.step, range(8)))
                 self._next(CONSENSUS, self.step + 1)
@@ -263,26 +317,33 @@ class RobotNode(Node):
                     self._send_vote()
             elif self.phase == FORMATION:
                 if self.step == self.params.formation_steps:
-                    if not self._display_ready():       # a hardware robot is done once it shows its state
+                    if (
+                        not self._display_ready()
+                    ):  # a hardware robot is done once it shows its state
                         return
                     self._next(DONE, self.step)
                     self._report()
                     continue
-                if not self._ready(self._waiting_for("state", rng.STREAM_STATE, self.step, range(NUM_SLOTS)),
-                                   self.step_timeout):
+                if not self._ready(
+                    self._waiting_for("state", rng.STREAM_STATE, self.step, range(NUM_SLOTS)),
+                    self.step_timeout,
+                ):
                     return
                 self.core.form(self.step, self._take("state", self.step, range(NUM_SLOTS)))
                 self._next(FORMATION, self.step + 1)
                 self._report()
                 if self.step < self.params.formation_steps:
                     self._send_state()
-            elif self.next_image is not None:      # done, and a new background is up
+            elif self.next_image is not None:  # done, and a new background is up
                 self._start_next_round()
             else:
                 return
 
     def _send_vote(self) -> None:
-        self._send("vote", Vote(phase=CONSENSUS, step=self.step, p=list(self.core.p), degree=self.core.degree))
+        self._send(
+            "vote",
+            Vote(phase=CONSENSUS, step=self.step, p=list(self.core.p), degree=self.core.degree),
+        )
 
     def _send_state(self) -> None:
         self._send("state", State(phase=FORMATION, step=self.step, state=self.core.state))
@@ -290,22 +351,48 @@ class RobotNode(Node):
 
 def params_from_node(node: Node) -> tuple[CamoParams, int, int, float]:
     """Read a standalone robot's ROS parameters into CamoParams (raises ParameterError)."""
-    spec = {"rows": 8, "cols": 8, "row": 0, "col": 0, "profile": "paper", "seed": 0, "rho_meas": 0.0,
-            "rho_comm": 0.0, "threshold": 50.0, "consensus_steps": -1, "formation_steps": -1,
-            "step_timeout": 10.0, "discovery_timeout": 300.0}
+    spec = {
+        "rows": 8,
+        "cols": 8,
+        "row": 0,
+        "col": 0,
+        "profile": "paper",
+        "seed": 0,
+        "rho_meas": 0.0,
+        "rho_comm": 0.0,
+        "threshold": 50.0,
+        "consensus_steps": -1,
+        "formation_steps": -1,
+        "step_timeout": 10.0,
+        "discovery_timeout": 300.0,
+    }
     values = {name: node.declare_parameter(name, default).value for name, default in spec.items()}
-    params = CamoParams(profile=values["profile"], rows=values["rows"], cols=values["cols"],
-                        threshold=values["threshold"], seed=values["seed"], rho_meas=values["rho_meas"],
-                        rho_comm=values["rho_comm"],
-                        consensus_steps=None if values["consensus_steps"] < 0 else values["consensus_steps"],
-                        formation_steps=None if values["formation_steps"] < 0 else values["formation_steps"])
+    params = CamoParams(
+        profile=values["profile"],
+        rows=values["rows"],
+        cols=values["cols"],
+        threshold=values["threshold"],
+        seed=values["seed"],
+        rho_meas=values["rho_meas"],
+        rho_comm=values["rho_comm"],
+        consensus_steps=None if values["consensus_steps"] < 0 else values["consensus_steps"],
+        formation_steps=None if values["formation_steps"] < 0 else values["formation_steps"],
+    )
     if not (0 <= values["row"] < params.rows and 0 <= values["col"] < params.cols):
-        raise ParameterError(f"cell ({values['row']}, {values['col']}) is outside the "
-                             f"{params.rows}x{params.cols} grid")
+        raise ParameterError(
+            f"cell ({values['row']}, {values['col']}) is outside the "
+            f"{params.rows}x{params.cols} grid"
+        )
     for name in ("step_timeout", "discovery_timeout"):
         if not values[name] > 0:
             raise ParameterError(f"{name} must be positive (got {values[name]})")
-    return params, values["row"], values["col"], values["step_timeout"], values["discovery_timeout"]
+    return (
+        params,
+        values["row"],
+        values["col"],
+        values["step_timeout"],
+        values["discovery_timeout"],
+    )
 
 
 def main(args=None) -> int:
@@ -318,7 +405,9 @@ def main(args=None) -> int:
             params, row, col, timeout, discovery_timeout = params_from_node(reader)
         finally:
             reader.destroy_node()
-        node = RobotNode(params, row, col, step_timeout=timeout, discovery_timeout=discovery_timeout)
+        node = RobotNode(
+            params, row, col, step_timeout=timeout, discovery_timeout=discovery_timeout
+        )
         while rclpy.ok():
             rclpy.spin_once(node, timeout_sec=0.5)
     except (ParameterError, ValueError) as exc:

@@ -4,6 +4,7 @@ rclpy's own handler shuts the context down under running callbacks, which then
 fail mid-publish; a flag lets a process finish its current callback, stop
 spinning and clean up in order.
 """
+
 from __future__ import annotations
 
 import signal
@@ -15,7 +16,7 @@ class StopFlag:
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, self._set)
 
-    def _set(self, signum, frame) -> None:  # noqa: ARG002 - signal handler signature
+    def _set(self, signum, frame) -> None:
         self.raised = True
 
     def __bool__(self) -> bool:

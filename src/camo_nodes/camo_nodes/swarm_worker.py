@@ -1,4 +1,5 @@
 """A process that hosts many robot nodes in one executor (started by the launcher)."""
+
 from __future__ import annotations
 
 import argparse
@@ -8,24 +9,25 @@ import sys
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.signals import SignalHandlerOptions
-
-from camo_core.params import CamoParams
-
-from camo_msgs.msg import RobotStatus
-from camo_projector.qos import BACKGROUND_TOPIC, LATCHED
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 
-from .robot_node import MESSAGE_TYPES, RobotNode, inputs
-from .topics import STATUS_TOPIC, history_qos, robot_topic
-from .shutdown import StopFlag
+from camo_core.params import CamoParams
+from camo_msgs.msg import RobotStatus
+from camo_projector.qos import BACKGROUND_TOPIC, LATCHED
 
+from .robot_node import MESSAGE_TYPES, RobotNode, inputs
+from .shutdown import StopFlag
+from .topics import STATUS_TOPIC, history_qos, robot_topic
 
 # Hosted robots need no parameter, rosout or type-description services: fewer DDS entities.
-LEAN_NODE = {"start_parameter_services": False, "enable_rosout": False,
-             "parameter_overrides": [Parameter("start_type_description_service", value=False)]}
+LEAN_NODE = {
+    "start_parameter_services": False,
+    "enable_rosout": False,
+    "parameter_overrides": [Parameter("start_type_description_service", value=False)],
+}
 
 
 class Hub(Node):
@@ -52,8 +54,12 @@ class Hub(Node):
             key = (robot.core.neighbors[slot], kind)
             if key not in self.listeners:
                 self.listeners[key] = []
-                self.create_subscription(MESSAGE_TYPES[kind], robot_topic(key[0], kind),
-                                         lambda msg, k=key: self._dispatch(k, msg), self.qos)
+                self.create_subscription(
+                    MESSAGE_TYPES[kind],
+                    robot_topic(key[0], kind),
+                    lambda msg, k=key: self._dispatch(k, msg),
+                    self.qos,
+                )
             self.listeners[key].append((robot, slot))
 
     def _dispatch(self, key: tuple[int, str], msg) -> None:
@@ -94,9 +100,16 @@ def main(argv: list[str] | None = None) -> int:
         executor.add_node(hub)
         for robot in cells:
             row, col = divmod(robot, params.cols)
-            node = RobotNode(params, row, col, step_timeout=args.step_timeout,
-                             discovery_timeout=args.discovery_timeout, autostart=False, hub=hub,
-                             **LEAN_NODE)
+            node = RobotNode(
+                params,
+                row,
+                col,
+                step_timeout=args.step_timeout,
+                discovery_timeout=args.discovery_timeout,
+                autostart=False,
+                hub=hub,
+                **LEAN_NODE,
+            )
             nodes.append(node)
             executor.add_node(node)
         for node in nodes[1:]:

@@ -1,4 +1,5 @@
 """numpy <-> sensor_msgs/Image for the 8-bit grey and BGR images the projector sends."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -20,7 +21,9 @@ def from_msg(msg: Image) -> np.ndarray:
     channels = {"mono8": 1, "bgr8": 3, "rgb8": 3}.get(msg.encoding)
     if channels is None:
         raise ValueError(f"unsupported image encoding {msg.encoding!r} (mono8, bgr8 or rgb8)")
-    data = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.step)[:, :msg.width * channels]
+    data = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(msg.height, msg.step)[
+        :, : msg.width * channels
+    ]
     if channels == 1:
         return data.copy()
     image = data.reshape(msg.height, msg.width, 3)

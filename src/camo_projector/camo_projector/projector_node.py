@@ -4,15 +4,16 @@ Parameters: `image` (a file) or `pattern` (desert, forest, leopard). Setting
 either while running, or sending a name or path on /camo/projector/load,
 publishes the new background, and the swarm camouflages again on it.
 """
+
 from __future__ import annotations
 
 import sys
 
 import numpy as np
 import rclpy
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
