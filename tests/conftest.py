@@ -1,124 +1,55 @@
-"""Shared helpers. Tests run through `./camo test`, inside the project's venv and workspace."""
+"""Fixtures shared by the tests (helpers that are not fixtures live in support.py)."""
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-import time
-from contextlib import contextmanager
-from pathlib import Path
+import json
 
-ROOT = Path(__file__).resolve().parents[1]
+import pytest
+from support import BAG_OPTIONS, camo_run
 
 
-def run_camo(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    """Run the camo command line (already set up: we are inside ./camo test)."""
-    return subprocess.run(
-        [sys.executable, "-m", "camo_core.cli", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
-
-
-_next_domain = [0]
-
-
-def domain() -> int:
-    """A ROS domain of its own for each run, so parallel test processes do not hear each other."""
-    _next_domain[0] += 1
-    return 1 + (os.getpid() * 7 + _next_domain[0]) % 200
-
-
-@contextmanager
-def ros_context(domain_id: int | None = None):
-    """An rclpy context of the caller's own (in a domain of its own unless given), shut down on leaving."""
-    import rclpy
-
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain() if domain_id is None else domain_id)
-    try:
-        yield context
-    finally:
-        rclpy.try_shutdown(context=context)
-
-
-def camo_run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
-    """`./camo run` with a domain of its own."""
-    return subprocess.run(
-        [sys.executable, "-m", "camo_nodes.launcher", *args, "--domain-id", str(domain())],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
-
-
-def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 120.0) -> list[str]:
-    """Read a process's stderr up to the first line holding `text`; the lines read so far."""
-    seen: list[str] = []
-    deadline = time.monotonic() + timeout
-    for line in proc.stderr:
-        seen.append(line)
-        if text in line:
-            return seen
-        assert time.monotonic() < deadline, (
-            f"no line with {text!r} in {timeout:g} s:\n{''.join(seen[-30:])}"
-        )
-    raise AssertionError(f"the process ended before a line with {text!r}:\n{''.join(seen[-30:])}")
-
-
-class StatusListener:
-    """The robots' statuses (/swarm/status) heard in one ROS domain, in a context of the test's own."""
-
-    def __init__(self, domain_id: int) -> None:
-        self.domain_id = domain_id
-        self.got: list = []
-
-    def __enter__(self) -> StatusListener:
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-
-        from camo_msgs.msg import RobotStatus
-        from camo_nodes.topics import STATUS_TOPIC, status_listener_qos
-
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=self.domain_id)
-        self.node = rclpy.create_node("status_listener", context=self.context)
-        self.node.create_subscription(
-            RobotStatus, STATUS_TOPIC, self.got.append, status_listener_qos()
-        )
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        return self
-
-    def spin_until(self, done, timeout: float) -> None:
-        """Take messages until done() holds or `timeout` seconds pass."""
-        deadline = time.monotonic() + timeout
-        while not done() and time.monotonic() < deadline:
-            self.executor.spin_once(timeout_sec=0.1)
-
-    def final_states(self) -> dict[int, int]:
-        """Robot id -> state, of the robots that reported done."""
-        return {m.sender_id: m.state for m in self.got if m.phase == 4}
-
-    def __exit__(self, *exc) -> None:
-        import rclpy
-
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
-
+@pytest.fixture
 def count_round_records(monkeypatch) -> list[int]:
     """Counts RoundRecord constructions (each allocates traces of consensus steps x robots)."""
-    from camo_nodes.monitor_node import RoundRecord
+    from camo_core.record import RoundRecord
 
-    made = []
+    made: list[int] = []
     original = RoundRecord.__post_init__
     monkeypatch.setattr(
         RoundRecord, "__post_init__", lambda self: (made.append(1), original(self))[1]
     )
     return made
+
+
+@pytest.fixture(scope="session")
+def recorded(tmp_path_factory):
+    """One recorded run: (bag folder, live summary)."""
+    folder = tmp_path_factory.mktemp("recorded")
+    out = camo_run(*BAG_OPTIONS, "--out", str(folder / "live"), "--record", str(folder / "bag"))
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "lacks" not in out.stderr, out.stderr[-2000:]
+    return folder / "bag", json.loads((folder / "live" / "summary.json").read_text())
+
+
+@pytest.fixture
+def emulator(tmp_path):
+    """Makes emulated Droplets on pseudo-terminals; stops them after the test."""
+    from camo_droplet.emulator import DropletEmulator
+
+    made = []
+
+    def make(rgb=(10, 20, 30), faults=None, droplet_id=0x1A2B):
+        em = DropletEmulator(
+            tmp_path / f"droplet{len(made)}",
+            droplet_id,
+            rgb,
+            faults,
+            led_log=tmp_path / f"led{len(made)}.log",
+            seed=len(made),
+        ).start()
+        made.append(em)
+        return em
+
+    yield make
+    for em in made:
+        em.stop()

@@ -15,6 +15,6 @@ setup(
     maintainer="camo developers",
     maintainer_email="camo@example.org",
     description="The camouflage algorithm without ROS, and its reference simulator.",
-    license="MIT",
+    license="Apache-2.0",
     entry_points={"console_scripts": ["camo_sim = camo_core.cli:main"]},
 )

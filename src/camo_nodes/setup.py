@@ -14,20 +14,14 @@ setup(
     zip_safe=True,
     maintainer="camo developers",
     maintainer_email="camo@example.org",
-    description="Camouflage swarm nodes: robot, monitor, swarm worker, launcher, recorder, replay.",
-    license="MIT",
+    description="The camouflage swarm: robot nodes, workers, the monitor and the launcher.",
+    license="Apache-2.0",
     entry_points={
         "console_scripts": [
             "robot_node = camo_nodes.robot_node:main",
             "monitor_node = camo_nodes.monitor_node:main",
-            "swarm_worker = camo_nodes.swarm_worker:main",
+            "swarm_worker = camo_nodes.worker:main",
             "camo_run = camo_nodes.launcher:main",
-            "recorder_node = camo_nodes.recorder_node:main",
-            "camo_replay = camo_nodes.replay:main",
-            "camo_render = camo_nodes.render:main",
-            "camo_bag = camo_nodes.bag_cli:main",
-            "droplet_bridge = camo_nodes.droplet_bridge:main",
-            "droplet_emulator = camo_nodes.droplet_emulator:main",
         ],
     },
 )

@@ -15,6 +15,6 @@ setup(
     maintainer="camo developers",
     maintainer_email="camo@example.org",
     description="Publishes the background image projected onto the arena.",
-    license="MIT",
+    license="Apache-2.0",
     entry_points={"console_scripts": ["projector_node = camo_projector.projector_node:main"]},
 )

@@ -9,6 +9,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from .sensing import ImageError
+
 SIZE = 128
 BACKGROUNDS = ("desert", "forest", "leopard")
 
@@ -33,7 +35,7 @@ def forest(size: int = SIZE) -> np.ndarray:
     )  # light mist, top to bottom
     for centre in range(8, size, 32):
         width = rng.uniform(11.0, 15.0)
-        left = int(round(centre + rng.uniform(-2.0, 2.0) - width / 2))
+        left = round(centre + rng.uniform(-2.0, 2.0) - width / 2)
         shade = rng.uniform(30.0, 55.0)
         cv2.rectangle(image, (left, 0), (left + int(width), size - 1), shade, thickness=-1)
     image += rng.normal(0.0, 8.0, (size, size))  # bark and leaves
@@ -61,7 +63,7 @@ def background(name: str) -> np.ndarray:
     try:
         return {"desert": desert, "forest": forest, "leopard": leopard}[name]()
     except KeyError:
-        raise ValueError(
+        raise ImageError(
             f"unknown built-in background {name!r} (choose from {', '.join(BACKGROUNDS)})"
         ) from None
 

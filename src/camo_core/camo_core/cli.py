@@ -9,103 +9,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
-from pathlib import Path
 
 import numpy as np
 
 from . import bench, errors, figures
-from .backgrounds import BACKGROUNDS, background
-from .params import PROFILES, CamoParams, ParameterError
+from .exceptions import EXIT_USAGE, CamoError, UsageError
+from .options import Parser, add_run_options, image_from, out_dir, params_from
 from .progress import ProgressBar
-from .sensing import ImageError, load_image, sense_image
+from .result import write_summary
+from .sensing import sense_image
 from .simulator import simulate
-
-EXIT_USAGE = 2
-
-
-class UsageError(Exception):
-    """Bad input from the user: reported in one line, exit code 2."""
-
-
-class Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one line, not usage + message
-        raise UsageError(message)
-
-
-def add_run_options(
-    parser: argparse.ArgumentParser, default_pattern: str | None = "forest"
-) -> None:
-    """The options shared by every command that runs one camouflage (sim, and later run)."""
-    source = parser.add_mutually_exclusive_group()
-    source.add_argument("--image", help="background image file (any format OpenCV reads)")
-    source.add_argument(
-        "--pattern",
-        choices=BACKGROUNDS,
-        default=None,
-        help=f"built-in background (default: {default_pattern})",
-    )
-    parser.add_argument("--rows", type=int, default=8, help="robot rows (default 8)")
-    parser.add_argument("--cols", type=int, default=8, help="robot columns (default 8)")
-    parser.add_argument(
-        "--profile", choices=PROFILES, default="paper", help="paper or droplet rules"
-    )
-    parser.add_argument(
-        "--seed", type=int, default=0, help="seed of every random draw (default 0)"
-    )
-    parser.add_argument(
-        "--rho-meas", type=float, default=0.0, help="measurement error probability"
-    )
-    parser.add_argument("--rho-comm", type=float, default=0.0, help="message loss probability")
-    parser.add_argument(
-        "--threshold", type=float, default=50.0, help="descriptor threshold T (default 50)"
-    )
-    parser.add_argument(
-        "--consensus-steps", type=int, default=None, help="default: 35 paper, 10 droplet"
-    )
-    parser.add_argument(
-        "--formation-steps", type=int, default=None, help="default: 10 paper, 20 droplet"
-    )
-    parser.add_argument(
-        "--out", type=Path, default=None, help="output folder (default results/<timestamp>/)"
-    )
-    parser.set_defaults(default_pattern=default_pattern)
-
-
-def params_from(args: argparse.Namespace) -> CamoParams:
-    return CamoParams(
-        profile=args.profile,
-        rows=args.rows,
-        cols=args.cols,
-        threshold=args.threshold,
-        consensus_steps=args.consensus_steps,
-        formation_steps=args.formation_steps,
-        seed=args.seed,
-        rho_meas=args.rho_meas,
-        rho_comm=args.rho_comm,
-    )
-
-
-def image_from(args: argparse.Namespace) -> tuple[np.ndarray, str]:
-    if args.image:
-        return load_image(args.image), str(args.image)
-    name = args.pattern or args.default_pattern
-    return background(name), f"built-in {name}"
-
-
-def out_dir(args: argparse.Namespace) -> Path:
-    folder = args.out or Path("results") / time.strftime("%Y%m%d-%H%M%S")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UsageError(f"cannot create output folder {folder}: {exc.strerror}") from None
-    return folder
-
-
-def write_summary(summary: dict, folder: Path) -> Path:
-    path = folder / "summary.json"
-    path.write_text(json.dumps(summary, indent=1) + "\n")
-    return path
 
 
 def sensed_overrides(texts: list[str], rows: int, cols: int) -> dict[tuple[int, int], float]:
@@ -155,7 +68,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     )
     counts = ", ".join(f"{k} {v}" for k, v in result.selection_counts.items())
     print(
-        f"pattern: {result.majority_pattern} ({counts}); wrote {folder}/summary.json and figure.png "
+        f"pattern: {result.majority_pattern} ({counts}); "
+        f"wrote {folder}/summary.json and figure.png "
         f"in {result.elapsed_s:.3f} s"
     )
     return 0
@@ -165,10 +79,7 @@ def cmd_errors(args: argparse.Namespace) -> int:
     params = params_from(args)
     if args.trials < 1 or args.trials > 10_000:
         raise UsageError(f"--trials must be an integer in 1..10000 (got {args.trials})")
-    try:
-        rhos = errors.parse_rhos(args.rhos)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    rhos = errors.parse_rhos(args.rhos)
     image, label = image_from(args)
     raw = sense_image(image, params.rows, params.cols, params.profile)
     folder = out_dir(args)
@@ -228,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)
-    except (UsageError, ParameterError, ImageError, ValueError) as exc:
+    except CamoError as exc:
         print(f"camo: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:

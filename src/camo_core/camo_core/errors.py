@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .exceptions import UsageError
 from .params import CamoParams
 from .progress import ProgressBar
 from .simulator import simulate
@@ -85,7 +86,7 @@ def parse_rhos(text: str) -> list[float]:
     try:
         values = [float(part) for part in text.split(",") if part.strip()]
     except ValueError:
-        raise ValueError(f"--rhos must be comma-separated numbers (got {text!r})") from None
+        raise UsageError(f"--rhos must be comma-separated numbers (got {text!r})") from None
     if not values or any(not math.isfinite(v) or not 0.0 <= v <= 1.0 for v in values):
-        raise ValueError(f"--rhos must be probabilities in [0, 1] (got {text!r})")
+        raise UsageError(f"--rhos must be probabilities in [0, 1] (got {text!r})")
     return values

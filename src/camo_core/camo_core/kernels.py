@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from . import rng
 from .grid import NEIGHBOR_OFFSETS
 from .rules import (
     ACTIVATORS,
@@ -35,11 +36,12 @@ for _k in range(3):
     ROLE[_k, list(ACTIVATORS[_k])] = 1
     ROLE[_k, list(INHIBITORS[_k])] = -1
 
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
-_M2 = np.uint64(0x94D049BB133111EB)
+# SPEC section 3's SplitMix64, with rng.py's constants (numba freezes module globals).
+_GOLDEN = np.uint64(rng.GOLDEN)
+_M1 = np.uint64(rng.M1)
+_M2 = np.uint64(rng.M2)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
-_INV_2_53 = 1.0 / float(1 << 53)
+_INV_2_53 = rng.INV_2_53
 ALL_SLOTS = (1 << 12) - 1
 # w = 1 / (1 + max degree), computed once per possible degree: the same float64 as rules.py.
 METROPOLIS = np.array([1.0 / (1.0 + d) for d in range(9)])
@@ -97,7 +99,7 @@ def _state_in(state, known, i, j, s, prefix, rho):
     """State received from slot s of robot (i, j), or -1 if nothing arrived."""
     if (known[i, j] >> s) & 1 == 0:
         return -1
-    rows, cols = state.shape
+    cols = state.shape[1]
     ni = i + DI[s]
     nj = j + DJ[s]
     if not _arrives(prefix, ni * cols + nj, i * cols + j, rho):

@@ -6,6 +6,8 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
+from .exceptions import CamoError
+
 PROFILES = ("paper", "droplet")
 
 # SPEC section 2: steps per phase and Young's inhibitor weight, per profile.
@@ -28,7 +30,7 @@ MAX_SIDE = 8192  # robots per row or column; ids stay far inside uint32
 MAX_STEPS = 100_000
 
 
-class ParameterError(ValueError):
+class ParameterError(CamoError):
     """A parameter outside its allowed range; the message names it and the range."""
 
 

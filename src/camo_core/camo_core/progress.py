@@ -21,7 +21,10 @@ class ProgressBar:
         fraction = min(1.0, self.done / self.total)
         elapsed = time.monotonic() - self.start
         eta = elapsed / fraction - elapsed if fraction > 0 else 0.0
-        text = f"{self.label} {self.done}/{self.total} {fraction:4.0%} elapsed {elapsed:5.1f}s eta {eta:5.1f}s {note}"
+        text = (
+            f"{self.label} {self.done}/{self.total} {fraction:4.0%} elapsed {elapsed:5.1f}s "
+            f"eta {eta:5.1f}s {note}"
+        )
         if self._tty:
             filled = int(30 * fraction)
             self.stream.write(f"\r[{'#' * filled}{'.' * (30 - filled)}] {text}\x1b[K")

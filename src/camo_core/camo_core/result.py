@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -87,5 +89,11 @@ class RunResult:
                     [None if dead[i, j] else v for j, v in enumerate(row)]
                     for i, row in enumerate(summary[key])
                 ]
-            summary["dead"] = [[int(i), int(j)] for i, j in zip(*np.nonzero(dead))]
+            summary["dead"] = [[int(i), int(j)] for i, j in zip(*np.nonzero(dead), strict=False)]
         return summary
+
+
+def write_summary(summary: dict[str, Any], folder: Path) -> Path:
+    path = folder / "summary.json"
+    path.write_text(json.dumps(summary, indent=1) + "\n")
+    return path

@@ -19,17 +19,17 @@ STREAM_STATE = 4
 STREAM_SENSOR_REPLACED = 5
 STREAM_SENSOR_VALUE = 6
 
-_GOLDEN = 0x9E3779B97F4A7C15
-_M1 = 0xBF58476D1CE4E5B9
-_M2 = 0x94D049BB133111EB
-_INV_2_53 = 1.0 / float(1 << 53)
+GOLDEN = 0x9E3779B97F4A7C15
+M1 = 0xBF58476D1CE4E5B9
+M2 = 0x94D049BB133111EB
+INV_2_53 = 1.0 / float(1 << 53)
 
 
 def mix(x: int) -> int:
     """SplitMix64 finaliser on a Python int."""
-    x = (x + _GOLDEN) & MASK
-    x = ((x ^ (x >> 30)) * _M1) & MASK
-    x = ((x ^ (x >> 27)) * _M2) & MASK
+    x = (x + GOLDEN) & MASK
+    x = ((x ^ (x >> 30)) * M1) & MASK
+    x = ((x ^ (x >> 27)) * M2) & MASK
     return x ^ (x >> 31)
 
 
@@ -40,7 +40,7 @@ def prefix(seed: int, stream: int, a: int) -> int:
 
 def uniform(seed: int, stream: int, a: int, b: int, c: int) -> float:
     """A float in [0, 1)."""
-    return (mix(mix(prefix(seed, stream, a) ^ b) ^ c) >> 11) * _INV_2_53
+    return (mix(mix(prefix(seed, stream, a) ^ b) ^ c) >> 11) * INV_2_53
 
 
 def lost(seed: int, stream: int, step: int, src: int, dst: int, rho_comm: float) -> bool:
@@ -50,9 +50,9 @@ def lost(seed: int, stream: int, step: int, src: int, dst: int, rho_comm: float)
 
 # ---- vectorised (NumPy uint64; wrapping arithmetic is the mask) -------------
 
-_GOLDEN_U = np.uint64(_GOLDEN)
-_M1_U = np.uint64(_M1)
-_M2_U = np.uint64(_M2)
+_GOLDEN_U = np.uint64(GOLDEN)
+_M1_U = np.uint64(M1)
+_M2_U = np.uint64(M2)
 _S30, _S27, _S31, _S11 = (np.uint64(s) for s in (30, 27, 31, 11))
 
 
@@ -80,4 +80,4 @@ def sender_hash(seed: int, stream: int, a: int, src: np.ndarray) -> np.ndarray:
 
 def to_unit(h: np.ndarray) -> np.ndarray:
     """Final hash to a float64 in [0, 1)."""
-    return (h >> _S11).astype(np.float64) * _INV_2_53
+    return (h >> _S11).astype(np.float64) * INV_2_53

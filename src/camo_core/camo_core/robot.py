@@ -1,7 +1,8 @@
 """One robot's view of a camouflage run: what it knows, holds and decides.
 
-Both drivers use this class: the per-robot reference driver (`perrobot.py`) and
-the ROS 2 robot node. It takes what was *delivered* to the robot, applies the
+The per-robot reference driver (`perrobot.py`) and the step protocol
+(`protocol.py`, which every robot node runs) use this class. It takes what was *delivered* to the
+robot, applies the
 simulated link (SPEC section 3: a message is lost by a deterministic draw keyed
 on sender, receiver and step) and calls the rules of `rules.py`.
 """
@@ -13,7 +14,7 @@ from dataclasses import dataclass, field
 
 from . import rng, rules
 from .grid import CONSENSUS_SLOTS, DESCRIPTOR_SLOTS, NUM_SLOTS, neighbor_ids, robot_id
-from .params import CamoParams
+from .params import CamoParams, ParameterError
 from .sensing import noisy_value
 
 Vote = tuple[Sequence[float], int]
@@ -34,28 +35,36 @@ class RobotCore:
 
     def __post_init__(self) -> None:
         if not (0 <= self.row < self.params.rows and 0 <= self.col < self.params.cols):
-            raise ValueError(
-                f"cell ({self.row}, {self.col}) is outside the {self.params.rows}x{self.params.cols} grid"
+            raise ParameterError(
+                f"cell ({self.row}, {self.col}) is outside the "
+                f"{self.params.rows}x{self.params.cols} grid"
             )
         self.id = robot_id(self.row, self.col, self.params.cols)
         self.neighbors: list[int | None] = neighbor_ids(
             self.row, self.col, self.params.rows, self.params.cols
         )
+        self._arrivals: dict[tuple[int, int], tuple[bool, ...]] = {}
 
     # ---- the simulated link -------------------------------------------------
 
-    def arrives(self, stream: int, step: int, slot: int) -> bool:
-        """Does the message of `stream`/`step` from slot's robot survive the link?"""
-        src = self.neighbors[slot]
-        return src is not None and not rng.lost(
-            self.params.seed, stream, step, src, self.id, self.params.rho_comm
-        )
+    def arrivals(self, stream: int, step: int) -> tuple[bool, ...]:
+        """Per slot 0-11: does the message of `stream`/`step` from that slot's robot survive the
+        link? Drawn once per (stream, step) and kept: the protocol asks on every delivery."""
+        key = (stream, step)
+        cached = self._arrivals.get(key)
+        if cached is None:
+            seed, me, rho = self.params.seed, self.id, self.params.rho_comm
+            cached = tuple(
+                src is not None and not rng.lost(seed, stream, step, src, me, rho)
+                for src in self.neighbors
+            )
+            self._arrivals[key] = cached
+        return cached
 
     def _filter(self, stream: int, step: int, delivered: Sequence, slots: range) -> list:
+        arriving = self.arrivals(stream, step)
         return [
-            delivered[s]
-            if delivered[s] is not None and self.known[s] and self.arrives(stream, step, s)
-            else None
+            delivered[s] if delivered[s] is not None and self.known[s] and arriving[s] else None
             for s in slots
         ]
 
@@ -63,9 +72,8 @@ class RobotCore:
 
     def discover(self, heard: Sequence[bool]) -> None:
         """`heard[s]`: a hello from slot s was delivered. Known = delivered and not lost."""
-        self.known = [
-            bool(heard[s]) and self.arrives(rng.STREAM_HELLO, 0, s) for s in range(NUM_SLOTS)
-        ]
+        arriving = self.arrivals(rng.STREAM_HELLO, 0)
+        self.known = [bool(heard[s]) and arriving[s] for s in range(NUM_SLOTS)]
 
     @property
     def degree(self) -> int:

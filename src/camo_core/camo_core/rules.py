@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
+
 from .params import CamoParams
 
 HORIZONTAL, VERTICAL, MOTTLED = 0, 1, 2
@@ -104,14 +106,18 @@ def consensus_step(
     return acc[0] + keep * p_own[0], acc[1] + keep * p_own[1], acc[2] + keep * p_own[2]
 
 
-def select_pattern(p: Sequence[float]) -> int:
-    """The strictly largest entry of p; any tie for the largest goes to mottled."""
-    h, v, m = p
-    if h > v and h > m:
-        return HORIZONTAL
-    if v > h and v > m:
-        return VERTICAL
-    return MOTTLED
+def select_pattern(p: Sequence[float] | np.ndarray) -> int | np.ndarray:
+    """The strictly largest entry of p; any tie for the largest goes to mottled.
+
+    `p` is one robot's vector (an int comes back) or an array of them, last axis
+    [p_h, p_v, p_m] (an array of pattern codes comes back, for the whole grid).
+    """
+    a = np.asarray(p, dtype=np.float64)
+    h, v, m = a[..., 0], a[..., 1], a[..., 2]
+    chosen = np.where(
+        (h > v) & (h > m), HORIZONTAL, np.where((v > h) & (v > m), VERTICAL, MOTTLED)
+    )
+    return int(chosen) if chosen.ndim == 0 else chosen
 
 
 # ---- phase 3: pattern formation -------------------------------------------------

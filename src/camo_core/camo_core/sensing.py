@@ -3,15 +3,19 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
+import yaml
 
 from . import rng
+from .exceptions import CamoError
+from .params import ParameterError
 
 
-class ImageError(ValueError):
+class ImageError(CamoError):
     """An image that cannot be used: missing, unreadable or too small."""
 
 
@@ -58,6 +62,41 @@ def rgb_to_gray(r: float, g: float, b: float, profile: str) -> float:
     return float(to_gray(pixel, profile)[0, 0])
 
 
+@dataclass(frozen=True)
+class Calibration:
+    """A real sensor's grey = gain * profile_grey(r, g, b) + offset, clipped to 0..255
+    (identity by default)."""
+
+    gain: float = 1.0
+    offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.gain) and self.gain > 0 and math.isfinite(self.offset)):
+            raise ParameterError(
+                f"calibration: gain must be positive and offset finite "
+                f"(got gain {self.gain}, offset {self.offset})"
+            )
+
+    def apply(self, grey: float) -> float:
+        return min(255.0, max(0.0, self.gain * grey + self.offset))
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> Calibration:
+        """A YAML file with `gain` and/or `offset` (numbers)."""
+        try:
+            data = yaml.safe_load(Path(path).read_text()) or {}
+        except OSError as exc:
+            raise ParameterError(f"cannot read calibration {path}: {exc.strerror}") from None
+        except yaml.YAMLError:
+            raise ParameterError(f"calibration {path} is not YAML") from None
+        if not isinstance(data, dict) or set(data) - {"gain", "offset"}:
+            raise ParameterError(f"calibration {path} may hold only `gain` and `offset`")
+        try:
+            return cls(float(data.get("gain", 1.0)), float(data.get("offset", 0.0)))
+        except (TypeError, ValueError):
+            raise ParameterError(f"calibration {path}: gain and offset must be numbers") from None
+
+
 def block_means(gray: np.ndarray, rows: int, cols: int) -> np.ndarray:
     """Mean grey value of the image block each robot covers (rows x cols float64)."""
     height, width = gray.shape[:2]
@@ -97,3 +136,50 @@ def apply_noise(
     noise = np.floor(256 * rng.uniform_array(seed, rng.STREAM_SENSOR_VALUE, 0, ids, zero))
     out[replaced] = noise[replaced]
     return out
+
+
+# ---- a simulated robot's sensor: the projected image ------------------------------------------
+
+
+@dataclass(frozen=True)
+class Reading:
+    """What a robot's sensor gives: a grey level, and whether it is a real sensor's (a real
+    reading gets no simulated measurement noise)."""
+
+    value: float
+    real: bool = False
+
+
+class Projection:
+    """The backgrounds projected so far, as sensed grids (one resize per image, shared by all the
+    robots of a process)."""
+
+    def __init__(self, rows: int, cols: int, profile: str) -> None:
+        self.rows, self.cols, self.profile = rows, cols, profile
+        self.grids: list[np.ndarray] = []
+
+    def add(self, image: np.ndarray) -> None:
+        """Raises ImageError for an image smaller than the grid."""
+        self.grids.append(sense_image(image, self.rows, self.cols, self.profile))
+
+
+class ProjectedSensor:
+    """A simulated robot's sensor: its cell's block mean of the background of its round."""
+
+    def __init__(self, projection: Projection, row: int, col: int) -> None:
+        self.projection, self.row, self.col = projection, row, col
+        self.index = 0
+
+    def read(self) -> Reading | None:
+        grids = self.projection.grids
+        return (
+            Reading(float(grids[self.index][self.row, self.col]))
+            if self.index < len(grids)
+            else None
+        )
+
+    def next_round(self) -> None:
+        self.index = len(self.projection.grids) - 1  # the newest background
+
+    def ok(self) -> bool:
+        return True

@@ -18,7 +18,7 @@ from . import kernels, rng
 from .grid import NEIGHBOR_OFFSETS, NUM_SLOTS
 from .params import CamoParams
 from .result import RunResult, mean_p
-from .rules import HORIZONTAL, MOTTLED, VERTICAL
+from .rules import select_pattern
 from .sensing import apply_noise
 
 PAD = 2  # slots reach two cells away
@@ -37,7 +37,7 @@ class Grid:
         ]
 
     def pad(self, a: np.ndarray) -> np.ndarray:
-        shape = a.shape[:-2] + (self.rows + 2 * PAD, self.cols + 2 * PAD)
+        shape = (*a.shape[:-2], self.rows + 2 * PAD, self.cols + 2 * PAD)
         out = np.zeros(shape, dtype=a.dtype)
         out[..., PAD : PAD + self.rows, PAD : PAD + self.cols] = a
         return out
@@ -49,7 +49,8 @@ class Grid:
     def arrivals(
         self, params: CamoParams, stream: int, step: int, slots: range
     ) -> list[np.ndarray] | None:
-        """Per slot, which robots receive their neighbour's message (None: the link loses nothing)."""
+        """Per slot, which robots receive their neighbour's message (None: the link loses
+        nothing)."""
         if params.rho_comm <= 0.0:
             return None
         sender = self.pad(rng.sender_hash(params.seed, stream, step, self.ids))
@@ -89,7 +90,7 @@ def simulate(
 
     # Phase 2: consensus.
     p, trace = _consensus(grid, params, votes, known_mask, progress)
-    selected = select_patterns(p)
+    selected = select_pattern(p)
 
     # Phase 3: pattern formation.
     final = _formation(grid, params, initial, selected, known_mask, progress)
@@ -145,11 +146,6 @@ def _consensus(
         if progress:
             progress("consensus", step + 1, params.consensus_steps)
     return p, np.array(trace)
-
-
-def select_patterns(p: np.ndarray) -> np.ndarray:
-    h, v, m = p[:, :, 0], p[:, :, 1], p[:, :, 2]
-    return np.where((h > v) & (h > m), HORIZONTAL, np.where((v > h) & (v > m), VERTICAL, MOTTLED))
 
 
 def _formation(

@@ -18,10 +18,10 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
 from camo_core.backgrounds import BACKGROUNDS, background
-from camo_core.sensing import ImageError, load_image
-
-from .image_msg import to_msg
-from .qos import BACKGROUND_TOPIC, LATCHED, LOAD_TOPIC
+from camo_core.exceptions import CamoError
+from camo_core.options import node_help, wants_help
+from camo_core.sensing import load_image
+from camo_nodes.topics import BACKGROUND_TOPIC, LATCHED, LOAD_TOPIC, image_to_msg
 
 
 def load(image_path: str, pattern: str) -> np.ndarray:
@@ -44,13 +44,13 @@ class ProjectorNode(Node):
         name = msg.data.strip()
         try:
             self.image = load("", name) if name in BACKGROUNDS else load(name, "")
-        except (ImageError, ValueError) as exc:
+        except CamoError as exc:
             self.get_logger().error(f"cannot project {name!r}: {exc}")
             return
         self.publish()
 
     def publish(self) -> None:
-        msg = to_msg(self.image)
+        msg = image_to_msg(self.image)
         msg.header.stamp = self.get_clock().now().to_msg()
         self.publisher.publish(msg)
         self.get_logger().info(f"projecting a {msg.width}x{msg.height} {msg.encoding} background")
@@ -63,19 +63,23 @@ class ProjectorNode(Node):
         pattern = values.get("pattern", self.get_parameter("pattern").value)
         try:
             self.image = load(path, pattern)
-        except (ImageError, ValueError) as exc:
+        except CamoError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         self.publish()
         return SetParametersResult(successful=True)
 
 
 def main(args=None) -> int:
+    if wants_help(args):
+        about = "Publishes the background image projected onto the arena (latched)."
+        print(node_help("projector_node", about, {"image": "", "pattern": "forest"}))
+        return 0
     rclpy.init(args=args)
     node = None
     try:
         node = ProjectorNode()
         rclpy.spin(node)
-    except (ImageError, ValueError) as exc:
+    except CamoError as exc:
         print(f"projector_node: error: {exc}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, ExternalShutdownException):

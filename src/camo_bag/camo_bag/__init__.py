@@ -1,0 +1,1 @@
+"""Recording, replaying and rendering camouflage runs as MCAP bags."""

@@ -1,0 +1,48 @@
+"""`./camo bag info BAG` and `./camo bag repair BAG [--out NEW]`."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from camo_core.exceptions import CamoError
+from camo_core.options import Parser
+
+from .container import format_info, mcap_file, read_summary, repair
+
+
+def build_parser() -> Parser:
+    parser = Parser(prog="camo bag", description="inspect and repair MCAP bags")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    info = sub.add_parser(
+        "info", help="duration, topics, types and message counts (like ros2 bag info)"
+    )
+    info.add_argument("bag", help="bag folder or .mcap file")
+    fix = sub.add_parser(
+        "repair", help="write a complete, indexed copy of what a damaged bag still holds"
+    )
+    fix.add_argument("bag", help="bag folder or .mcap file, e.g. from a recorder that was killed")
+    fix.add_argument(
+        "--out", type=Path, default=None, help="new bag folder (default: BAG_repaired)"
+    )
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        args = build_parser().parse_args(argv)
+        if args.command == "info":
+            print(format_info(read_summary(args.bag)))
+            return 0
+        source = mcap_file(args.bag)
+        out = args.out or Path(str(Path(args.bag)).rstrip("/") + "_repaired")
+        count, ending = repair(source, out)
+    except CamoError as exc:
+        print(f"camo bag: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"camo bag: read {source} ({ending}); wrote {count} messages to {out}/")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

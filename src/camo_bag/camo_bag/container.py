@@ -1,0 +1,354 @@
+"""Bags as rosbag2 writes them with its MCAP storage: no ROS imports here.
+
+A bag is a folder NAME/ holding NAME_0.mcap and metadata.yaml. The MCAP file
+has the `ros2` profile, one `ros2msg` schema per type, `cdr` channels with
+their `offered_qos_profiles` metadata, zstd chunks, message indexes and a
+summary; the file's own `rosbag2` metadata record repeats metadata.yaml. The
+container is the `mcap` library's; this module only decides what goes in.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.records import Channel, Message, Schema
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from camo_core.exceptions import CamoError
+from camo_core.options import new_folder_problem
+
+MAGIC = b"\x89MCAP0\r\n"
+ROSBAG2_VERSION = 9  # Jazzy's metadata version
+CHUNK_SIZE = 256 * 1024  # small chunks: a killed recorder loses at most one
+
+
+class BagError(CamoError):
+    """A bag that cannot be used: missing, not MCAP, truncated, or unwritable."""
+
+
+@dataclass
+class TopicInfo:
+    name: str
+    type: str  # pkg/msg/Type
+    qos: str = ""  # offered_qos_profiles, YAML text
+    type_hash: str = ""
+    count: int = 0
+
+
+@dataclass
+class BagSummary:
+    path: Path  # the .mcap file
+    start_ns: int
+    end_ns: int
+    topics: list[TopicInfo] = field(default_factory=list)
+
+    @property
+    def message_count(self) -> int:
+        return sum(t.count for t in self.topics)
+
+
+@dataclass
+class BagMessage:
+    topic: str
+    type: str
+    log_time: int  # ns since the epoch, when the recorder received it
+    publish_time: int  # ns since the epoch, from the message's header stamp
+    data: bytes  # CDR, exactly as published
+
+
+# ---- writing ----------------------------------------------------------------------
+
+
+class BagWriter:
+    """Writes one bag folder. Call close() (also on Ctrl-C) for an indexed file and
+    metadata.yaml."""
+
+    def __init__(self, folder: str | Path, library: str = "camo") -> None:
+        self.folder = Path(folder)
+        if self.folder.suffix == ".mcap":
+            raise BagError(
+                f"{folder}: give a bag folder name, not a .mcap file "
+                "(rosbag2 writes NAME/NAME_0.mcap)"
+            )
+        problem = new_folder_problem(self.folder, "the bag")
+        if problem:
+            raise BagError(problem)
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            self.file = self.folder / f"{self.folder.name}_0.mcap"
+            self._stream = open(self.file, "wb")
+        except OSError as exc:
+            raise BagError(f"cannot write the bag {folder}: {exc.strerror}") from None
+        self._writer = Writer(
+            self._stream, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD
+        )
+        self._writer.start(profile="ros2", library=library)
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self.topics: dict[str, TopicInfo] = {}
+        self._sequence: dict[str, int] = {}
+        self.start_ns: int | None = None
+        self.end_ns = 0
+        self.closed = False
+
+    def add_topic(self, topic: TopicInfo, definition: str) -> None:
+        if topic.name in self._channels:
+            return
+        if topic.type not in self._schemas:
+            self._schemas[topic.type] = self._writer.register_schema(
+                name=topic.type, encoding="ros2msg", data=definition.encode()
+            )
+        self._channels[topic.name] = self._writer.register_channel(
+            topic=topic.name,
+            message_encoding="cdr",
+            schema_id=self._schemas[topic.type],
+            metadata={"offered_qos_profiles": topic.qos},
+        )
+        self.topics[topic.name] = TopicInfo(topic.name, topic.type, topic.qos, topic.type_hash)
+        self._sequence[topic.name] = 0
+
+    def write(self, topic: str, data: bytes, log_time: int, publish_time: int) -> None:
+        self._sequence[topic] += 1
+        self._writer.add_message(
+            channel_id=self._channels[topic],
+            log_time=log_time,
+            data=data,
+            publish_time=publish_time,
+            sequence=self._sequence[topic],
+        )
+        self.topics[topic].count += 1
+        self.start_ns = log_time if self.start_ns is None else min(self.start_ns, log_time)
+        self.end_ns = max(self.end_ns, log_time)
+
+    def flush(self) -> None:
+        """Write the chunk in progress, so that a killed process loses nothing written before."""
+        if not self.closed:
+            self._writer.flush()
+
+    @property
+    def message_count(self) -> int:
+        return sum(t.count for t in self.topics.values())
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        metadata = metadata_yaml(
+            self.file.name, list(self.topics.values()), self.start_ns or 0, self.end_ns
+        )
+        self._writer.add_metadata(
+            "rosbag2", {"serialized_metadata": metadata, "ROS_DISTRO": "jazzy"}
+        )
+        self._writer.finish()
+        self._stream.close()
+        (self.folder / "metadata.yaml").write_text(
+            yaml.safe_dump(
+                {"rosbag2_bagfile_information": yaml.safe_load(metadata)}, sort_keys=False
+            )
+        )
+
+
+def metadata_yaml(file_name: str, topics: list[TopicInfo], start_ns: int, end_ns: int) -> str:
+    """rosbag2's bag information (version 9), as YAML text."""
+    duration = max(0, end_ns - start_ns)
+    count = sum(t.count for t in topics)
+    info = {
+        "version": ROSBAG2_VERSION,
+        "storage_identifier": "mcap",
+        "duration": {"nanoseconds": duration},
+        "starting_time": {"nanoseconds_since_epoch": start_ns},
+        "message_count": count,
+        "topics_with_message_count": [
+            {
+                "topic_metadata": {
+                    "name": t.name,
+                    "type": t.type,
+                    "serialization_format": "cdr",
+                    "offered_qos_profiles": yaml.safe_load(t.qos) or [],
+                    "type_description_hash": t.type_hash,
+                },
+                "message_count": t.count,
+            }
+            for t in topics
+        ],
+        "compression_format": "",
+        "compression_mode": "",
+        "relative_file_paths": [file_name],
+        "files": [
+            {
+                "path": file_name,
+                "starting_time": {"nanoseconds_since_epoch": start_ns},
+                "duration": {"nanoseconds": duration},
+                "message_count": count,
+            }
+        ],
+        "custom_data": None,
+        "ros_distro": "jazzy",
+    }
+    return yaml.safe_dump(info, sort_keys=False)
+
+
+# ---- reading ----------------------------------------------------------------------
+
+
+def mcap_file(path: str | Path) -> Path:
+    """The .mcap file of a bag folder (or the file itself), checked to be MCAP."""
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(path.glob("*.mcap"))
+        if not files:
+            raise BagError(f"{path} holds no .mcap file")
+        path = files[0]
+    elif not path.exists():
+        raise BagError(f"{path}: no such bag")
+    try:
+        with open(path, "rb") as stream:
+            head = stream.read(len(MAGIC))
+    except OSError as exc:
+        raise BagError(f"cannot read {path}: {exc.strerror}") from None
+    if head != MAGIC:
+        raise BagError(f"{path} is not an MCAP file")
+    return path
+
+
+def _truncated(path: Path) -> BagError:
+    return BagError(
+        f"{path} is truncated or was not closed (no index); `./camo bag repair {path}` "
+        f"writes a readable copy of its complete chunks"
+    )
+
+
+def _qos_of(channel: Channel) -> str:
+    return channel.metadata.get("offered_qos_profiles", "")
+
+
+def read_summary(path: str | Path) -> BagSummary:
+    file = mcap_file(path)
+    with open(file, "rb") as stream:
+        try:
+            summary = make_reader(stream).get_summary()
+        except (McapError, EOFError, ValueError, OSError):
+            raise _truncated(file) from None
+    if summary is None or summary.statistics is None:
+        raise _truncated(file)
+    counts = summary.statistics.channel_message_counts
+    topics = []
+    for channel_id, channel in sorted(summary.channels.items()):
+        schema = summary.schemas.get(channel.schema_id)
+        topics.append(
+            TopicInfo(
+                channel.topic,
+                schema.name if schema else "",
+                _qos_of(channel),
+                count=counts.get(channel_id, 0),
+            )
+        )
+    return BagSummary(
+        file, summary.statistics.message_start_time, summary.statistics.message_end_time, topics
+    )
+
+
+def read_messages(path: str | Path, topics: list[str] | None = None) -> Iterator[BagMessage]:
+    """Messages of a closed bag in log-time order (BagError if it is truncated or corrupt)."""
+    file = read_summary(path).path
+    with open(file, "rb") as stream:
+        try:
+            for schema, channel, message in make_reader(stream).iter_messages(
+                topics=topics, log_time_order=True
+            ):
+                yield BagMessage(
+                    channel.topic,
+                    schema.name if schema else "",
+                    message.log_time,
+                    message.publish_time,
+                    message.data,
+                )
+        except (McapError, EOFError, ValueError) as exc:
+            raise BagError(f"{file} is corrupt: {exc}") from None
+
+
+def salvage(path: str | Path) -> tuple[list[Schema], list[Channel], list[Message], str]:
+    """Everything readable from the start of a damaged file: schemas, channels, messages, and why
+    it ends."""
+    file = mcap_file(path)
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    messages: list[Message] = []
+    ending = "complete"
+    with open(file, "rb") as stream:
+        try:
+            for record in StreamReader(
+                stream, skip_magic=False, emit_chunks=False, validate_crcs=True
+            ).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    messages.append(record)
+        except Exception as exc:  # noqa: BLE001 - a damaged tail makes the parser fail in many ways
+            ending = f"cut short ({type(exc).__name__})"
+    messages = [m for m in messages if m.channel_id in channels]
+    return list(schemas.values()), list(channels.values()), messages, ending
+
+
+def repair(src: str | Path, dst: str | Path) -> tuple[int, str]:
+    """Write a complete, indexed bag of every message that can be read from `src`."""
+    schemas, channels, messages, ending = salvage(src)
+    by_schema = {s.id: s for s in schemas}
+    writer = BagWriter(dst, library="camo bag repair")
+    try:
+        for channel in channels:
+            schema = by_schema.get(channel.schema_id)
+            if schema is None:
+                continue
+            writer.add_topic(
+                TopicInfo(channel.topic, schema.name, _qos_of(channel)), schema.data.decode()
+            )
+        topic_of = {c.id: c.topic for c in channels}
+        for message in sorted(messages, key=lambda m: m.log_time):
+            topic = topic_of[message.channel_id]
+            if topic in writer.topics:
+                writer.write(topic, message.data, message.log_time, message.publish_time)
+    finally:
+        writer.close()
+    return writer.message_count, ending
+
+
+def format_info(summary: BagSummary) -> str:
+    """What `ros2 bag info` prints."""
+
+    def stamp(ns: int) -> str:
+        return (
+            time.strftime("%b %d %Y %H:%M:%S", time.localtime(ns / 1e9))
+            + f".{ns % 10**9 // 10**6:03d} ({ns / 1e9:.9f})"
+        )
+
+    size = os.path.getsize(summary.path)
+    lines = [
+        f"Files:             {summary.path.name}",
+        f"Bag size:          {size / 1024 / 1024:.1f} MiB"
+        if size >= 1024 * 1024
+        else f"Bag size:          {size / 1024:.1f} KiB",
+        "Storage id:        mcap",
+        f"Duration:          {(summary.end_ns - summary.start_ns) / 1e9:.9f}s",
+        f"Start:             {stamp(summary.start_ns)}",
+        f"End:               {stamp(summary.end_ns)}",
+        f"Messages:          {summary.message_count}",
+    ]
+    width = max((len(t.name) for t in summary.topics), default=0)
+    for k, topic in enumerate(sorted(summary.topics, key=lambda t: t.name)):
+        head = "Topic information: " if k == 0 else " " * 19
+        lines.append(
+            f"{head}Topic: {topic.name:<{width}} | Type: {topic.type} | Count: {topic.count} | "
+            f"Serialization Format: cdr"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,243 @@
+"""The recorder: every topic of a run (or the ones named) into an MCAP bag, as rosbag2 records.
+
+It discovers topics as they appear, subscribes to each with a QoS compatible
+with what its publishers offer (transient-local topics hand over their
+history, so nothing published before discovery is lost), and stores the CDR
+bytes as received. Log time is the receive time; publish time is the
+message's header stamp (the receive time for types without a header). It
+flushes a chunk every second, so a recorder killed with SIGKILL loses at
+most the last second; Ctrl-C closes the bag with its index and summary.
+
+It also keeps a ledger of what the bag holds of the run (`ledger.py`) and
+publishes it on /swarm/recorded: `./camo run --record` waits for each round to
+be complete in the bag before it switches backgrounds or stops the robots.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import sys
+import time
+from pathlib import Path
+
+import rclpy
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import String
+
+from camo_core.exceptions import CamoError
+from camo_core.options import Parser
+from camo_core.params import CamoParams
+from camo_core.protocol import DONE
+from camo_core.shutdown import StopFlag
+from camo_nodes.topics import (
+    BACKGROUND_TOPIC,
+    LATCHED,
+    PARAMS_TOPIC,
+    RECORDED_TOPIC,
+    STATUS_TOPIC,
+)
+
+from . import msgdefs, qos_yaml
+from .container import BagWriter, TopicInfo
+from .ledger import Ledger
+
+PROFILE = Path(__file__).with_name("recorder_profile.xml")
+SKIPPED = {"/rosout", "/parameter_events", RECORDED_TOPIC}
+ROBOT_KINDS = {
+    "camo_msgs/msg/Hello": "hello",
+    "camo_msgs/msg/Color": "color",
+    "camo_msgs/msg/Vote": "vote",
+    "camo_msgs/msg/State": "state",
+}
+
+
+def header_stamp_ns(data: bytes) -> int | None:
+    """The header stamp of a CDR message whose first field is std_msgs/Header (sec int32,
+    nanosec uint32)."""
+    if len(data) < 12:
+        return None
+    sec, nanosec = struct.unpack("<iI" if data[1] == 1 else ">iI", data[4:12])
+    return sec * 10**9 + nanosec
+
+
+class RecorderNode(Node):
+    def __init__(
+        self,
+        path: str,
+        topics: list[str] | None = None,
+        discovery_period: float = 0.5,
+        flush_period: float = 1.0,
+        **kwargs,
+    ) -> None:
+        super().__init__("recorder", namespace="/camo", **kwargs)
+        self.bag = BagWriter(path, library="camo recorder_node")
+        self.wanted = set(topics) if topics else None
+        self.ledger = Ledger()
+        self._stamped: dict[str, bool] = {}
+        self._decoders: dict[str, object] = {}
+        self._recorded: dict[str, object] = {}
+        self.create_timer(discovery_period, self.discover)
+        self.flush_period = flush_period
+        self._flushed = time.monotonic()
+        self.create_timer(flush_period, self._flush)
+        self.report_pub = self.create_publisher(String, RECORDED_TOPIC, LATCHED)
+        self._reported = None
+        self.create_timer(0.25, self.report)
+        self.discover()
+        self.report()
+
+    def recorded(self, topic: str) -> int:
+        """Messages recorded on a topic so far."""
+        info = self.bag.topics.get(topic)
+        return 0 if info is None else info.count
+
+    def discover(self) -> None:
+        for name, types in self.get_topic_names_and_types():
+            if (
+                name in self._recorded
+                or name in SKIPPED
+                or (self.wanted and name not in self.wanted)
+            ):
+                continue
+            if len(types) != 1:
+                self.get_logger().warning(f"{name} carries several types {types}; not recorded")
+                self._recorded[name] = None
+                continue
+            publishers = self.get_publishers_info_by_topic(name)
+            if not publishers:
+                continue  # only subscribers so far: wait for a publisher's QoS
+            self._subscribe(name, msgdefs.full_name(types[0]), [p.qos_profile for p in publishers])
+
+    def _subscribe(self, name: str, type_name: str, offered: list[QoSProfile]) -> None:
+        try:
+            cls = msgdefs.message_class(type_name)
+            definition = msgdefs.message_definition(type_name)
+        except msgdefs.DefinitionError as exc:
+            self.get_logger().warning(f"{name} not recorded: {exc}")
+            self._recorded[name] = None
+            return
+        self.bag.add_topic(
+            TopicInfo(name, type_name, qos_yaml.dump(offered), msgdefs.type_hash(type_name)),
+            definition,
+        )
+        fields = list(cls.get_fields_and_field_types().items())
+        self._stamped[name] = bool(fields) and fields[0] == ("header", "std_msgs/Header")
+        if type_name in ROBOT_KINDS or name in (STATUS_TOPIC, PARAMS_TOPIC):
+            self._decoders[name] = cls
+        # As rosbag2 adapts: reliable and transient-local only when every publisher offers it.
+        reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+        latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_ALL,
+            depth=1,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+        )
+        self._recorded[name] = self.create_subscription(
+            cls, name, lambda data, topic=name: self._on_message(topic, data), qos, raw=True
+        )
+
+    def _on_message(self, topic: str, data: bytes) -> None:
+        if self.bag.closed:
+            return
+        received = time.time_ns()
+        published = header_stamp_ns(data) if self._stamped[topic] else None
+        self.bag.write(topic, data, received, published if published is not None else received)
+        cls = self._decoders.get(topic)
+        if cls is not None:
+            self._account(topic, deserialize_message(data, cls))
+        elif topic == BACKGROUND_TOPIC:
+            self.ledger.backgrounds = self.recorded(topic)
+        if time.monotonic() - self._flushed > self.flush_period:  # timers starve under floods
+            self._flush()
+
+    def _account(self, topic: str, msg) -> None:
+        """What the ledger must know of a run message: who sent it, in which round."""
+        if topic == PARAMS_TOPIC:
+            try:
+                setup = json.loads(msg.data)
+                self.ledger.set_run(CamoParams(**setup["params"]), len(setup["backgrounds"]))
+            except (ValueError, KeyError, TypeError, CamoError):
+                self.get_logger().warning(f"{PARAMS_TOPIC} does not hold a run's parameters")
+        elif topic == STATUS_TOPIC:
+            if msg.phase == DONE:
+                self.ledger.reported_done(msg.sender_id, msg.round)
+        else:
+            kind = ROBOT_KINDS[msgdefs.full_name(self.bag.topics[topic].type)]
+            self.ledger.message(kind, msg.sender_id, msg.round)
+
+    def report(self) -> None:
+        """/swarm/recorded: per round, how many robots' rounds the bag holds completely."""
+        ledger = self.ledger
+        rounds = ledger.rounds or 0
+        report = {
+            "messages": self.bag.message_count,
+            "complete": [len(ledger.complete(k)) for k in range(rounds)],
+            "lacking": [ledger.lacking(k) for k in range(rounds)],
+        }
+        changed = {k: v for k, v in report.items() if k != "messages"}
+        if changed != self._reported:
+            self._reported = changed
+            self.report_pub.publish(String(data=json.dumps(report)))
+
+    def _flush(self) -> None:
+        self.bag.flush()
+        self._flushed = time.monotonic()
+
+    def close(self) -> None:
+        self.bag.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = Parser(prog="recorder_node", description="record topics into an MCAP bag folder")
+    parser.add_argument(
+        "path", help="bag folder to create (NAME/ with NAME_0.mcap and metadata.yaml)"
+    )
+    parser.add_argument(
+        "--topics", nargs="+", default=None, help="only these topics (default: every topic)"
+    )
+    try:
+        args, ros_args = parser.parse_known_args(argv)
+    except CamoError as exc:
+        print(f"recorder_node: error: {exc}", file=sys.stderr)
+        return 2
+    stop = StopFlag()
+    # Before the DDS participant exists: readers with room for a fast swarm's bursts.
+    os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(PROFILE))
+    rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    executor = EventsExecutor()
+    try:
+        node = RecorderNode(args.path, args.topics)
+        executor.add_node(node)
+        print(f"recorder_node: recording to {node.bag.file} (Ctrl-C to stop)", file=sys.stderr)
+        while not stop and rclpy.ok():
+            executor.spin_once(timeout_sec=0.2)
+    except CamoError as exc:
+        print(f"recorder_node: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        pass
+    finally:
+        executor.shutdown()
+        if node is not None:
+            executor.remove_node(node)
+            node.close()
+            print(
+                f"recorder_node: wrote {node.bag.message_count} messages on "
+                f"{len(node.bag.topics)} topics to {node.bag.folder}",
+                file=sys.stderr,
+            )
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

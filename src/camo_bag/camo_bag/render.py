@@ -1,0 +1,134 @@
+"""`./camo render BAG --out DIR`: a run's summary.json, figure.png and timeline.png from its bag
+alone.
+
+Nothing runs: the robots' statuses, the background and the run's parameters
+are read from the bag, decoded with rclpy's serialization and assembled by the
+monitor's own RoundRecord, so the summary equals the live run's (elapsed_s
+aside). A robot that never reported done is dead, as the live monitor decides
+at the end of a run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import Image
+from std_msgs.msg import String
+
+from camo_core import figures
+from camo_core.exceptions import CamoError
+from camo_core.options import Parser, out_dir
+from camo_core.output import run_title, write_round
+from camo_core.params import CamoParams
+from camo_core.record import Backgrounds, Rounds
+from camo_msgs.msg import RobotStatus
+from camo_nodes.topics import BACKGROUND_TOPIC, PARAMS_TOPIC, STATUS_TOPIC, image_from_msg
+
+from .container import BagError, read_messages
+
+
+@dataclass
+class RecordedRun:
+    """What a bag tells of a run: enough to write its summaries and figures."""
+
+    params: CamoParams
+    labels: list[str]  # the backgrounds, in round order
+    rounds: Rounds
+    images: Backgrounds  # round k camouflaged images[k]
+    elapsed_s: dict[int, float]  # span of each round's statuses in the bag
+
+
+def load_run(path: str | Path) -> RecordedRun:
+    """The run's parameters, statuses and backgrounds, from a bag."""
+    setup = None
+    images = Backgrounds()
+    pending: list[tuple[RobotStatus, int]] = []
+    try:
+        for message in read_messages(path, [PARAMS_TOPIC, STATUS_TOPIC, BACKGROUND_TOPIC]):
+            if message.topic == PARAMS_TOPIC and setup is None:
+                setup = json.loads(deserialize_message(message.data, String).data)
+            elif message.topic == BACKGROUND_TOPIC:
+                msg = deserialize_message(message.data, Image)
+                stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+                images.add(stamp, lambda msg=msg: image_from_msg(msg))
+            elif message.topic == STATUS_TOPIC:
+                pending.append((deserialize_message(message.data, RobotStatus), message.log_time))
+    except CamoError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - bytes that do not decode as their recorded type
+        raise BagError(f"{path}: a message does not decode as its recorded type ({exc})") from None
+    if setup is None:
+        raise BagError(
+            f"{path} has no {PARAMS_TOPIC} message: it was not recorded from `./camo run`"
+        )
+    try:
+        params = CamoParams(**setup["params"])
+    except (TypeError, KeyError):
+        raise BagError(f"{path}: {PARAMS_TOPIC} does not hold a run's parameters") from None
+    rounds = Rounds(params)
+    times: dict[int, list[int]] = {}
+    for status, log_time in pending:
+        if status.sender_id < params.count:
+            rounds[status.round].add(status)
+            times.setdefault(status.round, []).append(log_time)
+    if not rounds:
+        raise BagError(f"{path} holds no robot status: nothing to render")
+    elapsed = {index: (max(t) - min(t)) / 1e9 for index, t in times.items()}
+    return RecordedRun(params, setup.get("backgrounds", []), rounds, images, elapsed)
+
+
+def render(path: str | Path, out: Path) -> list[dict]:
+    run = load_run(path)
+    params, summaries = run.params, []
+    for index in sorted(run.rounds):
+        record = run.rounds[index]
+        folder = out if len(run.rounds) == 1 else out / f"round_{index}"
+        folder.mkdir(parents=True, exist_ok=True)
+        result = record.result(dead=~record.finished)
+        result.elapsed_s = run.elapsed_s[index]
+        label = run.labels[index] if index < len(run.labels) else f"round {index}"
+        image = run.images[index] if index < len(run.images) else None
+        title = run_title(f"{label} (from {Path(path).name})", params, "robot nodes")
+        summaries.append(write_round(result, image, folder, title))
+        figures.timeline_figure(
+            record.timeline(),
+            folder / "timeline.png",
+            title=f"{label}: {params.rows}x{params.cols} robots; consensus steps c0.., "
+            f"formation steps f0..",
+        )
+    return summaries
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = Parser(
+        prog="camo render", description="rebuild a run's figures and summary from its bag"
+    )
+    parser.add_argument(
+        "bag", help="bag folder (or its .mcap file) recorded by ./camo run --record"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output folder (default results/<timestamp>/)"
+    )
+    try:
+        args = parser.parse_args(argv)
+        out = out_dir(argparse.Namespace(out=args.out))
+        summaries = render(args.bag, out)
+    except CamoError as exc:
+        print(f"camo render: error: {exc}", file=sys.stderr)
+        return 2
+    for k, summary in enumerate(summaries):
+        print(
+            f"round {k}: pattern {summary['pattern']} "
+            f"({', '.join(f'{n} {c}' for n, c in summary['votes'].items())})"
+        )
+    print(f"wrote summary.json, figure.png and timeline.png to {out}/")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,135 @@
+"""`./camo replay BAG [--rate R] [--topics ...] [--loop]`: publish a recorded run again.
+
+Messages go out as the raw CDR bytes recorded, at their recorded log times
+scaled by 1/R, each topic with the QoS its publishers offered (from the bag's
+offered_qos_profiles), so Foxglove, a monitor or a fresh swarm see the run
+again. Publishers stay up `--linger` seconds after the last message, so that
+latched (transient-local) topics still reach subscribers that join late.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+import rclpy
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from camo_core.exceptions import CamoError, UsageError
+from camo_core.options import Parser
+from camo_core.progress import ProgressBar
+from camo_core.shutdown import StopFlag
+
+from . import msgdefs, qos_yaml
+from .container import BagSummary, read_messages, read_summary
+
+
+def build_parser() -> Parser:
+    parser = Parser(
+        prog="camo replay", description="republish a recorded bag with its timing and QoS"
+    )
+    parser.add_argument("bag", help="bag folder (or its .mcap file)")
+    parser.add_argument(
+        "--rate", type=float, default=1.0, help="playback speed factor (default 1)"
+    )
+    parser.add_argument(
+        "--topics", nargs="+", default=None, help="only these topics (default: all)"
+    )
+    parser.add_argument("--loop", action="store_true", help="start again at the end, until Ctrl-C")
+    parser.add_argument(
+        "--delay",
+        type=float,
+        default=1.0,
+        help="seconds between creating the publishers and the first message, so that "
+        "subscribers are matched first (default 1)",
+    )
+    parser.add_argument(
+        "--linger",
+        type=float,
+        default=2.0,
+        help="seconds to keep publishers up after the last message (default 2)",
+    )
+    parser.add_argument(
+        "--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited)"
+    )
+    return parser
+
+
+def sleep_until(due: float, stop: StopFlag) -> None:
+    while not stop and (left := due - time.monotonic()) > 0:
+        time.sleep(min(left, 0.1))
+
+
+def replay(args, summary: BagSummary, stop: StopFlag) -> int:
+    topics = [t for t in summary.topics if args.topics is None or t.name in args.topics]
+    if args.topics:
+        unknown = sorted(set(args.topics) - {t.name for t in summary.topics})
+        if unknown:
+            raise UsageError(f"the bag has no topic {unknown[0]} (see ./camo bag info {args.bag})")
+    node = Node("replay", namespace="/camo", start_parameter_services=False, enable_rosout=False)
+    try:
+        publishers = {
+            t.name: node.create_publisher(
+                msgdefs.message_class(t.type), t.name, qos_yaml.load_first(t.qos)
+            )
+            for t in topics
+        }
+        total = sum(t.count for t in topics)
+        passes = 0
+        sleep_until(time.monotonic() + args.delay, stop)
+        while not stop:
+            bar = ProgressBar(total, f"replay x{args.rate:g}")
+            start = time.monotonic()
+            for message in read_messages(args.bag, list(publishers)):
+                sleep_until(start + (message.log_time - summary.start_ns) / 1e9 / args.rate, stop)
+                if stop:
+                    break
+                publishers[message.topic].publish(message.data)
+                bar.update(note=message.topic)
+            passes += 1
+            if not args.loop:
+                break
+        sleep_until(time.monotonic() + args.linger, stop)
+        print(
+            f"camo replay: published {total} messages on {len(publishers)} topics"
+            f"{f' ({passes} passes)' if passes > 1 else ''}",
+            file=sys.stderr,
+        )
+    finally:
+        node.destroy_node()
+    return 130 if stop else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        args = build_parser().parse_args(argv)
+        if not 0 < args.rate <= 1000:
+            raise UsageError(f"--rate must be in (0, 1000] (got {args.rate})")
+        for name in ("delay", "linger"):
+            if not 0 <= getattr(args, name) <= 3600:
+                raise UsageError(
+                    f"--{name} must be in 0..3600 seconds (got {getattr(args, name)})"
+                )
+        if args.domain_id is not None and not 0 <= args.domain_id <= 232:
+            raise UsageError(f"--domain-id must be in 0..232 (got {args.domain_id})")
+        summary = read_summary(args.bag)  # a bad bag fails before ROS starts
+    except CamoError as exc:
+        print(f"camo replay: error: {exc}", file=sys.stderr)
+        return 2
+    if args.domain_id is not None:
+        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    stop = StopFlag()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        return replay(args, summary, stop)
+    except CamoError as exc:
+        print(f"camo replay: error: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

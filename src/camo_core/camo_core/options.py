@@ -1,0 +1,120 @@
+"""Command-line options shared by every command that runs a camouflage (sim, errors, run, ...)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .backgrounds import BACKGROUNDS, background
+from .exceptions import UsageError
+from .params import PROFILES, CamoParams
+from .sensing import load_image
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors, and no abbreviations: `--row` is not `--rows`."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str) -> None:  # one line, not usage + message
+        raise UsageError(message)
+
+
+def add_run_options(
+    parser: argparse.ArgumentParser, default_pattern: str | None = "forest"
+) -> None:
+    """The options shared by every command that runs one camouflage (sim, errors, run)."""
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument("--image", help="background image file (any format OpenCV reads)")
+    source.add_argument(
+        "--pattern",
+        choices=BACKGROUNDS,
+        default=None,
+        help=f"built-in background (default: {default_pattern})",
+    )
+    parser.add_argument("--rows", type=int, default=8, help="robot rows (default 8)")
+    parser.add_argument("--cols", type=int, default=8, help="robot columns (default 8)")
+    parser.add_argument(
+        "--profile", choices=PROFILES, default="paper", help="paper or droplet rules"
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="seed of every random draw (default 0)"
+    )
+    parser.add_argument(
+        "--rho-meas", type=float, default=0.0, help="measurement error probability"
+    )
+    parser.add_argument("--rho-comm", type=float, default=0.0, help="message loss probability")
+    parser.add_argument(
+        "--threshold", type=float, default=50.0, help="descriptor threshold T (default 50)"
+    )
+    parser.add_argument(
+        "--consensus-steps", type=int, default=None, help="default: 35 paper, 10 droplet"
+    )
+    parser.add_argument(
+        "--formation-steps", type=int, default=None, help="default: 10 paper, 20 droplet"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output folder (default results/<timestamp>/)"
+    )
+    parser.set_defaults(default_pattern=default_pattern)
+
+
+def params_from(args: argparse.Namespace) -> CamoParams:
+    return CamoParams(
+        profile=args.profile,
+        rows=args.rows,
+        cols=args.cols,
+        threshold=args.threshold,
+        consensus_steps=args.consensus_steps,
+        formation_steps=args.formation_steps,
+        seed=args.seed,
+        rho_meas=args.rho_meas,
+        rho_comm=args.rho_comm,
+    )
+
+
+def image_from(args: argparse.Namespace) -> tuple[np.ndarray, str]:
+    if args.image:
+        return load_image(args.image), str(args.image)
+    name = args.pattern or args.default_pattern
+    return background(name), f"built-in {name}"
+
+
+def new_folder_problem(path: Path, what: str = "folder") -> str | None:
+    """Why `path` cannot be a new output folder (it exists and holds something), or None."""
+    if path.exists() and (not path.is_dir() or any(path.iterdir())):
+        return f"{what} {path} already exists and is not empty; choose another name"
+    return None
+
+
+def out_dir(args: argparse.Namespace) -> Path:
+    folder = args.out or Path("results") / time.strftime("%Y%m%d-%H%M%S")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"cannot create output folder {folder}: {exc.strerror}") from None
+    return folder
+
+
+def wants_help(argv: list[str] | None) -> bool:
+    """-h or --help before any --ros-args: a ROS node's own arguments end there."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    if "--ros-args" in args:
+        args = args[: args.index("--ros-args")]
+    return "-h" in args or "--help" in args
+
+
+def node_help(prog: str, description: str, parameters: dict[str, object]) -> str:
+    """The --help text of a node configured by ROS parameters (ros2 run's conventions)."""
+    lines = [f"usage: {prog} [--ros-args [-p NAME:=VALUE ...] [--params-file FILE] ...]", ""]
+    lines.append(description)
+    if parameters:
+        lines += ["", "parameters (default):"]
+        lines += [f"  {name} ({value!r})" for name, value in parameters.items()]
+    return "\n".join(lines)

@@ -1,0 +1,388 @@
+"""One robot's step protocol: when it may take its next step, as a state machine without ROS.
+
+A robot goes through the phases by itself (hello, sense, colour, vote,
+consensus, formation) with no clock master. It moves from step t to t+1 when,
+for every neighbour slot the phase needs, one of these holds:
+
+1. that neighbour's message for step t has been delivered;
+2. the simulated link will drop it (a deterministic draw, known in advance);
+3. the neighbour is *silent*: it let a deadline pass before and has not
+   spoken since;
+4. the step's deadline passes; the neighbours still missing become silent,
+   so a dead robot costs one deadline, not one per step. A neighbour known to
+   be alive (hosted by the robot's own process, say) is never given up on: it
+   is waiting itself, for a robot further away.
+
+The machine is driven from outside: `start`, `deliver`, `tick` and
+`background` are handed the current time (the clock is injected) and return an
+`Output`: the messages to send and the reports for monitors.
+A transport (rclpy, or an in-memory bus in tests) moves the messages; a
+`Sensor` and a `Display` are the robot's hardware (a projected image and
+nothing, or a Droplet's colour sensor and LED).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from . import rng
+from .grid import NUM_SLOTS
+from .params import CamoParams
+from .robot import RobotCore
+from .sensing import Reading
+
+DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = range(5)
+PHASE_NAMES = ("discovery", "sensing", "consensus", "formation", "done")
+KINDS = ("hello", "color", "vote", "state")
+# Each kind is heard from the first LISTEN[kind] slots (SPEC: descriptor 0-3, consensus 0-7).
+LISTEN = {"hello": NUM_SLOTS, "color": 4, "vote": 8, "state": NUM_SLOTS}
+STREAM = {
+    "hello": rng.STREAM_HELLO,
+    "color": rng.STREAM_COLOR,
+    "vote": rng.STREAM_CONSENSUS,
+    "state": rng.STREAM_STATE,
+}
+PHASE_OF = {"hello": DISCOVERY, "color": SENSING, "vote": CONSENSUS, "state": FORMATION}
+NO_PATTERN = 255  # RobotStatus.PATTERN_NONE
+TICK = 0.05  # s between the transport's calls to tick()
+STALL = 0.5  # s: a tick this late means the robot's own process stalled
+
+
+def messages_per_round(params: CamoParams) -> dict[str, int]:
+    """What each robot sends in a round it finishes: one hello, one colour, a vote per consensus
+    step and a state per formation step (a recording of the run must hold them all)."""
+    return {
+        "hello": 1,
+        "color": 1,
+        "vote": params.consensus_steps,
+        "state": params.formation_steps,
+    }
+
+
+@dataclass(frozen=True)
+class Message:
+    """What one robot sends its neighbours. `value`: hello (row, col); colour the sensed grey;
+    vote (p, degree); state 0 or 1."""
+
+    kind: str
+    sender: int
+    round: int
+    step: int
+    value: Any
+
+
+@dataclass(frozen=True)
+class Report:
+    """Where a robot is and what it shows, for monitors and recorders (a RobotStatus)."""
+
+    sender_id: int
+    row: int
+    col: int
+    phase: int
+    step: int
+    round: int
+    sensed: float
+    p: tuple[float, float, float]
+    pattern: int
+    state: int
+    alive: bool
+    known_slots: int
+    deadlines: int
+    silent: tuple[int, ...] = ()  # neighbours it has given up on (robot ids)
+
+
+@dataclass
+class Output:
+    send: list[Message] = field(default_factory=list)
+    reports: list[Report] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+
+class Sensor(Protocol):
+    def read(self) -> Reading | None:
+        """This robot's grey value now, or None if it cannot be read yet (try again later)."""
+
+    def next_round(self) -> None:
+        """A new background is up: later reads are of it."""
+
+    def ok(self) -> bool:
+        """The hardware behind the sensor is reachable."""
+
+
+class Display(Protocol):
+    def show(self, state: int) -> None: ...
+
+    def ready(self) -> bool:
+        """It shows the last state it was given."""
+
+    def ok(self) -> bool: ...
+
+
+class NoDisplay:
+    """A simulated robot shows nothing."""
+
+    def show(self, state: int) -> None:
+        pass
+
+    def ready(self) -> bool:
+        return True
+
+    def ok(self) -> bool:
+        return True
+
+
+class StepProtocol:
+    def __init__(
+        self,
+        params: CamoParams,
+        row: int,
+        col: int,
+        sensor: Sensor,
+        display: Display | None = None,
+        step_timeout: float = 10.0,
+        discovery_timeout: float = 300.0,
+        known_alive: Callable[[int], bool] | None = None,
+    ) -> None:
+        self.params = params
+        # A neighbour the transport knows to be alive (e.g. hosted by the same process) is waited
+        # for past the deadline: it is itself waiting, and giving up on it would wrongly spread
+        # one dead robot's silence through its living neighbours.
+        self.known_alive = known_alive or (lambda robot: False)
+        self.core = RobotCore(params, row, col)
+        self.sensor = sensor
+        self.display = display or NoDisplay()
+        self.step_timeout = step_timeout
+        self.discovery_timeout = discovery_timeout
+        self.slot_of = {n: s for s, n in enumerate(self.core.neighbors) if n is not None}
+        # Delivered and not yet used, by (round, kind, step, slot): early messages wait for their
+        # step.
+        self.inbox: dict[tuple[int, str, int, int], Any] = {}
+        self.silent: set[int] = set()
+        self.deadlines = 0  # step deadlines let pass in this round
+        self.round = 0
+        self.phase = DISCOVERY
+        self.step = 0
+        self.background_up = False
+        self.newer_background = False  # a background arrived mid-round: camouflaged next
+        self.started = False
+        self.hardware_wait = False  # waiting for the sensor or display: ticks retry
+        self.wait_started = 0.0
+        self.last_tick: float | None = None
+        self._out = Output()
+
+    @property
+    def id(self) -> int:
+        return self.core.id
+
+    @property
+    def done(self) -> bool:
+        return self.phase == DONE
+
+    def listens_to(self) -> Iterable[tuple[int, str]]:
+        """(neighbour id, kind) of every message this robot needs."""
+        for slot, neighbor in enumerate(self.core.neighbors):
+            if neighbor is not None:
+                for kind in KINDS:
+                    if slot < LISTEN[kind]:
+                        yield neighbor, kind
+
+    # ---- events ---------------------------------------------------------------------
+
+    def start(self, now: float) -> Output:
+        """Say hello and begin. Messages delivered before are kept for their steps."""
+        self.started = True
+        self.wait_started = now
+        self.last_tick = now
+        self._send("hello", 0, (self.core.row, self.core.col))
+        return self._advance(now)
+
+    def deliver(self, message: Message, now: float) -> Output:
+        slot = self.slot_of.get(message.sender)
+        if slot is None or slot >= LISTEN[message.kind]:
+            return self._flush()  # not a neighbour this robot listens to for that kind
+        self.silent.discard(slot)  # it speaks again: wait for it again
+        if message.round >= self.round:
+            self.inbox[(message.round, message.kind, message.step, slot)] = message.value
+        return self._advance(now) if self.started else self._flush()
+
+    def background(self, now: float) -> Output:
+        """The projected background changed (the sensor holds the image)."""
+        if self.background_up:
+            self.newer_background = True
+        self.background_up = True
+        return self._advance(now) if self.started else self._flush()
+
+    def tick(self, now: float) -> Output:
+        """Called every TICK seconds: the only event that lets a deadline pass."""
+        if self.last_tick is not None:
+            stalled = now - self.last_tick - TICK
+            if stalled > STALL:
+                # This process could not listen (busy or descheduled): that time is not the
+                # neighbours' fault, and their messages may still be queued behind this tick.
+                self.wait_started += stalled
+        self.last_tick = now
+        if not self.started or not (self.hardware_wait or self._deadline_due(now)):
+            return self._flush()  # nothing a tick could change: keep a big swarm's ticks cheap
+        return self._advance(now, ticking=True)
+
+    def _deadline_due(self, now: float) -> bool:
+        if self.phase == DONE:
+            return False
+        timeout = self.discovery_timeout if self.phase == DISCOVERY else self.step_timeout
+        return now - self.wait_started >= timeout
+
+    # ---- stepping -------------------------------------------------------------------
+
+    def _advance(self, now: float, ticking: bool = False) -> Output:
+        self.hardware_wait = False
+        while self._step_once(now, ticking):
+            pass
+        return self._flush()
+
+    def _step_once(self, now: float, ticking: bool) -> bool:
+        """Take one step if it may be taken; False when the robot must wait."""
+        core, params = self.core, self.params
+        if self.phase == DISCOVERY:
+            pending = self._waiting_for("hello", 0, NUM_SLOTS, known_only=False)
+            if not self._ready(pending, self.discovery_timeout, now, ticking):
+                return False
+            core.discover([h is not None for h in self._take("hello", 0, NUM_SLOTS)])
+            self._next(SENSING, 0, now)
+        elif self.phase == SENSING:
+            if not self.background_up:
+                return False
+            if math.isnan(core.sensed):
+                reading = self.sensor.read()
+                if reading is None:  # not available yet: tried again on the next tick
+                    self.hardware_wait = True
+                    return False
+                core.sense(reading.value, reading.real)
+                self._send("color", 0, core.sensed)
+                self.wait_started = now
+            if not self._ready(self._waiting_for("color", 0, 4), self.step_timeout, now, ticking):
+                return False
+            core.decide_vote(self._take("color", 0, 4))
+            self._next(CONSENSUS, 0, now)
+            self._report()
+            self._send_vote()
+        elif self.phase == CONSENSUS:
+            if self.step == params.consensus_steps:
+                core.finish_consensus()
+                self._next(FORMATION, 0, now)
+                self._report()
+                self._send("state", 0, core.state)
+                return True
+            pending = self._waiting_for("vote", self.step, 8)
+            if not self._ready(pending, self.step_timeout, now, ticking):
+                return False
+            core.consensus(self.step, self._take("vote", self.step, 8))
+            self._next(CONSENSUS, self.step + 1, now)
+            self._report()
+            if self.step < params.consensus_steps:
+                self._send_vote()
+        elif self.phase == FORMATION:
+            if self.step == params.formation_steps:
+                if not self.display.ready():  # a hardware robot is done once it shows its state
+                    self.hardware_wait = True
+                    return False
+                self._next(DONE, self.step, now)
+                self._report()
+                return True
+            pending = self._waiting_for("state", self.step, NUM_SLOTS)
+            if not self._ready(pending, self.step_timeout, now, ticking):
+                return False
+            core.form(self.step, self._take("state", self.step, NUM_SLOTS))
+            self._next(FORMATION, self.step + 1, now)
+            self._report()
+            if self.step < params.formation_steps:
+                self._send("state", self.step, core.state)
+        elif self.newer_background:  # done, and a new background is up
+            self._start_next_round(now)
+        else:
+            return False
+        return True
+
+    def _waiting_for(self, kind: str, step: int, slots: int, known_only: bool = True) -> list[int]:
+        """Slots whose message for `step` is still to come: expected, not dropped, not silent."""
+        core = self.core
+        arriving = core.arrivals(STREAM[kind], step)
+        return [
+            s
+            for s in range(slots)
+            if arriving[s]
+            and (core.known[s] or not known_only)
+            and s not in self.silent
+            and (self.round, kind, step, s) not in self.inbox
+        ]
+
+    def _ready(self, pending: list[int], timeout: float, now: float, ticking: bool) -> bool:
+        if not pending:
+            return True
+        # Only the tick lets a deadline pass: it has first discounted a stall of this process, and
+        # a message handled before the tick after a stall would otherwise find the deadline gone.
+        if not ticking or now - self.wait_started < timeout:
+            return False
+        given_up = [s for s in pending if not self.known_alive(self.core.neighbors[s])]
+        if given_up:
+            self.silent.update(given_up)
+            self.deadlines += 1
+            self._out.warnings.append(
+                f"step deadline passed; neighbours in slots {given_up} are silent"
+            )
+        return len(given_up) == len(pending)
+
+    def _take(self, kind: str, step: int, slots: int) -> list:
+        return [self.inbox.pop((self.round, kind, step, s), None) for s in range(slots)]
+
+    def _next(self, phase: int, step: int, now: float) -> None:
+        self.phase, self.step = phase, step
+        self.wait_started = now
+
+    def _start_next_round(self, now: float) -> None:
+        """Camouflage again on the new background: same rules, a fresh robot state."""
+        self.round += 1
+        self.newer_background = False
+        self.sensor.next_round()
+        self.core = RobotCore(self.params, self.core.row, self.core.col)
+        self.deadlines = 0
+        self.inbox = {key: value for key, value in self.inbox.items() if key[0] >= self.round}
+        self._next(DISCOVERY, 0, now)
+        self._send("hello", 0, (self.core.row, self.core.col))
+
+    # ---- output ---------------------------------------------------------------------
+
+    def _send(self, kind: str, step: int, value: Any) -> None:
+        self._out.send.append(Message(kind, self.core.id, self.round, step, value))
+
+    def _send_vote(self) -> None:
+        self._send("vote", self.step, (tuple(self.core.p), self.core.degree))
+
+    def _report(self) -> None:
+        core = self.core
+        if self.phase >= FORMATION:
+            self.display.show(core.state)
+        self._out.reports.append(
+            Report(
+                sender_id=core.id,
+                row=core.row,
+                col=core.col,
+                phase=self.phase,
+                step=self.step,
+                round=self.round,
+                sensed=core.sensed,
+                p=tuple(core.p),
+                pattern=NO_PATTERN if core.pattern is None else core.pattern,
+                state=core.state,
+                alive=self.sensor.ok() and self.display.ok(),
+                known_slots=core.known_mask,
+                deadlines=self.deadlines,
+                silent=tuple(sorted(core.neighbors[s] for s in self.silent)),
+            )
+        )
+
+    def _flush(self) -> Output:
+        out, self._out = self._out, Output()
+        return out

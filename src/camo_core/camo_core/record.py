@@ -1,0 +1,150 @@
+"""What the robots reported in each round, assembled into the reference simulator's result.
+
+The monitor fills it live from the robots' statuses; `camo render` fills it
+from a bag. A report is anything with RobotStatus's fields (a `protocol.Report`
+or the message itself).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .params import CamoParams
+from .protocol import CONSENSUS, DONE, FORMATION
+from .result import RunResult, mean_p
+from .rules import select_pattern
+
+
+@dataclass
+class RoundRecord:
+    """Everything the robots reported in one camouflage round."""
+
+    params: CamoParams
+    started: float = field(default_factory=time.monotonic)
+
+    def __post_init__(self) -> None:
+        n, steps = self.params.count, self.params.consensus_steps
+        self.sensed = np.full(n, np.nan)
+        self.p_trace = np.full((steps + 1, n, 3), np.nan)
+        self.state_trace = np.full((self.params.formation_steps + 1, n), -1, np.int64)
+        self.p_latest = np.full((n, 3), np.nan)
+        self.initial = np.full(n, -1, np.int64)
+        self.state = np.full(n, -1, np.int64)
+        self.selected = np.full(n, -1, np.int64)
+        self.phase = np.zeros(n, np.int64)
+        self.step = np.zeros(n, np.int64)
+        self.finished = np.zeros(n, bool)
+        self.deadlines = np.zeros(n, np.int64)  # step deadlines each robot let pass
+        self.given_up: dict[int, frozenset[int]] = {}  # reporter -> neighbours it gave up on
+
+    def add(self, report) -> None:
+        i = report.sender_id
+        self.phase[i] = report.phase
+        self.step[i] = report.step
+        self.sensed[i] = report.sensed
+        self.state[i] = report.state
+        self.deadlines[i] = report.deadlines
+        if report.silent or i in self.given_up:
+            self.given_up[i] = frozenset(report.silent)
+        if report.phase >= CONSENSUS:
+            self.p_latest[i] = report.p
+        if report.phase == CONSENSUS:
+            self.p_trace[report.step, i] = report.p
+            self.initial[i] = report.state
+        elif report.phase == FORMATION:
+            self.state_trace[report.step, i] = report.state
+        if report.phase == DONE:
+            self.state_trace[report.step, i] = report.state
+            self.selected[i] = report.pattern
+            self.finished[i] = True
+
+    def declared_silent(self) -> np.ndarray:
+        """Robots that a neighbour has given up on (at its latest report)."""
+        silent = np.zeros(self.params.count, bool)
+        for ids in self.given_up.values():
+            silent[list(ids)] = True
+        return silent
+
+    def dead(self, lost: np.ndarray | None = None) -> np.ndarray:
+        """Robots that did not finish and that their neighbours gave up on, or whose process is
+        known to have died (`lost`): a late report alone never makes a robot dead."""
+        gone = self.declared_silent() if lost is None else self.declared_silent() | lost
+        return ~self.finished & gone
+
+    def timeline(self) -> list[tuple[str, np.ndarray]]:
+        """The swarm at each consensus step (selected pattern, -1 unknown) and formation step
+        (state)."""
+        shape = (self.params.rows, self.params.cols)
+        frames = []
+        for step, p in enumerate(self.p_trace):
+            unknown = np.isnan(p).any(axis=1)
+            chosen = select_pattern(np.nan_to_num(p))
+            frames.append((f"c{step}", np.where(unknown, -1, chosen).reshape(shape)))
+        frames += [(f"f{step}", s.reshape(shape)) for step, s in enumerate(self.state_trace)]
+        return frames
+
+    def result(self, dead: np.ndarray, partial: bool = False) -> RunResult:
+        """What the swarm computed, in the reference simulator's form; dead robots masked out.
+
+        `partial`: the run was stopped early; robots still working count as alive and show
+        their latest report, and the consensus trace ends where the slowest robot was.
+        """
+        shape = (self.params.rows, self.params.cols)
+        if partial:
+            alive = ~dead & (self.phase >= CONSENSUS)
+            # A robot still in consensus shows what its current p would select.
+            selected = np.where(
+                self.selected < 0, select_pattern(np.nan_to_num(self.p_latest)), self.selected
+            )
+        else:
+            alive = self.finished & ~dead
+            selected = self.selected
+        trace = []
+        for step in self.p_trace:
+            if np.isnan(step[alive]).any():
+                break
+            trace.append(mean_p(step[alive]))
+        first = self.p_trace[0]
+        votes = np.where(np.isnan(first).any(axis=1), -1, np.argmax(np.nan_to_num(first), axis=1))
+        return RunResult(
+            params=self.params,
+            sensed=self.sensed.reshape(shape),
+            votes=votes.reshape(shape),
+            p=self.p_latest.reshape((*shape, 3)),
+            selected=selected.reshape(shape),
+            initial=self.initial.reshape(shape),
+            final=self.state.reshape(shape),
+            consensus_trace=np.array(trace).reshape(-1, 3),
+            elapsed_s=time.monotonic() - self.started,
+            alive=None if alive.all() else alive.reshape(shape),
+        )
+
+
+class Rounds(dict):
+    """Round index -> RoundRecord, created on first use (`rounds[k]`). Not setdefault: its
+    default would allocate a record's traces (steps x robots) on every report."""
+
+    def __init__(self, params: CamoParams) -> None:
+        super().__init__()
+        self.params = params
+
+    def __missing__(self, index: int) -> RoundRecord:
+        record = self[index] = RoundRecord(self.params)
+        return record
+
+
+class Backgrounds(list):
+    """The backgrounds a run showed, each kept once (by its stamp): round k camouflaged self[k]."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.stamps: list[tuple[int, int]] = []
+
+    def add(self, stamp: tuple[int, int], decode) -> None:
+        """`decode()` gives the image; called only for a stamp not seen before."""
+        if stamp not in self.stamps:
+            self.stamps.append(stamp)
+            self.append(decode())

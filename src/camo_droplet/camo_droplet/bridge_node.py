@@ -1,0 +1,215 @@
+"""The hardware bridge: a real Droplet takes the place of one robot (console script
+droplet_bridge).
+
+Robot mode (default): a robot node whose sensor is the Droplet's `get_rgb`
+(grey by the profile's weights, then the calibration) and whose display is its
+LED (`rig.py`); its neighbours cannot tell it from a simulated robot. Its
+reading is real, so simulated measurement noise never applies to it. A port
+that disappears is reconnected with backoff; meanwhile the robot reports
+itself not alive, keeps computing, and sets the LED it missed once the port is
+back.
+
+Monitor mode (`monitor:=true`): for a Droplet running the camouflage firmware
+itself; its printouts become this cell's RobotStatus messages, so a hardware
+run can be watched and recorded like a simulated one. `transcript:=FILE`
+reads a recorded printout instead of a port.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import rclpy
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from camo_core.exceptions import CamoError
+from camo_core.options import node_help, wants_help
+from camo_core.params import CamoParams, ParameterError
+from camo_core.protocol import CONSENSUS, NO_PATTERN, SENSING
+from camo_core.sensing import Calibration
+from camo_core.shutdown import StopFlag
+from camo_msgs.msg import RobotStatus
+from camo_nodes.robot_node import LEAN_NODE, ROBOT_PARAMETERS, host_robots, params_from_node
+from camo_nodes.topics import STATUS_TOPIC, history_qos
+
+from .firmware import FirmwareState
+from .link import DropletDisconnected, DropletError, DropletLink
+from .rig import DropletLed, DropletSensor, Reconnector, parse_rgb
+
+BRIDGE_PARAMETERS = {
+    "port": "",
+    "monitor": False,
+    "transcript": "",
+    "calibration": "",
+    "gain": 1.0,
+    "offset": 0.0,
+    "led_on": "255 0 0",
+    "led_off": "255 255 255",
+    "serial_timeout": 0.5,
+    "retries": 3,
+}
+
+
+class DropletMonitorNode(Node):
+    """A Droplet running the camouflage firmware, watched: its printouts as this cell's
+    statuses."""
+
+    def __init__(
+        self,
+        params: CamoParams,
+        row: int,
+        col: int,
+        link: DropletLink | None = None,
+        transcript: Path | None = None,
+        **kwargs,
+    ) -> None:
+        super().__init__(f"droplet_monitor_{row}_{col}", namespace="/camo", **kwargs)
+        self.params, self.row, self.col = params, row, col
+        self.link = link
+        self.lines = (
+            list(Path(transcript).read_text(errors="replace").splitlines()) if transcript else None
+        )
+        self.state: FirmwareState | None = None
+        self.status_pub = self.create_publisher(RobotStatus, STATUS_TOPIC, history_qos(10_000))
+        self.reconnector = Reconnector(link, self.get_logger()) if link else None
+        self.finished = False
+        self.create_timer(0.05, self._poll)
+
+    def _poll(self) -> None:
+        if self.lines is not None:
+            if self.state is None:
+                self.state = FirmwareState(droplet_id=self._transcript_id())
+            for line in self.lines:
+                if self.state.feed(line):
+                    self._report()
+            self.lines, self.finished = [], True
+            return
+        if not self.reconnector.ensure():
+            return
+        try:
+            if self.state is None:
+                self.state = FirmwareState(droplet_id=self.link.get_id())
+            for line in self.link.poll(0.0):
+                if self.state.feed(line):
+                    self._report()
+        except DropletDisconnected as exc:
+            self.reconnector.failed(exc)
+        except DropletError as exc:
+            self.get_logger().warning(str(exc))
+
+    def _transcript_id(self) -> int:
+        """The id the transcript's `get_id` answer shows (0 when it has none)."""
+        for line in self.lines:
+            if line.strip().startswith("My ID is: "):
+                try:
+                    return int(line.strip()[len("My ID is: ") :], 16)
+                except ValueError:
+                    break
+        return 0
+
+    def _report(self) -> None:
+        state = self.state
+        phase = CONSENSUS if state.p is not None else SENSING
+        pattern = state.pattern
+        status = RobotStatus(
+            sender_id=self.row * self.params.cols + self.col,
+            row=self.row,
+            col=self.col,
+            phase=phase,
+            step=state.steps,
+            round=0,
+            sensed=state.sensed,
+            p=list(state.p) if state.p else [0.0, 0.0, 0.0],
+            pattern=NO_PATTERN if pattern is None else pattern,
+            state=0,
+            alive=self.link.connected if self.link else True,
+            known_slots=0,
+        )
+        status.header.stamp = self.get_clock().now().to_msg()
+        status.header.frame_id = "camo"
+        self.status_pub.publish(status)
+
+
+def run_bridge(params: CamoParams, row: int, col: int, values: dict, timeouts, stop) -> int:
+    """Robot mode: this cell's robot, with the Droplet's sensor and LED."""
+    link = DropletLink(values["port"], timeout=values["serial_timeout"], retries=values["retries"])
+    if values["calibration"]:
+        calibration = Calibration.from_yaml(values["calibration"])
+    else:
+        calibration = Calibration(values["gain"], values["offset"])
+    reconnector = Reconnector(link)
+    cell = row * params.cols + col
+    sensor = DropletSensor(link, reconnector, params.profile, calibration)
+    led = DropletLed(
+        link, reconnector, parse_rgb(values["led_on"]), parse_rgb(values["led_off"]), (row, col)
+    )
+    host = host_robots(
+        params, [cell], *timeouts, lean=False, sensors={cell: sensor}, displays={cell: led}
+    )
+    reconnector.logger = host.node.get_logger()
+    host.node.create_timer(0.25, led.keep)
+    led.keep()
+    try:
+        return host.run(stop)
+    finally:
+        link.close()
+
+
+def run_monitor(params: CamoParams, row: int, col: int, values: dict, stop) -> int:
+    """Monitor mode: a Droplet running the firmware, or a transcript of one."""
+    link = None
+    if values["port"]:
+        link = DropletLink(
+            values["port"], timeout=values["serial_timeout"], retries=values["retries"]
+        )
+    transcript = Path(values["transcript"]) if values["transcript"] else None
+    if transcript is not None and not transcript.is_file():
+        raise ParameterError(f"transcript not found: {transcript}")
+    node = DropletMonitorNode(params, row, col, link=link, transcript=transcript)
+    try:
+        while not stop and rclpy.ok():
+            rclpy.spin_once(node, timeout_sec=0.1)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if link is not None:
+            link.close()
+        node.destroy_node()
+    return 0
+
+
+def main(args=None) -> int:
+    """droplet_bridge --ros-args -p rows:=8 -p cols:=8 -p row:=R -p col:=C -p port:=/dev/ttyUSB0"""
+    if wants_help(args):
+        about = "A real Droplet on a serial port as one robot of the swarm (see docs/hardware.md)."
+        print(node_help("droplet_bridge", about, {**ROBOT_PARAMETERS, **BRIDGE_PARAMETERS}))
+        return 0
+    stop = StopFlag()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        reader = Node("droplet_parameters", **LEAN_NODE)
+        try:
+            params, row, col, *timeouts = params_from_node(reader)
+            values = {
+                n: reader.declare_parameter(n, v).value for n, v in BRIDGE_PARAMETERS.items()
+            }
+        finally:
+            reader.destroy_node()
+        if not values["port"] and not values["transcript"]:
+            raise ParameterError("give the Droplet's serial port: -p port:=/dev/ttyUSB0")
+        if not (values["serial_timeout"] > 0 and values["retries"] >= 0):
+            raise ParameterError("serial_timeout must be positive and retries not negative")
+        if values["monitor"] or values["transcript"]:
+            return run_monitor(params, row, col, values, stop)
+        return run_bridge(params, row, col, values, timeouts, stop)
+    except CamoError as exc:
+        print(f"droplet_bridge: error: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

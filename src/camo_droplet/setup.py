@@ -1,0 +1,25 @@
+from setuptools import find_packages, setup
+
+package_name = "camo_droplet"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="camo developers",
+    maintainer_email="camo@example.org",
+    description="Real Droplets in the swarm: serial link, bridge, firmware monitor, emulator.",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "droplet_bridge = camo_droplet.bridge_node:main",
+            "droplet_emulator = camo_droplet.emulator:main",
+        ],
+    },
+)

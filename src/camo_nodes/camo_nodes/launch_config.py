@@ -1,0 +1,199 @@
+"""`./camo run`'s command line, checked into one RunConfig before anything starts.
+
+Every bad option is found here and reported in one line (exit code 2), so a
+run never starts processes it would have to stop again.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from camo_core.backgrounds import BACKGROUNDS
+from camo_core.exceptions import UsageError
+from camo_core.options import (
+    Parser,
+    add_run_options,
+    image_from,
+    new_folder_problem,
+    out_dir,
+    params_from,
+)
+from camo_core.params import CamoParams
+from camo_core.sensing import Calibration, load_image, sense_image
+
+
+def build_parser() -> Parser:
+    parser = Parser(prog="camo run", description="run the camouflage as a swarm of ROS 2 nodes")
+    add_run_options(parser)
+    add = parser.add_argument
+    add(
+        "--procs",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="worker processes hosting the robot nodes (default: number of cores)",
+    )
+    add("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited, else 0)")
+    add(
+        "--step-timeout",
+        type=float,
+        default=30.0,
+        help="seconds a robot waits for a silent neighbour before moving on (default 30)",
+    )
+    add(
+        "--discovery-timeout",
+        type=float,
+        default=None,
+        help="seconds a robot waits for its neighbours' hellos (default 300 + 0.15 per robot: "
+        "node start-up of big swarms is slow; a robot that never starts costs this once)",
+    )
+    add(
+        "--own-process",
+        action="append",
+        default=[],
+        metavar="ROW,COL",
+        help="run this robot alone in a process of its own (repeatable)",
+    )
+    add(
+        "--then",
+        action="append",
+        default=[],
+        metavar="BACKGROUND",
+        help="after the camouflage finishes, project this built-in name or image file and "
+        "camouflage again (repeatable); each round writes round_<k>/",
+    )
+    add(
+        "--bridge",
+        action="append",
+        default=[],
+        metavar="ROW,COL=PORT",
+        help="this cell is a real Droplet on this serial port (repeatable); see docs/hardware.md",
+    )
+    add(
+        "--calibration",
+        default=None,
+        metavar="YAML",
+        help="gain and offset applied to every bridged Droplet's grey reading",
+    )
+    add(
+        "--record",
+        metavar="BAG",
+        default=None,
+        help="record every topic of the run into this MCAP bag folder (as rosbag2 does)",
+    )
+    add(
+        "--no-projector",
+        action="store_true",
+        help="start no projector: the background comes from elsewhere, e.g. "
+        "./camo replay BAG --topics /camo/background",
+    )
+    return parser
+
+
+@dataclass
+class RunConfig:
+    params: CamoParams
+    procs: int
+    step_timeout: float
+    discovery_timeout: float
+    image: np.ndarray  # the first background
+    labels: list[str]  # every round's background: a built-in name or a file
+    folder: Path
+    env: dict[str, str]
+    projector: list[str] | None  # the projector's ROS parameters, None with --no-projector
+    alone: list[int] = field(default_factory=list)  # robots in processes of their own
+    bridges: dict[int, str] = field(default_factory=dict)  # robot -> serial port
+    calibration: Path | None = None
+    record: Path | None = None
+
+    @property
+    def rounds(self) -> int:
+        return len(self.labels)
+
+
+def parse_cells(texts: list[str], params: CamoParams, option: str = "--own-process") -> list[int]:
+    cells = []
+    for text in texts:
+        try:
+            row, col = (int(x) for x in text.split(","))
+        except ValueError:
+            raise UsageError(f"{option} takes ROW,COL (got {text!r})") from None
+        if not (0 <= row < params.rows and 0 <= col < params.cols):
+            raise UsageError(f"{option} {text}: outside the {params.rows}x{params.cols} grid")
+        cells.append(row * params.cols + col)
+    return cells
+
+
+def parse_bridges(texts: list[str], params: CamoParams) -> dict[int, str]:
+    """--bridge ROW,COL=PORT options as {robot id: port}."""
+    bridges: dict[int, str] = {}
+    for text in texts:
+        cell, _, port = text.partition("=")
+        if not port:
+            raise UsageError(f"--bridge takes ROW,COL=PORT (got {text!r})")
+        robot = parse_cells([cell], params, "--bridge")[0]
+        if robot in bridges:
+            raise UsageError(f"--bridge {cell}: that cell is bridged twice")
+        bridges[robot] = port
+    return bridges
+
+
+def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None) -> RunConfig:
+    params = params_from(args)
+    if not 1 <= args.procs <= 256:
+        raise UsageError(f"--procs must be an integer in 1..256 (got {args.procs})")
+    discovery = args.discovery_timeout
+    if discovery is None:
+        discovery = 300.0 + 0.15 * params.count  # 64x64 needed about 505 s to start here
+    for name, value in (("--step-timeout", args.step_timeout), ("--discovery-timeout", discovery)):
+        if not value > 0:
+            raise UsageError(f"{name} must be positive (got {value})")
+    alone = parse_cells(args.own_process, params)
+    bridges = parse_bridges(args.bridge, params)
+    if set(alone) & set(bridges):
+        raise UsageError("a cell cannot be both --own-process and --bridge")
+    calibration = None
+    if args.calibration:
+        calibration = Path(args.calibration).resolve()
+        Calibration.from_yaml(calibration)  # a bad file fails here, in one line
+    record = Path(args.record) if args.record else None
+    if record is not None:
+        problem = new_folder_problem(record, "the bag")
+        if problem or record.suffix == ".mcap":
+            raise UsageError(problem or f"--record {record}: give a bag folder, not a .mcap file")
+    image, label = image_from(args)
+    sense_image(image, params.rows, params.cols, params.profile)  # a too-small image fails here
+    for then in args.then:
+        if then not in BACKGROUNDS:
+            sense_image(load_image(then), params.rows, params.cols, params.profile)
+    env = dict(os.environ if environ is None else environ)
+    if args.domain_id is not None:
+        if not 0 <= args.domain_id <= 232:
+            raise UsageError(f"--domain-id must be in 0..232 (got {args.domain_id})")
+        env["ROS_DOMAIN_ID"] = str(args.domain_id)
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if args.no_projector:
+        projector = None
+    elif args.image:
+        projector = ["-p", f"image:={Path(args.image).resolve()}"]
+    else:
+        projector = ["-p", f"pattern:={args.pattern or args.default_pattern}"]
+    return RunConfig(
+        params=params,
+        procs=args.procs,
+        step_timeout=args.step_timeout,
+        discovery_timeout=discovery,
+        image=image,
+        labels=[label, *args.then],
+        folder=out_dir(args),
+        env=env,
+        projector=projector,
+        alone=alone,
+        bridges=bridges,
+        calibration=calibration,
+        record=record,
+    )

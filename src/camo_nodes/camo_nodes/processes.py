@@ -1,0 +1,146 @@
+"""The processes of one run: projector, Droplet bridges, workers and the recorder.
+
+Each runs in a session of its own, so that the terminal's Ctrl-C reaches only
+the launcher, which then stops them in order. Each is also told by the kernel
+to stop (SIGTERM) when the launcher dies, however it dies.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+
+from .launch_config import RunConfig
+
+PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    """In the child, before exec: SIGTERM when the parent exits (Linux prctl)."""
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        pass
+
+
+def robot_parameters(config: RunConfig, robot: int) -> list[str]:
+    """A standalone robot's (or bridge's) ROS parameters, as -p options."""
+    params = config.params
+    row, col = divmod(robot, params.cols)
+    values = {
+        "rows": params.rows,
+        "cols": params.cols,
+        "row": row,
+        "col": col,
+        "profile": params.profile,
+        "seed": params.seed,
+        "rho_meas": float(params.rho_meas),
+        "rho_comm": float(params.rho_comm),
+        "threshold": float(params.threshold),
+        "consensus_steps": params.consensus_steps,
+        "formation_steps": params.formation_steps,
+        "step_timeout": float(config.step_timeout),
+        "discovery_timeout": float(config.discovery_timeout),
+    }
+    return [
+        x
+        for name, value in values.items()
+        for x in ("-p", f"{name}:={value!r}" if isinstance(value, float) else f"{name}:={value}")
+    ]
+
+
+def split_cells(cells: list[int], procs: int) -> list[list[int]]:
+    """Robot ids in contiguous blocks, one per process, so neighbours mostly share a process."""
+    procs = max(1, min(procs, len(cells)))
+    bounds = [round(k * len(cells) / procs) for k in range(procs + 1)]
+    return [cells[bounds[k] : bounds[k + 1]] for k in range(procs)]
+
+
+def worker_groups(config: RunConfig) -> list[list[int]]:
+    """The robots of each worker process: one each for --own-process, the rest in blocks."""
+    params = config.params
+    taken = set(config.alone) | set(config.bridges)
+    shared = [i for i in range(params.count) if i not in taken]
+    return [[i] for i in config.alone] + (split_cells(shared, config.procs) if shared else [])
+
+
+class ProcessGroup:
+    def __init__(self, env: dict[str, str]) -> None:
+        self.env = env
+        self.procs: list[subprocess.Popen] = []
+        self.cells: dict[int, list[int]] = {}  # pid -> robot ids
+        self.recorder: subprocess.Popen | None = None
+
+    def _start(self, module: str, *args: str) -> subprocess.Popen:
+        command = [sys.executable, "-m", module, *args]
+        proc = subprocess.Popen(
+            command, env=self.env, start_new_session=True, preexec_fn=_die_with_parent
+        )
+        self.procs.append(proc)
+        return proc
+
+    def start_recorder(self, bag: str) -> subprocess.Popen:
+        self.recorder = self._start(
+            "camo_bag.recorder_node", bag, "--ros-args", "--log-level", "warn"
+        )
+        return self.recorder
+
+    def start_swarm(self, config: RunConfig) -> None:
+        quiet = ("--ros-args", "--log-level", "warn")
+        if config.projector is not None:
+            self._start("camo_projector.projector_node", *quiet, *config.projector)
+        for robot, port in config.bridges.items():
+            extra = ["-p", f"calibration:={config.calibration}"] if config.calibration else []
+            bridge = self._start(
+                "camo_droplet.bridge_node",
+                *quiet,
+                *robot_parameters(config, robot),
+                "-p",
+                f"port:={port}",
+                *extra,
+            )
+            self.cells[bridge.pid] = [robot]
+        for cells in worker_groups(config):
+            worker = self._start(
+                "camo_nodes.worker",
+                "--params",
+                json.dumps(config.params.as_dict()),
+                "--cells",
+                ",".join(map(str, cells)),
+                "--step-timeout",
+                str(config.step_timeout),
+                "--discovery-timeout",
+                str(config.discovery_timeout),
+                *quiet,
+            )
+            self.cells[worker.pid] = cells
+
+    def failed(self) -> str | None:
+        """A process exited with an error (a robot killed by a signal is a fault, not this)."""
+        for proc in self.procs:
+            if proc.poll() is not None and proc.returncode > 0:
+                return f"a swarm process exited with code {proc.returncode}: {proc.args[2]}"
+        return None
+
+    def lost_cells(self) -> list[int]:
+        """Robots whose process has exited (killed, say): they cannot finish."""
+        return [c for p in self.procs if p.poll() is not None for c in self.cells.get(p.pid, ())]
+
+    def stop(self, grace: float = 5.0, keep: Callable[[subprocess.Popen], bool] = lambda p: False):
+        """SIGINT to each (but those `keep` spares), SIGKILL to those still running after
+        `grace` seconds."""
+        stopping = [p for p in self.procs if p.poll() is None and not keep(p)]
+        for proc in stopping:
+            proc.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + grace
+        for proc in stopping:
+            try:
+                proc.wait(max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()

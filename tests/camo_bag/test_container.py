@@ -1,0 +1,157 @@
+"""Bags as rosbag2 writes them with MCAP: read back by two independent readers; bad files
+refused in one line; a cut file repaired."""
+
+import subprocess
+import sys
+
+from support import BAG_COLS, BAG_FORMATION, BAG_ROWS, BAG_STEPS, ROOT
+
+
+def tool(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", f"camo_bag.{module}", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
+
+
+def deserialize(data: bytes) -> str:
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import String
+
+    return deserialize_message(data, String).data
+
+
+def test_bag_is_a_rosbag2_folder_with_an_indexed_ros2_mcap(recorded):
+    from mcap.reader import make_reader
+
+    bag, _ = recorded
+    assert sorted(p.name for p in bag.iterdir()) == ["bag_0.mcap", "metadata.yaml"]
+    with open(bag / "bag_0.mcap", "rb") as stream:
+        reader = make_reader(stream)
+        assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+    assert summary.chunk_indexes and all(c.compression == "zstd" for c in summary.chunk_indexes)
+    assert {s.encoding for s in summary.schemas.values()} == {"ros2msg"}
+    vote = next(
+        s for s in summary.schemas.values() if s.name == "camo_msgs/msg/Vote"
+    ).data.decode()
+    assert vote.startswith("# Phase 2 (consensus)")
+    assert "\n" + "=" * 80 + "\nMSG: std_msgs/Header\n" in vote
+    assert "\nMSG: builtin_interfaces/Time\n" in vote
+    for channel in summary.channels.values():
+        assert channel.message_encoding == "cdr"
+        assert "reliability:" in channel.metadata["offered_qos_profiles"]
+    background = next(c for c in summary.channels.values() if c.topic == "/camo/background")
+    assert "durability: transient_local" in background.metadata["offered_qos_profiles"]
+
+
+def test_mcap_ros2_decoder_reads_every_robot_message(recorded):
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    bag, live = recorded
+    votes, final, publish_before_log = {}, {}, True
+    with open(bag / "bag_0.mcap", "rb") as stream:
+        for _schema, channel, message, msg in make_reader(
+            stream, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
+            if channel.topic.endswith("/vote"):
+                assert channel.topic == f"/camo/robot_{msg.sender_id}/vote"
+                assert abs(sum(msg.p) - 1.0) < 1e-9
+                votes.setdefault(msg.sender_id, []).append(msg.step)
+            elif channel.topic == "/swarm/status" and msg.phase == 4:
+                final[(msg.row, msg.col)] = msg.state
+            publish_before_log &= message.publish_time <= message.log_time
+    # Loss is drawn where a message is received, so every robot publishes every step's vote.
+    assert sorted(votes) == list(range(BAG_ROWS * BAG_COLS))
+    assert all(sorted(steps) == list(range(BAG_STEPS)) for steps in votes.values())
+    assert [[final[(i, j)] for j in range(BAG_COLS)] for i in range(BAG_ROWS)] == live["final"]
+    assert publish_before_log
+
+
+def test_rosbags_anyreader_reads_the_bag_folder(recorded):
+    from rosbags.highlevel import AnyReader
+
+    bag, live = recorded
+    with AnyReader([bag]) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        assert types["/camo/background"] == "sensor_msgs/msg/Image"
+        assert types["/camo/robot_0/state"] == "camo_msgs/msg/State"
+        assert (
+            counts["/camo/robot_7/state"] == BAG_FORMATION and counts["/camo/robot_7/hello"] == 1
+        )
+        colors = [c for c in reader.connections if c.topic.endswith("/color")]
+        sensed = {}
+        for connection, _, raw in reader.messages(connections=colors):
+            msg = reader.deserialize(raw, connection.msgtype)
+            sensed[msg.sender_id] = msg.value
+    assert [[sensed[i * BAG_COLS + j] for j in range(BAG_COLS)] for i in range(BAG_ROWS)] == live[
+        "sensed"
+    ]
+
+
+def test_truncated_and_foreign_files_get_one_line_errors(recorded, tmp_path):
+    bag, _ = recorded
+    data = (bag / "bag_0.mcap").read_bytes()
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    (cut / "cut_0.mcap").write_bytes(data[: len(data) * 2 // 3])
+    foreign = tmp_path / "foreign.mcap"
+    foreign.write_bytes(b"this is not a bag\n" * 50)
+    for path, words in (
+        (cut, "truncated"),
+        (foreign, "not an MCAP file"),
+        (tmp_path / "missing", "no such bag"),
+    ):
+        for command in (
+            ["cli", "info", str(path)],
+            ["render", str(path), "--out", str(tmp_path / "r")],
+            ["replay", str(path)],
+        ):
+            out = tool(*command)
+            assert out.returncode == 2, (command, out.stderr)
+            assert words in out.stderr and len(out.stderr.strip().splitlines()) == 1, (
+                command,
+                out.stderr,
+            )
+    out = tool("cli", "repair", str(foreign))
+    assert out.returncode == 2 and "not an MCAP file" in out.stderr
+
+
+def test_repair_keeps_every_complete_chunk_of_a_cut_file(tmp_path):
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from camo_bag.container import BagWriter, TopicInfo, read_messages
+    from camo_bag.msgdefs import message_definition
+
+    writer = BagWriter(tmp_path / "whole")
+    writer.add_topic(
+        TopicInfo("/chatter", "std_msgs/msg/String"), message_definition("std_msgs/msg/String")
+    )
+    ends = []
+    for chunk in range(6):
+        for k in range(50):
+            writer.write(
+                "/chatter",
+                serialize_message(String(data=f"{chunk}-{k}")),
+                10**9 + chunk * 100 + k,
+                0,
+            )
+        writer.flush()
+        ends.append(writer.file.stat().st_size)
+    writer.close()
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    (cut / "cut_0.mcap").write_bytes(
+        (tmp_path / "whole" / "whole_0.mcap").read_bytes()[: ends[2] + 10]
+    )
+    out = tool("cli", "repair", str(cut), "--out", str(tmp_path / "fixed"))
+    assert out.returncode == 0, out.stderr
+    assert "cut short" in out.stdout and "wrote 150 messages" in out.stdout
+    texts = [deserialize(m.data) for m in read_messages(tmp_path / "fixed")]
+    assert texts == [f"{c}-{k}" for c in range(3) for k in range(50)]

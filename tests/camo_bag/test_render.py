@@ -1,0 +1,98 @@
+"""`camo render`: a run's summary and figures rebuilt from its bag alone."""
+
+import json
+import re
+import subprocess
+import sys
+
+from support import ROOT, camo_run
+
+
+def tool(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", f"camo_bag.{module}", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
+
+
+def test_render_reads_a_bag_into_one_record_per_round(recorded, count_round_records):
+    from camo_bag.render import load_run
+
+    made = count_round_records
+    run = load_run(recorded[0])
+    assert list(run.rounds) == [0] and len(made) == 1
+    assert run.rounds[0].finished.all()
+
+
+def test_render_rebuilds_the_live_summary_from_the_bag_alone(recorded, tmp_path):
+    bag, live = recorded
+    out = tool("render", str(bag), "--out", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    rendered = json.loads((tmp_path / "summary.json").read_text())
+    assert {k: v for k, v in rendered.items() if k != "elapsed_s"} == {
+        k: v for k, v in live.items() if k != "elapsed_s"
+    }
+    assert (tmp_path / "figure.png").stat().st_size > 10_000
+    assert (tmp_path / "timeline.png").stat().st_size > 10_000
+
+
+def test_render_of_a_run_with_three_backgrounds_writes_each_round_from_a_complete_bag(tmp_path):
+    # A small swarm finishes a round in a fraction of a second, before the recorder may have
+    # discovered its topics; each round must still be in the bag whole.
+    out = camo_run(
+        "--rows",
+        "4",
+        "--cols",
+        "5",
+        "--pattern",
+        "forest",
+        "--then",
+        "desert",
+        "--then",
+        "forest",
+        "--procs",
+        "1",
+        "--out",
+        str(tmp_path / "live"),
+        "--record",
+        str(tmp_path / "bag"),
+    )
+    assert out.returncode == 0 and "lacks" not in out.stderr, out.stderr[-2000:]
+    rendered = tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
+    assert rendered.returncode == 0, rendered.stderr
+    for k in (0, 1, 2):
+        live = json.loads((tmp_path / "live" / f"round_{k}" / "summary.json").read_text())
+        again = json.loads((tmp_path / "rendered" / f"round_{k}" / "summary.json").read_text())
+        assert {x: v for x, v in again.items() if x != "elapsed_s"} == {
+            x: v for x, v in live.items() if x != "elapsed_s"
+        }
+        assert (tmp_path / "rendered" / f"round_{k}" / "timeline.png").exists()
+    assert "round 2: pattern" in rendered.stdout
+    info = tool("cli", "info", str(tmp_path / "bag"))
+    assert info.returncode == 0, info.stderr
+    consensus_steps = len(live["consensus_trace"]) - 1
+    votes = sum(
+        int(count)
+        for count in re.findall(r"/vote +\| Type: camo_msgs/msg/Vote \| Count: (\d+)", info.stdout)
+    )
+    assert votes == 3 * 4 * 5 * consensus_steps
+
+
+def test_render_refuses_a_bag_whose_messages_do_not_decode(tmp_path):
+    from camo_bag.container import BagWriter, TopicInfo
+    from camo_bag.msgdefs import message_definition
+
+    writer = BagWriter(tmp_path / "odd")
+    for topic, kind in (
+        ("/swarm/params", "std_msgs/msg/String"),
+        ("/swarm/status", "camo_msgs/msg/RobotStatus"),
+    ):
+        writer.add_topic(TopicInfo(topic, kind), message_definition(kind))
+        writer.write(topic, b"\x00\x01\x00\x00\xff\xff", 10**9, 10**9)
+    writer.close()
+    out = tool("render", str(tmp_path / "odd"), "--out", str(tmp_path / "r"))
+    assert out.returncode == 2 and "does not decode" in out.stderr, out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1

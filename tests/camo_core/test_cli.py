@@ -1,0 +1,122 @@
+"""The reference tools from the command line: outputs, and one-line errors on bad input."""
+
+import csv
+import json
+
+import cv2
+import numpy as np
+import pytest
+from support import run_camo
+
+from camo_core.result import SUMMARY_KEYS
+
+
+def test_sim_writes_summary_and_figure(tmp_path):
+    out = run_camo(
+        "sim",
+        "--pattern",
+        "desert",
+        "--rows",
+        "8",
+        "--cols",
+        "12",
+        "--seed",
+        "4",
+        "--rho-comm",
+        "0.1",
+        "--out",
+        str(tmp_path),
+    )
+    assert out.returncode == 0, out.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert tuple(summary) == SUMMARY_KEYS
+    assert summary["pattern"] == "horizontal" and summary["rows"] == 8 and summary["cols"] == 12
+    assert sum(summary["votes"].values()) == 96
+    assert np.array(summary["final"]).shape == (8, 12) and np.array(summary["sensed"]).shape == (
+        8,
+        12,
+    )
+    assert len(summary["consensus_trace"]) == 36 and summary["rho_comm"] == 0.1
+    figure = cv2.imread(str(tmp_path / "figure.png"))
+    assert figure is not None and figure.shape[1] > 3 * figure.shape[0]  # one row of five panels
+
+
+def test_sim_accepts_a_colour_image_file(tmp_path):
+    image = np.zeros((64, 64, 3), np.uint8)
+    image[:, ::16] = (0, 0, 255)
+    image[:, 1::16] = (0, 0, 255)
+    path = tmp_path / "stripes.jpg"
+    cv2.imwrite(str(path), image)
+    out = run_camo(
+        "sim", "--image", str(path), "--profile", "droplet", "--out", str(tmp_path / "o")
+    )
+    assert out.returncode == 0, out.stderr
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["profile"] == "droplet"
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--image", "/no/such/file.png"], "image not found"),
+        (["--rows", "0"], "rows must be"),
+        (["--rho-meas", "-0.5"], "rho_meas must be"),
+        (["--rows", "200", "--cols", "200"], "smaller than"),
+        (["--profile", "nope"], "invalid choice"),
+        (["--seed", "abc"], "invalid int value"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(args, message, tmp_path):
+    out = run_camo("sim", *args, "--out", str(tmp_path / "o"))
+    assert out.returncode == 2
+    assert message in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and "Traceback" not in out.stderr
+
+
+def test_corrupt_image_is_one_line_and_exit_2(tmp_path):
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"not a png at all")
+    out = run_camo("sim", "--image", str(bad), "--out", str(tmp_path / "o"))
+    assert out.returncode == 2 and "cannot read image" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+
+
+def test_errors_writes_csv_and_figure(tmp_path):
+    out = run_camo(
+        "errors", "--pattern", "forest", "--trials", "2", "--rhos", "0,0.3", "--out", str(tmp_path)
+    )
+    assert out.returncode == 0, out.stderr
+    rows = list(csv.DictReader((tmp_path / "errors.csv").open()))
+    assert [r["mode"] for r in rows] == ["measurement"] * 2 + ["communication"] * 2 + ["both"] * 2
+    assert set(rows[0]) == {"mode", "rho", "trials", "mean_diff", "std_diff", "correct_rate"}
+    at_zero = [r for r in rows if float(r["rho"]) == 0.0]
+    assert all(float(r["mean_diff"]) == 0.0 and float(r["correct_rate"]) == 1.0 for r in at_zero)
+    assert max(float(r["mean_diff"]) for r in rows) > 0
+    assert cv2.imread(str(tmp_path / "errors.png")) is not None
+    assert "error analysis" in out.stderr  # the progress bar
+
+
+def test_errors_rejects_bad_rhos(tmp_path):
+    out = run_camo("errors", "--rhos", "0,2", "--out", str(tmp_path))
+    assert out.returncode == 2 and "probabilities" in out.stderr
+
+
+def test_bench_prints_json_with_ratios():
+    out = run_camo("bench", "sim", "--json", "--sizes", "16,32")
+    assert out.returncode == 0, out.stderr
+    report = json.loads(out.stdout)
+    assert {r["robots"] for r in report["results"]} == {"16x16", "32x32"}
+    assert all(r["ratio"] > 0 and r["baseline_s"] > 0 for r in report["results"])
+    assert report["speedup_over_per_robot"] > 1
+
+
+def test_sim_takes_real_readings_without_noise(tmp_path):
+    out = run_camo("sim", "--rho-meas", "1.0", "--sensed", "2,3=201.5", "--out", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    sensed = json.loads((tmp_path / "summary.json").read_text())["sensed"]
+    assert sensed[2][3] == 201.5
+    assert (
+        sum(v == int(v) for row in sensed for v in row) == 64 - 1
+    )  # the others are noise: integers
+    for bad in ("2,3", "9,9=4", "1,1=300"):
+        out = run_camo("sim", "--sensed", bad, "--out", str(tmp_path))
+        assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr

@@ -1,0 +1,92 @@
+"""Sensing: images, grey values, block means, measurement noise, real readings, calibration."""
+
+import cv2
+import numpy as np
+import pytest
+
+from camo_core import sensing
+from camo_core.params import ParameterError
+from camo_core.sensing import Calibration, ImageError, rgb_to_gray, to_gray
+
+
+def test_block_means_are_unrounded_area_averages():
+    gray = np.zeros((4, 4), np.uint8)
+    gray[0, 0] = 1  # block (0, 0) mean is 0.25, which a uint8 resize would round away
+    gray[2:, 2:] = 200
+    means = sensing.block_means(gray, 2, 2)
+    assert means.dtype == np.float64
+    assert means.tolist() == [[0.25, 0.0], [0.0, 200.0]]
+
+
+def test_paper_grey_is_opencv_luma_and_droplet_grey_is_red_green_mean():
+    bgr = np.zeros((2, 2, 3), np.uint8)
+    bgr[..., 0], bgr[..., 1], bgr[..., 2] = 10, 101, 250  # B, G, R
+    assert np.array_equal(
+        sensing.to_gray(bgr, "paper"), cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(float)
+    )
+    assert sensing.to_gray(bgr, "droplet")[0, 0] == 0.5 * 250 + 0.5 * 101
+
+
+def test_grey_image_is_used_as_is_by_both_profiles():
+    gray = np.arange(16, dtype=np.uint8).reshape(4, 4)
+    assert np.array_equal(sensing.to_gray(gray, "paper"), sensing.to_gray(gray, "droplet"))
+
+
+def test_noise_replaces_about_rho_of_the_robots_with_whole_grey_levels():
+    sensed = np.full((100, 100), 0.5)
+    noisy = sensing.apply_noise(sensed, seed=3, rho_meas=0.2)
+    replaced = noisy != 0.5
+    assert abs(replaced.mean() - 0.2) < 0.02
+    assert np.all(noisy[replaced] == np.floor(noisy[replaced])) and noisy.max() <= 255
+    assert sensing.noisy_value(3, 42, 0.5, 0.2) == noisy.ravel()[42]
+
+
+def test_image_errors_are_clear(tmp_path):
+    with pytest.raises(ImageError, match="not found"):
+        sensing.load_image(tmp_path / "missing.png")
+    corrupt = tmp_path / "corrupt.png"
+    corrupt.write_bytes(b"\x89PNG\r\n\x1a\n garbage")
+    with pytest.raises(ImageError, match="cannot read"):
+        sensing.load_image(corrupt)
+    with pytest.raises(ImageError, match="smaller"):
+        sensing.block_means(np.zeros((5, 5)), 8, 8)
+
+
+def test_colour_alpha_and_grey_files_load(tmp_path):
+    bgra = np.zeros((16, 16, 4), np.uint8)
+    bgra[..., 2] = 200
+    cv2.imwrite(str(tmp_path / "a.png"), bgra)
+    assert sensing.load_image(tmp_path / "a.png").shape == (16, 16, 3)
+    cv2.imwrite(str(tmp_path / "g.png"), np.full((16, 16), 7, np.uint8))
+    assert sensing.load_image(tmp_path / "g.png").shape == (16, 16)
+
+
+@pytest.mark.parametrize("profile", ["paper", "droplet"])
+def test_a_grey_reading_gives_its_own_value_in_both_profiles(profile):
+    for v in (0, 1, 77, 128, 254, 255):
+        assert rgb_to_gray(v, v, v, profile) == v
+
+
+def test_a_colour_reading_is_grey_as_the_image_pixel_would_be():
+    for r, g, b in ((200, 10, 30), (0, 255, 7), (13, 14, 250)):
+        pixel = np.array([[[b, g, r]]], np.uint8)
+        assert rgb_to_gray(r, g, b, "paper") == to_gray(pixel, "paper")[0, 0]
+        assert rgb_to_gray(r, g, b, "droplet") == 0.5 * r + 0.5 * g
+    with pytest.raises(ValueError):
+        rgb_to_gray(256, 0, 0, "paper")
+
+
+def test_calibration_is_identity_by_default_and_reads_yaml(tmp_path):
+    assert Calibration().apply(123.5) == 123.5
+    path = tmp_path / "cal.yaml"
+    path.write_text("gain: 1.1\noffset: -5\n")
+    cal = Calibration.from_yaml(path)
+    assert (
+        cal.apply(100) == pytest.approx(105.0) and cal.apply(250) == 255.0 and cal.apply(1) == 0.0
+    )
+    path.write_text("gain: [1\n")
+    with pytest.raises(ParameterError, match="not YAML"):
+        Calibration.from_yaml(path)
+    path.write_text("gain: 0\n")
+    with pytest.raises(ParameterError, match="positive"):
+        Calibration.from_yaml(path)

@@ -1,0 +1,169 @@
+"""The Droplet bridge: monitor mode, one-line errors, and bridged swarms that equal the
+reference simulator given the Droplets' readings."""
+
+import json
+import os
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+from support import ROOT, StatusListener, camo_run, domain, run_camo
+
+from camo_core.backgrounds import background
+from camo_core.sensing import Calibration, rgb_to_gray
+from camo_droplet.emulator import DropletEmulator, Faults, emulated_rgb
+
+TRANSCRIPT = ROOT / "tests" / "data" / "firmware_transcript.txt"
+
+
+CELLS = [(2, 3), (5, 6)]
+
+
+LED_ON, LED_OFF = (255, 0, 0), (255, 255, 255)
+
+
+def tinted_forest(path) -> np.ndarray:
+    """A colour background, so that the profile's grey weights matter."""
+    grey = background("forest").astype(np.float64)
+    image = np.dstack([grey * 0.5, grey * 0.9, grey]).astype(np.uint8)
+    cv2.imwrite(str(path), image)
+    return image
+
+
+def bridged_run(tmp_path, emulator, faults: list[Faults]) -> list[DropletEmulator]:
+    image = tinted_forest(tmp_path / "tinted.png")
+    (tmp_path / "cal.yaml").write_text("gain: 1.1\noffset: -5\n")
+    calibration = Calibration.from_yaml(tmp_path / "cal.yaml")
+    options = [
+        "--image",
+        str(tmp_path / "tinted.png"),
+        "--profile",
+        "droplet",
+        "--rho-meas",
+        "0.2",
+        "--rho-comm",
+        "0.1",
+        "--seed",
+        "3",
+    ]
+    emulators, overrides = [], []
+    for (row, col), fault in zip(CELLS, faults, strict=False):
+        rgb = emulated_rgb(image, 8, 8, row, col)
+        emulators.append(emulator(rgb=rgb, faults=fault))
+        overrides += [
+            "--sensed",
+            f"{row},{col}={calibration.apply(rgb_to_gray(*rgb, 'droplet'))!r}",
+        ]
+    bridges = [
+        x
+        for (row, col), em in zip(CELLS, emulators, strict=False)
+        for x in ("--bridge", f"{row},{col}={em.link}")
+    ]
+    swarm = camo_run(
+        *options,
+        *bridges,
+        "--calibration",
+        str(tmp_path / "cal.yaml"),
+        "--out",
+        str(tmp_path / "run"),
+    )
+    assert swarm.returncode == 0, swarm.stderr[-3000:]
+    sim = run_camo("sim", *options, *overrides, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    run_summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    sim_summary = json.loads((tmp_path / "sim" / "summary.json").read_text())
+    for key in sim_summary:
+        if key != "elapsed_s":
+            assert run_summary[key] == sim_summary[key], key
+    for (row, col), em in zip(CELLS, emulators, strict=False):
+        assert em.led == (LED_ON if run_summary["final"][row][col] == 1 else LED_OFF)
+    return emulators
+
+
+def test_monitor_mode_turns_a_transcript_into_status_messages():
+    from camo_msgs.msg import RobotStatus
+
+    domain_id = domain()
+    bridge = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "camo_droplet.bridge_node",
+            "--ros-args",
+            "-p",
+            "rows:=4",
+            "-p",
+            "cols:=4",
+            "-p",
+            "row:=1",
+            "-p",
+            "col:=2",
+            "-p",
+            f"transcript:={TRANSCRIPT}",
+        ],
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain_id)},
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        with StatusListener(domain_id) as listener:
+            listener.spin_until(lambda: len(listener.got) >= 5, timeout=30)
+    finally:
+        bridge.send_signal(2)
+        bridge.communicate(timeout=30)
+    got = listener.got
+    assert len(got) == 5
+    assert {(m.sender_id, m.row, m.col) for m in got} == {(6, 1, 2)}
+    assert got[0].phase == RobotStatus.PHASE_SENSING and got[0].sensed == 187.0
+    last = got[-1]
+    assert last.phase == RobotStatus.PHASE_CONSENSUS and last.step == 2
+    assert list(last.p) == [0.5, 0.25, 0.25] and last.pattern == RobotStatus.PATTERN_HORIZONTAL
+
+
+def test_bridge_without_a_port_exits_with_one_line():
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "camo_droplet.bridge_node",
+            "--ros-args",
+            "-p",
+            "rows:=4",
+            "-p",
+            "cols:=4",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
+    )
+    assert out.returncode == 2 and "serial port" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+
+
+def test_bridged_droplets_give_the_simulators_states_for_their_readings(tmp_path, emulator):
+    bridged_run(tmp_path, emulator, [Faults(), Faults()])
+
+
+def test_bridged_run_finishes_through_garbage_and_a_reconnect(tmp_path, emulator):
+    emulators = bridged_run(
+        tmp_path,
+        emulator,
+        [
+            Faults(garbage=0.4, chatter=0.4),
+            Faults(garbage=0.4, disconnect_after=3, disconnect_for=1.0),
+        ],
+    )
+    assert emulators[1].disconnects >= 1
+
+
+def test_bad_bridge_options_are_one_line_errors(tmp_path):
+    for bad in (
+        ["--bridge", "2,3"],
+        ["--bridge", "9,9=/dev/null"],
+        ["--bridge", "1,1=/a", "--bridge", "1,1=/b"],
+        ["--bridge", "1,1=/a", "--calibration", str(tmp_path / "missing.yaml")],
+    ):
+        out = camo_run("--rows", "4", "--cols", "4", *bad, "--out", str(tmp_path / "o"))
+        assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, (bad, out.stderr)

@@ -1,0 +1,80 @@
+"""A Droplet's serial link against the emulator: replies, garbage, silence, disconnects."""
+
+import json
+import time
+
+import pytest
+
+from camo_droplet.emulator import Faults
+from camo_droplet.link import (
+    DropletDisconnected,
+    DropletError,
+    DropletLink,
+    LineReader,
+)
+
+
+def connected(em, **kwargs) -> DropletLink:
+    link = DropletLink(str(em.link), **kwargs)
+    link.open()
+    return link
+
+
+def test_line_reader_splits_crlf_and_discards_garbage_and_long_lines():
+    reader = LineReader()
+    lines = reader.feed(b"My ID is: 00C3\r\nr: 1, g: 2,") + reader.feed(
+        b" b: 3\r\n\xff\xfe\x01junk\r\n"
+    )
+    lines += reader.feed(b"#" * 500 + b"\r\nok\n")
+    assert lines == ["My ID is: 00C3", "r: 1, g: 2, b: 3", "ok"]
+    assert reader.discarded == 2
+
+
+def test_link_reads_id_and_colour_and_sets_the_led(emulator):
+    em = emulator(rgb=(200, 100, 50), droplet_id=0x00C3)
+    link = connected(em)
+    assert link.get_id() == 0x00C3
+    assert link.get_rgb() == (200, 100, 50)
+    link.set_led(255, 0, 0)
+    assert em.led == (255, 0, 0)
+    assert json.loads((em.led_log).read_text().splitlines()[-1])["rgb"] == [255, 0, 0]
+
+
+def test_unknown_command_is_an_error_naming_it(emulator):
+    link = connected(emulator())
+    with pytest.raises(DropletError, match="does not know the command 'blink'"):
+        link.command("blink", None)
+    assert link.get_rgb() == (10, 20, 30)  # and the link still works
+
+
+def test_link_survives_garbage_chatter_and_dropped_replies(emulator):
+    em = emulator(faults=Faults(drop=0.3, garbage=0.5, chatter=0.5))
+    link = connected(em, timeout=0.2, retries=8)
+    for _ in range(15):
+        assert link.get_rgb() == (10, 20, 30)
+    assert link.reader.discarded > 0
+    assert any(line.startswith("Px:") for line in link.poll())
+
+
+def test_a_robot_that_never_answers_gives_a_clear_error(emulator):
+    link = connected(emulator(faults=Faults(drop=1.0)), timeout=0.1, retries=2)
+    with pytest.raises(DropletError, match="did not answer 'get_rgb' \\(3 tries"):
+        link.get_rgb()
+
+
+def test_a_port_that_disappears_raises_and_can_be_reopened(emulator):
+    em = emulator(faults=Faults(disconnect_after=2, disconnect_for=0.5))
+    link = connected(em)
+    assert link.get_rgb() == (10, 20, 30)
+    with pytest.raises(DropletDisconnected):
+        link.get_rgb()
+    assert not link.connected
+    deadline = time.monotonic() + 10
+    while True:
+        try:
+            link.open()
+            break
+        except DropletDisconnected:
+            assert time.monotonic() < deadline
+            time.sleep(0.1)
+    assert link.get_rgb() == (10, 20, 30)

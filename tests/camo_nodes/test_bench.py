@@ -1,0 +1,27 @@
+"""`camo bench ros`: the bare rclpy exchange it compares against, and its options."""
+
+import subprocess
+import sys
+
+from support import ROOT, domain
+
+
+def test_bare_exchange_benchmark_measures_a_rate():
+    from camo_nodes.bench import bare_rate
+
+    rate = bare_rate(3, 10, 1, domain())
+    assert 0 < rate < 10_000
+
+
+def test_bench_runs_are_longer_on_small_grids_and_reject_absurd_step_counts():
+    from camo_nodes.bench import default_steps
+
+    assert (default_steps(8), default_steps(16), default_steps(64)) == (1562, 390, 300)
+    out = subprocess.run(
+        [sys.executable, "-m", "camo_nodes.bench", "--steps", "5"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert out.returncode == 2 and "--steps must be in 20..100000" in out.stderr

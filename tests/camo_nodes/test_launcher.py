@@ -1,0 +1,293 @@
+"""`camo run`: robot nodes in several processes agree with the reference simulator, survive
+killed robots and Ctrl-C, switch backgrounds, and refuse bad options in one line."""
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+from support import ROOT, camo_run, domain, ros_context, run_camo, wait_for_line
+
+
+def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:
+    swarm = camo_run(*options, "--procs", str(procs), "--out", str(tmp_path / "run"))
+    assert swarm.returncode == 0, swarm.stderr[-2000:]
+    assert json.loads((tmp_path / "run" / "timing.json").read_text())["deadlines"] == 0
+    sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    load = lambda name: json.loads((tmp_path / name / "summary.json").read_text())  # noqa: E731
+    return load("run"), load("sim")
+
+
+CASES = [
+    (["--pattern", "forest", "--profile", "paper"], 1),
+    (
+        [
+            "--pattern",
+            "desert",
+            "--profile",
+            "droplet",
+            "--rows",
+            "5",
+            "--cols",
+            "7",
+            "--rho-meas",
+            "0.1",
+            "--rho-comm",
+            "0.1",
+            "--seed",
+            "3",
+        ],
+        2,
+    ),
+    (
+        [
+            "--pattern",
+            "leopard",
+            "--profile",
+            "paper",
+            "--rows",
+            "6",
+            "--cols",
+            "4",
+            "--rho-meas",
+            "0.3",
+            "--rho-comm",
+            "0.3",
+            "--seed",
+            "11",
+        ],
+        2,
+    ),
+    (
+        [
+            "--pattern",
+            "forest",
+            "--profile",
+            "droplet",
+            "--rows",
+            "4",
+            "--cols",
+            "4",
+            "--rho-comm",
+            "0.3",
+            "--seed",
+            "5",
+        ],
+        1,
+    ),
+    (
+        [
+            "--pattern",
+            "desert",
+            "--profile",
+            "paper",
+            "--rows",
+            "7",
+            "--cols",
+            "3",
+            "--rho-meas",
+            "0.1",
+            "--seed",
+            "8",
+        ],
+        2,
+    ),
+]
+
+
+@pytest.mark.parametrize("options, procs", CASES)
+def test_swarm_equals_reference_simulator(tmp_path, options, procs):
+    swarm, sim = summaries(tmp_path, options, procs)
+    for key in sim:
+        if key != "elapsed_s":
+            assert swarm[key] == sim[key], key
+    assert (tmp_path / "run" / "figure.png").stat().st_size > 10_000
+
+
+def test_run_rejects_bad_options_in_one_line(tmp_path):
+    out = camo_run("--procs", "0", "--out", str(tmp_path))
+    assert (
+        out.returncode == 2
+        and "--procs" in out.stderr
+        and len(out.stderr.strip().splitlines()) == 1
+    )
+
+
+def test_switching_the_background_makes_the_same_swarm_camouflage_again(tmp_path):
+    out = camo_run(
+        "--pattern", "forest", "--then", "desert", "--procs", "2", "--out", str(tmp_path / "run")
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    first = json.loads((tmp_path / "run" / "round_0" / "summary.json").read_text())
+    second = json.loads((tmp_path / "run" / "round_1" / "summary.json").read_text())
+    assert (first["pattern"], second["pattern"]) == ("vertical", "horizontal"), (
+        first["votes"],
+        second["votes"],
+        second.get("dead"),
+        out.stderr[-3000:],
+    )
+    sim = run_camo("sim", "--pattern", "desert", "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0
+    reference = json.loads((tmp_path / "sim" / "summary.json").read_text())
+    assert second["final"] == reference["final"] and second["mean_p"] == reference["mean_p"]
+
+
+def test_two_runs_on_different_domains_do_not_disturb_each_other(tmp_path):
+    runs = []
+    for _k, pattern in enumerate(("forest", "desert")):
+        runs.append(
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "camo_nodes.launcher",
+                    "--pattern",
+                    pattern,
+                    "--procs",
+                    "1",
+                    "--domain-id",
+                    str(domain()),
+                    "--out",
+                    str(tmp_path / pattern),
+                ],
+                cwd=ROOT,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+            )
+        )
+    for proc in runs:
+        _, err = proc.communicate(timeout=240)
+        assert proc.returncode == 0, err[-2000:]
+    for pattern, expected in (("forest", "vertical"), ("desert", "horizontal")):
+        summary = json.loads((tmp_path / pattern / "summary.json").read_text())
+        assert summary["pattern"] == expected
+        assert sum(summary["votes"].values()) == 64 and "dead" not in summary
+
+
+def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
+    out_dir = tmp_path / "run"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "camo_nodes.launcher",
+            "--pattern",
+            "forest",
+            "--procs",
+            "1",
+            "--own-process",
+            "2,3",
+            "--own-process",
+            "5,6",
+            "--step-timeout",
+            "2",
+            "--discovery-timeout",
+            "20",
+            "--consensus-steps",
+            "1000",
+            "--domain-id",
+            str(domain()),
+            "--out",
+            str(out_dir),
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    seen = wait_for_line(proc, "consensus 64")  # every robot has voted and is in consensus
+    processes = json.loads((out_dir / "processes.json").read_text())
+    victims = [int(pid) for pid, cells in processes.items() if cells in ([19], [46])]
+    for pid in victims:
+        os.kill(pid, 9)
+    assert len(victims) == 2, "".join(seen[-30:])
+    rest, _ = proc.communicate(timeout=240)
+    assert proc.returncode == 0, rest
+    summary = json.loads((out_dir / "summary.json").read_text())
+    assert sorted(summary["dead"]) == [[2, 3], [5, 6]]
+    assert summary["final"][2][3] is None and summary["final"][5][6] is None
+    assert summary["pattern"] == "vertical" and summary["votes"]["vertical"] == 62
+    assert "2 dead robots [[2, 3], [5, 6]]" in rest
+    # Their neighbours each let a deadline pass once, and the run says so.
+    assert json.loads((out_dir / "timing.json").read_text())["deadlines"] > 0
+    assert "step deadlines passed" in rest
+
+
+def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
+    out_dir = tmp_path / "run"
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "camo_nodes.launcher",
+            "--pattern",
+            "forest",
+            "--procs",
+            "2",
+            "--consensus-steps",
+            "5000",
+            "--domain-id",
+            str(domain()),
+            "--out",
+            str(out_dir),
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    wait_for_line(proc, "consensus 64")
+    time.sleep(1.0)
+    proc.send_signal(2)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "Traceback" not in err
+    pids = [int(pid) for pid in json.loads((out_dir / "processes.json").read_text())]
+    for pid in pids:
+        assert (
+            not os.path.exists(f"/proc/{pid}")
+            or "zombie" in open(f"/proc/{pid}/status").read().lower()
+        )
+    summary = json.loads((out_dir / "summary.json").read_text())
+    assert "incomplete" in summary and "dead" not in summary
+    assert len(summary["consensus_trace"]) >= 2 and summary["votes"]["vertical"] == 64
+    assert (out_dir / "figure.png").exists()
+
+
+def test_run_writes_timing(tmp_path):
+    out = camo_run("--rows", "4", "--cols", "4", "--procs", "1", "--out", str(tmp_path))
+    assert out.returncode == 0, out.stderr[-2000:]
+    timing = json.loads((tmp_path / "timing.json").read_text())
+    assert timing["steps"] == 45 and timing["steps_per_s"] > 0 and timing["deadlines"] == 0
+    assert 0 < timing["startup_s"] <= timing["launch_to_done_s"]
+
+
+def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one(tmp_path):
+    import rclpy
+    from std_msgs.msg import String
+
+    from camo_nodes.launch_config import build_parser, config_from
+    from camo_nodes.launcher import RunFailed, Session
+
+    config = config_from(build_parser().parse_args(["--rows", "2", "--out", str(tmp_path)]))
+    with ros_context() as context:
+        session = Session(config, stop=False, context=context)
+        projector = rclpy.create_node("projector", context=context)
+        got = []
+        try:
+            message = "no projector listens on /camo/projector/load after 0.5 s"
+            with pytest.raises(RunFailed, match=message):
+                session.switch_background("desert", limit=0.5)
+            projector.create_subscription(String, "/camo/projector/load", got.append, 10)
+            session.executor.add_node(projector)
+            session.switch_background("desert", limit=10.0)
+            session.wait(lambda: got, "the projector got nothing", 10.0)
+            assert [m.data for m in got] == ["desert"]
+        finally:
+            session.executor.remove_node(projector)
+            projector.destroy_node()
+            session.close()

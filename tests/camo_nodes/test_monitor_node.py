@@ -1,0 +1,101 @@
+"""The monitor: the swarm's pattern image, one record per round, offline hardware."""
+
+import subprocess
+import sys
+import time
+
+from support import ROOT, domain, ros_context
+
+
+def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
+    import rclpy
+    from sensor_msgs.msg import Image
+
+    domain_id = domain()
+    # A long consensus, stopped with Ctrl-C once the picture is complete.
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "camo_nodes.launcher",
+            "--pattern",
+            "forest",
+            "--rows",
+            "5",
+            "--cols",
+            "7",
+            "--procs",
+            "1",
+            "--consensus-steps",
+            "100000",
+            "--domain-id",
+            str(domain_id),
+            "--out",
+            str(tmp_path),
+        ],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    images = []
+    try:
+        with ros_context(domain_id) as context:
+            node = rclpy.create_node("pattern_viewer", context=context)
+            node.create_subscription(Image, "/swarm/pattern", images.append, 10)
+            executor = rclpy.executors.SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            deadline = time.monotonic() + 120
+            while time.monotonic() < deadline and not any(
+                set(bytes(m.data)) <= {0, 255} for m in images
+            ):
+                executor.spin_once(timeout_sec=0.2)
+            executor.shutdown()
+            node.destroy_node()
+    finally:
+        proc.send_signal(2)
+        _, err = proc.communicate(timeout=120)
+    assert images, f"no /swarm/pattern image; launcher said: {err[-1500:]}"
+    complete = [m for m in images if set(bytes(m.data)) <= {0, 255}]
+    assert complete, (
+        f"{len(images)} images, none with every robot's state; launcher said: {err[-1500:]}"
+    )
+    last = complete[0]
+    assert (last.height, last.width, last.encoding) == (5, 7, "mono8")
+    # Every pixel is a robot's state (black on, white off): the forest's initial stripes here.
+    assert bytes(last.data) != bytes([last.data[0]]) * 35
+    assert proc.returncode == 130
+
+
+def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(count_round_records):
+    # A record allocated per status made a long run's monitor fall far behind its robots.
+    from camo_core.params import CamoParams
+    from camo_msgs.msg import RobotStatus
+    from camo_nodes.monitor_node import MonitorNode
+
+    made = count_round_records
+    with ros_context() as context:
+        monitor = MonitorNode(CamoParams(rows=2, cols=2), context=context)
+        for round_index in (0, 1):
+            for step in range(5):
+                for robot in range(4):
+                    monitor._on_status(
+                        RobotStatus(sender_id=robot, phase=2, step=step, round=round_index)
+                    )
+        assert monitor.record(1).step.tolist() == [4, 4, 4, 4]
+        assert len(made) == 2 and monitor.statuses_heard == 40
+        monitor.destroy_node()
+
+
+def test_monitor_counts_bridged_robots_whose_hardware_is_offline():
+    from camo_core.params import CamoParams
+    from camo_msgs.msg import RobotStatus
+    from camo_nodes.monitor_node import MonitorNode
+
+    with ros_context() as context:
+        monitor = MonitorNode(CamoParams(rows=2, cols=2), context=context)
+        monitor._on_status(RobotStatus(sender_id=3, row=1, col=1, phase=2, alive=False))
+        assert "hardware offline 1" in monitor.progress_line()
+        monitor._on_status(RobotStatus(sender_id=3, row=1, col=1, phase=2, alive=True))
+        assert "offline" not in monitor.progress_line()
+        monitor.destroy_node()
