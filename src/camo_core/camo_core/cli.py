@@ -18,6 +18,7 @@ from . import bench, errors, figures
 from .backgrounds import BACKGROUNDS, background
 from .params import PROFILES, CamoParams, ParameterError
 from .progress import ProgressBar
+from .result import write_summary
 from .sensing import ImageError, load_image, sense_image
 from .simulator import simulate
 
@@ -102,12 +103,6 @@ def out_dir(args: argparse.Namespace) -> Path:
     return folder
 
 
-def write_summary(summary: dict, folder: Path) -> Path:
-    path = folder / "summary.json"
-    path.write_text(json.dumps(summary, indent=1) + "\n")
-    return path
-
-
 def sensed_overrides(texts: list[str], rows: int, cols: int) -> dict[tuple[int, int], float]:
     """--sensed ROW,COL=VALUE options: real readings (a bridged Droplet's) for some cells."""
     overrides = {}
@@ -145,7 +140,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     )
     progress = (lambda phase, step, total: bar.update(note=phase)) if bar else None
     result = simulate(params, raw, exempt=exempt, progress=progress)
-    write_summary(result.summary(), folder)
+    write_summary(result.summary(arrays=True), folder)
     figures.run_figure(
         result,
         image,
