@@ -1,13 +1,15 @@
-"""summary.json of large runs: the fast writer's document is json.dumps's, value for value
-(floats bit for bit, NaN included)."""
+"""summary.json and figure.png of large runs: the fast writer's document is json.dumps's, value for
+value (floats bit for bit, NaN included), and large grids are drawn from resized copies."""
 
 import json
 import struct
 
+import cv2
+import matplotlib.axes
 import numpy as np
 import pytest
 
-from camo_core import result
+from camo_core import figures, result
 from camo_core.params import CamoParams
 from camo_core.result import SUMMARY_KEYS, RunResult, write_summary
 from camo_core.simulator import simulate
@@ -115,3 +117,63 @@ def test_without_orjson_the_summary_goes_through_json(run, tmp_path, monkeypatch
     monkeypatch.setattr(result, "orjson", None)
     path = write_summary(run.summary(arrays=True), tmp_path)
     assert path.read_text() == json.dumps(run.summary(), indent=1) + "\n"
+
+
+def drawn_panels(monkeypatch) -> list[tuple[tuple, dict]]:
+    """Record the shape and keyword arguments of every array imshow draws."""
+    calls = []
+    imshow = matplotlib.axes.Axes.imshow
+
+    def spy(self, values, *args, **kwargs):
+        calls.append((np.shape(values), kwargs))
+        return imshow(self, values, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.axes.Axes, "imshow", spy)
+    return calls
+
+
+def synthetic_run(rows: int, cols: int, dead: bool = False) -> RunResult:
+    rng = np.random.default_rng(rows)
+    states = rng.integers(0, 2, (rows, cols)).astype(np.uint8)
+    alive = None
+    if dead:
+        alive = np.ones((rows, cols), bool)
+        alive[: rows // 3, : cols // 3] = False
+    return RunResult(
+        params=CamoParams(rows=rows, cols=cols),
+        sensed=rng.uniform(0, 255, (rows, cols)),
+        votes=np.zeros((rows, cols), int),
+        p=np.full((rows, cols, 3), 1 / 3),
+        selected=np.zeros((rows, cols), int),
+        initial=states,
+        final=1 - states,
+        consensus_trace=np.full((36, 3), 1 / 3),
+        alive=alive,
+    )
+
+
+def test_large_grid_figure_is_drawn_from_resized_grids(tmp_path, monkeypatch):
+    rows, cols = 1100, 400
+    calls = drawn_panels(monkeypatch)
+    image = np.random.default_rng(0).integers(0, 256, (2200, 1200, 3), dtype=np.uint8)
+    path = figures.run_figure(synthetic_run(rows, cols, dead=True), image, tmp_path / "big.png")
+    figure = cv2.imread(str(path))
+    assert figure.shape == (360, 1700, 3)  # figsize 17 x 3.6 inches at 100 dpi, as ever
+    assert len(calls) == 4  # input image, sensed, initial, final
+    cap = figures.MAX_PANEL_PX
+    assert calls[0][0] == (cap, cap, 3)  # each side on its own
+    assert calls[0][1]["extent"] == (-0.5, 1199.5, 2199.5, -0.5)
+    for shape, kwargs in calls[1:]:
+        assert shape == (cap, cols)  # 1100 rows drawn as 512, 400 columns as they are
+        assert kwargs["extent"] == (-0.5, cols - 0.5, rows - 0.5, -0.5)
+    assert len(np.unique(figure)) > 2  # the panels hold something
+
+
+def test_small_grid_figure_is_drawn_as_before(tmp_path, monkeypatch):
+    rows, cols = 64, 96
+    calls = drawn_panels(monkeypatch)
+    image = np.random.default_rng(0).integers(0, 256, (128, 192), dtype=np.uint8)
+    path = figures.run_figure(synthetic_run(rows, cols), image, tmp_path / "small.png")
+    assert cv2.imread(str(path)).shape == (360, 1700, 3)
+    assert [shape for shape, _ in calls] == [(128, 192), (rows, cols), (rows, cols), (rows, cols)]
+    assert not any("extent" in kwargs for _, kwargs in calls)
