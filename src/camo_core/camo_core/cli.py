@@ -181,7 +181,7 @@ def cmd_errors(args: argparse.Namespace) -> int:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     sizes = tuple(int(s) for s in args.sizes.split(",")) if args.sizes else bench.SIZES
-    report = bench.run(sizes=sizes)
+    report = bench.run(sizes=sizes, whole=args.whole)
     print(json.dumps(report) if args.json else bench.format_table(report))
     return 0
 
@@ -214,6 +214,11 @@ def build_parser() -> Parser:
     ben.add_argument("--json", action="store_true", help="print one JSON object")
     ben.add_argument(
         "--sizes", default=None, help="grid sides, comma-separated (default 64,256,1024)"
+    )
+    ben.add_argument(
+        "--whole",
+        action="store_true",
+        help="also time the whole `camo sim` process at 1024x1024 (a 2048x2048 image)",
     )
     ben.set_defaults(func=cmd_bench)
     return parser
