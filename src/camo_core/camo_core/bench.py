@@ -12,6 +12,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 
 import cv2
@@ -98,7 +99,7 @@ def run(sizes=SIZES, repeats: int = 3, whole: bool = False) -> dict:
         baseline = copy_baseline(n, n, steps, max(reps, 3))
         for rho in TARGETS:
             params = base.with_(rho_comm=rho)
-            seconds = _best_of(lambda: simulate(params, raw), reps)
+            seconds = _best_of(partial(simulate, params, raw), reps)
             rows_out.append(
                 {
                     "robots": f"{n}x{n}",
@@ -116,7 +117,8 @@ def run(sizes=SIZES, repeats: int = 3, whole: bool = False) -> dict:
     per_robot = _best_of(lambda: run_per_robot(params, raw), 1)
     report = {
         "pipeline": "descriptor + 35 consensus + 10 formation steps (paper profile)",
-        "baseline": "np.copyto of one rows x cols x 3 float64 p-array per consensus and formation step",
+        "baseline": "np.copyto of one rows x cols x 3 float64 p-array per consensus and "
+        "formation step",
         "results": rows_out,
         "per_robot_64x64_s": per_robot,
         "vectorised_64x64_s": vectorised,
@@ -132,7 +134,8 @@ def format_table(report: dict) -> str:
         f"pipeline: {report['pipeline']}",
         f"baseline: {report['baseline']}",
         "",
-        f"{'robots':>10} {'rho_comm':>8} {'seconds':>9} {'baseline s':>11} {'ratio':>8} {'target':>7}",
+        f"{'robots':>10} {'rho_comm':>8} {'seconds':>9} {'baseline s':>11} {'ratio':>8} "
+        f"{'target':>7}",
     ]
     for r in report["results"]:
         target = f"<= {r['target_ratio']:g}" if r["target_ratio"] else ""

@@ -150,8 +150,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     )
     counts = ", ".join(f"{k} {v}" for k, v in result.selection_counts.items())
     print(
-        f"pattern: {result.majority_pattern} ({counts}); wrote {folder}/summary.json and figure.png "
-        f"in {result.elapsed_s:.3f} s"
+        f"pattern: {result.majority_pattern} ({counts}); wrote {folder}/summary.json and "
+        f"figure.png in {result.elapsed_s:.3f} s"
     )
     return 0
 

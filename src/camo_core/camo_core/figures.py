@@ -114,7 +114,8 @@ def errors_figure(
 def timeline_figure(
     frames: list[tuple[str, np.ndarray]], path: str | Path, title: str = ""
 ) -> Path:
-    """A strip of small grids: selected pattern at each consensus step (c<k>), state at each formation step (f<k>).
+    """A strip of small grids: selected pattern at each consensus step (c<k>), state at each
+    formation step (f<k>).
 
     Consensus frames hold 0/1/2 (horizontal/vertical/mottled), formation frames 0/1 (off/on); -1 is
     a robot that did not report that step (grey).

@@ -99,7 +99,7 @@ class RunResult:
                     [None if dead[i, j] else v for j, v in enumerate(row)]
                     for i, row in enumerate(summary[key])
                 ]
-            summary["dead"] = [[int(i), int(j)] for i, j in zip(*np.nonzero(dead))]
+            summary["dead"] = [[int(i), int(j)] for i, j in zip(*np.nonzero(dead), strict=True)]
         return summary
 
 
