@@ -67,7 +67,8 @@ def test_large_summary_with_nan_sensed_values_keeps_nan(run, tmp_path):
         doc = written(nan_run.summary(arrays=arrays), tmp_path)
         assert exact(doc) == exact(reference)
         assert np.isnan(doc["sensed"][77][3]) and np.isnan(doc["sensed"][0]).sum() == 5
-    assert "NaN" in (tmp_path / "summary.json").read_text()  # as json writes it, not null
+    text = (tmp_path / "summary.json").read_text()
+    assert "NaN" in text and text.count("\n") == 16  # as json writes NaN; a key a line still
 
 
 def test_large_summary_with_dead_robots_has_null_cells_and_dead_list(run, tmp_path):
@@ -115,8 +116,11 @@ def test_values_orjson_would_write_otherwise_go_through_json(tmp_path):
 
 def test_without_orjson_the_summary_goes_through_json(run, tmp_path, monkeypatch):
     monkeypatch.setattr(result, "orjson", None)
-    path = write_summary(run.summary(arrays=True), tmp_path)
-    assert path.read_text() == json.dumps(run.summary(), indent=1) + "\n"
+    nan_run = RunResult(**{**vars(run), "sensed": run.sensed.copy()})
+    nan_run.sensed[5, 5] = np.nan
+    for case in (run, nan_run):
+        reference = as_json_dumps_writes_it(case.summary())
+        assert exact(written(case.summary(arrays=True), tmp_path)) == exact(reference)
 
 
 def drawn_panels(monkeypatch) -> list[tuple[tuple, dict]]:

@@ -95,45 +95,49 @@ class RunResult:
             # A swarm run in which robots died: their cells hold null, and they are listed.
             dead = ~self.alive
             for key in ("initial", "final"):
-                summary[key] = [
-                    [None if dead[i, j] else v for j, v in enumerate(row)]
-                    for i, row in enumerate(summary[key])
-                ]
+                cells = getattr(self, key).astype(int).astype(object)  # Python ints
+                cells[dead] = None
+                summary[key] = cells.tolist()
             summary["dead"] = [[int(i), int(j)] for i, j in zip(*np.nonzero(dead), strict=True)]
         return summary
 
 
 # Up to this many robots summary.json is json.dumps(indent=1), one value a line, as it always was;
-# above, the grids' millions of values are written by orjson (json.dumps takes 2 s at 1024x1024).
+# above, one top-level key a line, its value written by orjson (json.dumps(indent=1) takes 1 to
+# 2 s at 1024x1024, orjson 0.04 s) or, where orjson would write it otherwise, by compact json.
 INDENTED_SUMMARY_CELLS = 128 * 128
 _ORJSON_OPTIONS = orjson.OPT_SERIALIZE_NUMPY if orjson is not None else 0
 
 
 def write_summary(summary: dict, folder: Path) -> Path:
-    """Write folder/summary.json. Large grids are written by orjson, one top-level key a line;
-    the parsed document is always that of json.dumps (floats as repr, NaN and Infinity as
-    json writes them: a document holding one is written by json, as orjson would write null)."""
+    """Write folder/summary.json, whose lists may be NumPy arrays (summary(arrays=True)). The
+    parsed document is always that of json.dumps: floats as repr, NaN and Infinity as json
+    writes them (orjson would write null)."""
     path = Path(folder) / "summary.json"
     path.write_bytes(summary_bytes(summary))
     return path
 
 
 def summary_bytes(summary: dict) -> bytes:
-    """The text of summary.json (ASCII), whose lists may be NumPy arrays."""
+    """The text of summary.json, ASCII as json.dumps writes it."""
     cells = summary.get("rows", 0) * summary.get("cols", 0)
-    if orjson is not None and cells > INDENTED_SUMMARY_CELLS and _orjson_exact(summary):
+    if cells <= INDENTED_SUMMARY_CELLS or not all(isinstance(k, str) for k in summary):
+        return (json.dumps(summary, indent=1, default=_plain) + "\n").encode("ascii")
+    lines = [b" " + _dumps(key) + b": " + _dumps(value) for key, value in summary.items()]
+    return b"{\n" + b",\n".join(lines) + b"\n}\n"
+
+
+def _dumps(value: Any) -> bytes:
+    """value in JSON: by orjson where it writes what json.dumps does, else by json.dumps."""
+    if orjson is not None and _orjson_exact(value):
         try:
-            lines = [
-                b" " + orjson.dumps(key) + b": " + orjson.dumps(value, option=_ORJSON_OPTIONS)
-                for key, value in summary.items()
-            ]
+            text = orjson.dumps(value, option=_ORJSON_OPTIONS)
         except (orjson.JSONEncodeError, TypeError):
-            pass  # keys that are not str, integers beyond 64 bits, float subclasses, ...
+            pass  # integers beyond 64 bits, float subclasses, ...
         else:
-            text = b"{\n" + b",\n".join(lines) + b"\n}\n"
-            if text.isascii():  # json.dumps escapes non-ASCII; keep the file ASCII as it was
+            if text.isascii():  # json.dumps escapes non-ASCII: keep the file ASCII as it was
                 return text
-    return (json.dumps(summary, indent=1, default=_plain) + "\n").encode("ascii")
+    return json.dumps(value, default=_plain, separators=(",", ":")).encode("ascii")
 
 
 def _plain(value: Any) -> Any:
@@ -158,10 +162,16 @@ def _orjson_exact(value: Any) -> bool:
     if isinstance(value, dict):
         return all(isinstance(k, str) for k in value) and all(map(_orjson_exact, value.values()))
     if isinstance(value, list | tuple):
-        try:
-            total = sum(value, 0.0)  # a flat list of Python numbers, in C: NaN and inf survive
-        except (TypeError, OverflowError):  # nested lists, None, huge ints
-            return all(map(_orjson_exact, value))
-        # A NumPy scalar among the numbers makes the total one (np.float64 is a float subclass).
-        return math.isfinite(total) if type(total) is float else all(map(_orjson_exact, value))
+        types = set(map(type, value))  # a grid's row at C speed
+        if types <= _AGREED:
+            return True
+        if types <= {float, int, bool}:
+            try:
+                return math.isfinite(sum(value, 0.0))  # NaN and infinity survive the sum
+            except OverflowError:  # an int beyond floats; orjson or json will say
+                return True
+        return all(map(_orjson_exact, value))
     return True
+
+
+_AGREED = {int, bool, str, type(None)}  # written alike by orjson and json (or orjson refuses)
