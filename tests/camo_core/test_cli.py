@@ -107,6 +107,7 @@ def test_bench_prints_json_with_ratios():
     assert {r["robots"] for r in report["results"]} == {"16x16", "32x32"}
     assert all(r["ratio"] > 0 and r["baseline_s"] > 0 for r in report["results"])
     assert report["speedup_over_per_robot"] > 1
+    assert "whole_process" not in report  # only with --whole
 
 
 def test_sim_takes_real_readings_without_noise(tmp_path):
@@ -120,3 +121,16 @@ def test_sim_takes_real_readings_without_noise(tmp_path):
     for bad in ("2,3", "9,9=4", "1,1=300"):
         out = run_camo("sim", "--sensed", bad, "--out", str(tmp_path))
         assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
+
+
+def test_bench_whole_process_times_camo_sim_in_a_subprocess():
+    from camo_core import bench
+
+    whole = bench.whole_process(repeats=1, side=32)  # --whole runs it at 1024x1024
+    assert whole["command"].startswith("python -m camo_core.cli sim --image BIG --rows 32 ")
+    assert len(whole["runs_s"]) == 1 and whole["seconds"] == whole["runs_s"][0] > 0
+    assert whole["baseline_s"] > 0 and whole["ratio"] == whole["seconds"] / whole["baseline_s"]
+    assert whole["target_ratio"] is None  # the target is for 1024x1024
+    report = {"pipeline": "", "baseline": "", "results": [], "whole_process": whole}
+    report |= {"per_robot_64x64_s": 1.0, "vectorised_64x64_s": 0.1, "speedup_over_per_robot": 10}
+    assert "whole process: python -m camo_core.cli sim" in bench.format_table(report)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import matplotlib
 
 matplotlib.use("Agg")
@@ -15,6 +16,25 @@ from .result import RunResult
 
 PATTERN_COLORS = {"horizontal": "tab:blue", "vertical": "tab:green", "mottled": "tab:orange"}
 
+# A panel is about 260 px wide in the saved figure; a grid or image with a side above this is
+# drawn from a copy resized to it (imshow of a 1024x1024 grid takes 0.3 s, and shows no more of
+# it). Smaller ones are drawn as they are.
+MAX_PANEL_PX = 512
+
+
+def _shown(values: np.ndarray, nearest: bool) -> tuple[np.ndarray, dict]:
+    """values (rows x cols, or x 3) as a panel draws them, and imshow's extra arguments: a side
+    above MAX_PANEL_PX is resized to it, by sampling cells (nearest: as imshow's "nearest" draws
+    a large grid) or by area averaging (as imshow's antialiasing), and drawn over the full
+    extent, so that the axes (limits, aspect) are those of the full grid."""
+    rows, cols = values.shape[:2]
+    if rows <= MAX_PANEL_PX and cols <= MAX_PANEL_PX:
+        return values, {}
+    size = (min(cols, MAX_PANEL_PX), min(rows, MAX_PANEL_PX))  # OpenCV: width, height
+    how = cv2.INTER_NEAREST_EXACT if nearest else cv2.INTER_AREA
+    small = cv2.resize(np.ascontiguousarray(values), size, interpolation=how)
+    return small, {"extent": (-0.5, cols - 0.5, rows - 0.5, -0.5)}
+
 
 def run_figure(
     result: RunResult, image: np.ndarray | None, path: str | Path, title: str = ""
@@ -22,10 +42,12 @@ def run_figure(
     """One row of five panels: input, sensed grid, consensus curves, initial and final states."""
     fig, axes = plt.subplots(1, 5, figsize=(17, 3.6))
     if image is not None:
-        shown = image if image.ndim == 2 else image[:, :, ::-1]
-        axes[0].imshow(shown, cmap="gray", vmin=0, vmax=255)
+        shown, extent = _shown(image, nearest=False)
+        shown = shown if shown.ndim == 2 else shown[:, :, ::-1]
+        axes[0].imshow(shown, cmap="gray", vmin=0, vmax=255, **extent)
     axes[0].set_title("input image")
-    axes[1].imshow(result.sensed, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+    shown, extent = _shown(result.sensed, nearest=True)
+    axes[1].imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
     axes[1].set_title(f"sensed ({result.params.rows}x{result.params.cols})")
     trace = result.consensus_trace
     for k, name in enumerate(PATTERN_COLORS):
@@ -48,7 +70,8 @@ def run_figure(
         shown = np.where(states == 1, 0, 255).astype(float)
         if result.alive is not None:
             shown[~result.alive] = 128
-        ax.imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        shown, extent = _shown(shown, nearest=True)
+        ax.imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
         ax.set_title(label)
     for ax in (axes[0], axes[1], axes[3], axes[4]):
         ax.set_xticks([])
