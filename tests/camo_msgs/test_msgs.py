@@ -64,3 +64,28 @@ def test_each_message_type_round_trips(monkeypatch):
         node.destroy_node()
     finally:
         rclpy.shutdown()
+
+
+def test_robot_status_constants_are_the_protocols_phases_and_the_rules_patterns():
+    from camo_core import protocol, rules
+
+    assert [
+        RobotStatus.PHASE_DISCOVERY,
+        RobotStatus.PHASE_SENSING,
+        RobotStatus.PHASE_CONSENSUS,
+        RobotStatus.PHASE_FORMATION,
+        RobotStatus.PHASE_DONE,
+    ] == [
+        protocol.DISCOVERY,
+        protocol.SENSING,
+        protocol.CONSENSUS,
+        protocol.FORMATION,
+        protocol.DONE,
+    ]
+    assert [
+        RobotStatus.PATTERN_HORIZONTAL,
+        RobotStatus.PATTERN_VERTICAL,
+        RobotStatus.PATTERN_MOTTLED,
+    ] == [rules.HORIZONTAL, rules.VERTICAL, rules.MOTTLED]
+    assert RobotStatus.PATTERN_NONE == protocol.NO_PATTERN
+    assert [rules.PATTERN_NAMES[k] for k in (0, 1, 2)] == ["horizontal", "vertical", "mottled"]
