@@ -4,6 +4,7 @@ inside the project's venv and workspace."""
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -76,8 +77,9 @@ class StatusListener:
     """The robots' statuses (/swarm/status) heard in one ROS domain, in a context of the test's
     own."""
 
-    def __init__(self, domain_id: int) -> None:
+    def __init__(self, domain_id: int, run: str) -> None:
         self.domain_id = domain_id
+        self.run = run
         self.got: list = []
 
     def __enter__(self) -> StatusListener:
@@ -85,13 +87,13 @@ class StatusListener:
         from rclpy.executors import SingleThreadedExecutor
 
         from camo_msgs.msg import RobotStatus
-        from camo_nodes.topics import STATUS_TOPIC, status_listener_qos
+        from camo_nodes.topics import RunTopics, status_listener_qos
 
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)
         self.node = rclpy.create_node("status_listener", context=self.context)
         self.node.create_subscription(
-            RobotStatus, STATUS_TOPIC, self.got.append, status_listener_qos()
+            RobotStatus, RunTopics(self.run).status, self.got.append, status_listener_qos()
         )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -115,11 +117,30 @@ class StatusListener:
         rclpy.try_shutdown(context=self.context)
 
 
+def bag_tool(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    """Run a camo_bag command line (`cli`, `render`, `replay`, `recorder_node`)."""
+    return subprocess.run(
+        [sys.executable, "-m", f"camo_bag.{module}", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
+
+
+def tile_range(topic: str) -> range:
+    """The robots of a tile topic /<run>/camo/tile_FIRST_LAST/<part>/<kind>."""
+    first, last = re.search(r"/tile_(\d+)_(\d+)/", topic).groups()
+    return range(int(first), int(last) + 1)
+
+
 # One recorded run that several bag tests read (the `recorded` fixture).
+BAG_RUN = f"bags_{os.getpid()}"
 BAG_ROWS, BAG_COLS = 5, 6
 BAG_STEPS = 10  # droplet consensus steps
 BAG_FORMATION = 20  # droplet formation steps
 BAG_OPTIONS = [
     "--pattern", "forest", "--profile", "droplet", "--rows", str(BAG_ROWS), "--cols",
     str(BAG_COLS), "--rho-comm", "0.2", "--rho-meas", "0.1", "--seed", "4", "--procs", "2",
+    "--run-id", BAG_RUN,
 ]  # fmt: skip

@@ -1,25 +1,18 @@
 """`camo bag info` and `camo bag repair` on recorded bags."""
 
-import subprocess
-import sys
+import re
 
-from support import BAG_STEPS, ROOT
-
-
-def tool(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", f"camo_bag.{module}", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
+from support import BAG_STEPS, bag_tool
 
 
 def test_bag_info_lists_topics_types_and_counts(recorded):
     bag, _ = recorded
-    out = tool("cli", "info", str(bag))
+    out = bag_tool("cli", "info", str(bag))
     assert out.returncode == 0, out.stderr
     assert "Duration:" in out.stdout and "Storage id:        mcap" in out.stdout
-    line = next(x for x in out.stdout.splitlines() if "/camo/robot_3/vote " in x)
-    assert "Type: camo_msgs/msg/Vote" in line and f"Count: {BAG_STEPS} " in line
+    # The first process's tile holds robots 0-14: its edge and core vote topics hold 15 robots'
+    # votes, BAG_STEPS each.
+    lines = [x for x in out.stdout.splitlines() if "/tile_0_14/" in x and "/vote " in x]
+    assert len(lines) == 2 and all("Type: camo_msgs/msg/Vote" in x for x in lines)
+    counts = [int(re.search(r"Count: (\d+)", x).group(1)) for x in lines]
+    assert sum(counts) == 15 * BAG_STEPS

@@ -1,20 +1,7 @@
 """Bags as rosbag2 writes them with MCAP: read back by two independent readers; bad files
 refused in one line; a cut file repaired."""
 
-import subprocess
-import sys
-
-from support import BAG_COLS, BAG_FORMATION, BAG_ROWS, BAG_STEPS, ROOT
-
-
-def tool(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", f"camo_bag.{module}", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
+from support import BAG_COLS, BAG_FORMATION, BAG_ROWS, BAG_RUN, BAG_STEPS, bag_tool, tile_range
 
 
 def deserialize(data: bytes) -> str:
@@ -44,7 +31,9 @@ def test_bag_is_a_rosbag2_folder_with_an_indexed_ros2_mcap(recorded):
     for channel in summary.channels.values():
         assert channel.message_encoding == "cdr"
         assert "reliability:" in channel.metadata["offered_qos_profiles"]
-    background = next(c for c in summary.channels.values() if c.topic == "/camo/background")
+    background = next(
+        c for c in summary.channels.values() if c.topic == f"/{BAG_RUN}/camo/background"
+    )
     assert "durability: transient_local" in background.metadata["offered_qos_profiles"]
 
 
@@ -59,10 +48,10 @@ def test_mcap_ros2_decoder_reads_every_robot_message(recorded):
             stream, decoder_factories=[DecoderFactory()]
         ).iter_decoded_messages():
             if channel.topic.endswith("/vote"):
-                assert channel.topic == f"/camo/robot_{msg.sender_id}/vote"
+                assert msg.sender_id in tile_range(channel.topic)  # a tile's robots only
                 assert abs(sum(msg.p) - 1.0) < 1e-9
                 votes.setdefault(msg.sender_id, []).append(msg.step)
-            elif channel.topic == "/swarm/status" and msg.phase == 4:
+            elif channel.topic == f"/{BAG_RUN}/swarm/status" and msg.phase == 4:
                 final[(msg.row, msg.col)] = msg.state
             publish_before_log &= message.publish_time <= message.log_time
     # Loss is drawn where a message is received, so every robot publishes every step's vote.
@@ -78,17 +67,21 @@ def test_rosbags_anyreader_reads_the_bag_folder(recorded):
     bag, live = recorded
     with AnyReader([bag]) as reader:
         types = {c.topic: c.msgtype for c in reader.connections}
-        counts = {c.topic: c.msgcount for c in reader.connections}
-        assert types["/camo/background"] == "sensor_msgs/msg/Image"
-        assert types["/camo/robot_0/state"] == "camo_msgs/msg/State"
-        assert (
-            counts["/camo/robot_7/state"] == BAG_FORMATION and counts["/camo/robot_7/hello"] == 1
-        )
-        colors = [c for c in reader.connections if c.topic.endswith("/color")]
+        assert types[f"/{BAG_RUN}/camo/background"] == "sensor_msgs/msg/Image"
+        tiles = sorted(t for t in types if "/tile_" in t)
+        # Two processes, two tiles of 15 robots: edge and core topics of four kinds each.
+        assert {t.split("/")[3] for t in tiles} == {"tile_0_14", "tile_15_29"} and len(tiles) == 16
+        assert all(types[t] == f"camo_msgs/msg/{t.rsplit('/', 1)[1].title()}" for t in tiles)
+        sent: dict[tuple[int, str], int] = {}
         sensed = {}
-        for connection, _, raw in reader.messages(connections=colors):
+        robots = [c for c in reader.connections if "/tile_" in c.topic]
+        for connection, _, raw in reader.messages(connections=robots):
             msg = reader.deserialize(raw, connection.msgtype)
-            sensed[msg.sender_id] = msg.value
+            kind = connection.topic.rsplit("/", 1)[1]
+            sent[(msg.sender_id, kind)] = sent.get((msg.sender_id, kind), 0) + 1
+            if kind == "color":
+                sensed[msg.sender_id] = msg.value
+    assert sent[(7, "state")] == BAG_FORMATION and sent[(7, "hello")] == 1
     assert [[sensed[i * BAG_COLS + j] for j in range(BAG_COLS)] for i in range(BAG_ROWS)] == live[
         "sensed"
     ]
@@ -112,13 +105,13 @@ def test_truncated_and_foreign_files_get_one_line_errors(recorded, tmp_path):
             ["render", str(path), "--out", str(tmp_path / "r")],
             ["replay", str(path)],
         ):
-            out = tool(*command)
+            out = bag_tool(*command)
             assert out.returncode == 2, (command, out.stderr)
             assert words in out.stderr and len(out.stderr.strip().splitlines()) == 1, (
                 command,
                 out.stderr,
             )
-    out = tool("cli", "repair", str(foreign))
+    out = bag_tool("cli", "repair", str(foreign))
     assert out.returncode == 2 and "not an MCAP file" in out.stderr
 
 
@@ -150,7 +143,7 @@ def test_repair_keeps_every_complete_chunk_of_a_cut_file(tmp_path):
     (cut / "cut_0.mcap").write_bytes(
         (tmp_path / "whole" / "whole_0.mcap").read_bytes()[: ends[2] + 10]
     )
-    out = tool("cli", "repair", str(cut), "--out", str(tmp_path / "fixed"))
+    out = bag_tool("cli", "repair", str(cut), "--out", str(tmp_path / "fixed"))
     assert out.returncode == 0, out.stderr
     assert "cut short" in out.stdout and "wrote 150 messages" in out.stdout
     texts = [deserialize(m.data) for m in read_messages(tmp_path / "fixed")]

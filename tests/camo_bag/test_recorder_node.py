@@ -8,20 +8,11 @@ import time
 
 from support import (
     ROOT,
+    bag_tool,
     camo_run,
     domain,
     wait_for_line,
 )
-
-
-def tool(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", f"camo_bag.{module}", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
 
 
 def deserialize(data: bytes) -> str:
@@ -63,14 +54,19 @@ def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
     log = tmp_path / "recorder.log"
     recorder = subprocess.Popen(
-        [sys.executable, "-m", "camo_bag.recorder_node", str(tmp_path / "killed")],
+        [
+            sys.executable,
+            "-m",
+            "camo_bag.recorder_node",
+            str(tmp_path / "killed"),
+            "--run-id",
+            "k",
+        ],
         cwd=ROOT,
         env=env,
         stderr=open(log, "w"),
     )
-    while "recording to" not in log.read_text():
-        assert recorder.poll() is None, log.read_text()
-        time.sleep(0.1)
+    # The recorder waits for run k to appear, and records it from its start.
     # 2x2 robots do thousands of steps a second: a long run is still going when the recorder is
     # killed.
     swarm = subprocess.Popen(
@@ -88,6 +84,8 @@ def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers
             "1",
             "--domain-id",
             str(domain_id),
+            "--run-id",
+            "k",
             "--out",
             str(tmp_path / "run"),
         ],
@@ -105,8 +103,8 @@ def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers
         recorder.wait()
         swarm.send_signal(signal.SIGINT)
         swarm.communicate(timeout=60)
-    assert tool("cli", "info", str(tmp_path / "killed")).returncode == 2
-    out = tool("cli", "repair", str(tmp_path / "killed"), "--out", str(tmp_path / "fixed"))
+    assert bag_tool("cli", "info", str(tmp_path / "killed")).returncode == 2
+    out = bag_tool("cli", "repair", str(tmp_path / "killed"), "--out", str(tmp_path / "fixed"))
     assert out.returncode == 0, out.stderr
     steps: dict[int, list[int]] = {}
     with AnyReader([tmp_path / "fixed"]) as reader:
@@ -144,6 +142,8 @@ def test_ctrl_c_during_a_recorded_run_leaves_a_complete_indexed_bag(tmp_path):
             "5000",
             "--domain-id",
             str(domain()),
+            "--run-id",
+            "ctrlc",
             "--out",
             str(tmp_path / "run"),
             "--record",
@@ -155,13 +155,14 @@ def test_ctrl_c_during_a_recorded_run_leaves_a_complete_indexed_bag(tmp_path):
         text=True,
     )
     wait_for_line(proc, "consensus 16")
-    seen = recorded_so_far(tmp_path / "bag", "/camo/robot_0/vote", 2, proc)
+    seen = recorded_so_far(tmp_path / "bag", "/vote", 2, proc)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130 and "Traceback" not in err, err
     summary = read_summary(tmp_path / "bag")
     counts = {t.name: t.count for t in summary.topics}
-    assert counts["/camo/robot_0/vote"] >= seen and counts["/swarm/params"] == 1
+    votes = sum(n for name, n in counts.items() if name.endswith("/vote"))
+    assert votes >= seen and counts["/ctrlc/swarm/params"] == 1
     assert (tmp_path / "bag" / "metadata.yaml").exists()
 
 
@@ -182,6 +183,6 @@ def test_recording_into_an_existing_bag_is_refused_before_anything_starts(tmp_pa
     assert len(out.stderr.strip().splitlines()) == 1
     assert (tmp_path / "bag" / "x").read_text() == "keep me"
     for args in ([str(tmp_path / "bag")], []):
-        out = tool("recorder_node", *args)
+        out = bag_tool("recorder_node", *args)
         assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
     assert (tmp_path / "bag" / "x").read_text() == "keep me"

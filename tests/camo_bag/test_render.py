@@ -2,20 +2,8 @@
 
 import json
 import re
-import subprocess
-import sys
 
-from support import ROOT, camo_run
-
-
-def tool(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", f"camo_bag.{module}", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
+from support import bag_tool, camo_run
 
 
 def test_render_reads_a_bag_into_one_record_per_round(recorded, count_round_records):
@@ -29,7 +17,7 @@ def test_render_reads_a_bag_into_one_record_per_round(recorded, count_round_reco
 
 def test_render_rebuilds_the_live_summary_from_the_bag_alone(recorded, tmp_path):
     bag, live = recorded
-    out = tool("render", str(bag), "--out", str(tmp_path))
+    out = bag_tool("render", str(bag), "--out", str(tmp_path))
     assert out.returncode == 0, out.stderr
     rendered = json.loads((tmp_path / "summary.json").read_text())
     assert {k: v for k, v in rendered.items() if k != "elapsed_s"} == {
@@ -61,7 +49,7 @@ def test_render_of_a_run_with_three_backgrounds_writes_each_round_from_a_complet
         str(tmp_path / "bag"),
     )
     assert out.returncode == 0 and "lacks" not in out.stderr, out.stderr[-2000:]
-    rendered = tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
+    rendered = bag_tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
     assert rendered.returncode == 0, rendered.stderr
     for k in (0, 1, 2):
         live = json.loads((tmp_path / "live" / f"round_{k}" / "summary.json").read_text())
@@ -71,7 +59,7 @@ def test_render_of_a_run_with_three_backgrounds_writes_each_round_from_a_complet
         }
         assert (tmp_path / "rendered" / f"round_{k}" / "timeline.png").exists()
     assert "round 2: pattern" in rendered.stdout
-    info = tool("cli", "info", str(tmp_path / "bag"))
+    info = bag_tool("cli", "info", str(tmp_path / "bag"))
     assert info.returncode == 0, info.stderr
     consensus_steps = len(live["consensus_trace"]) - 1
     votes = sum(
@@ -93,6 +81,6 @@ def test_render_refuses_a_bag_whose_messages_do_not_decode(tmp_path):
         writer.add_topic(TopicInfo(topic, kind), message_definition(kind))
         writer.write(topic, b"\x00\x01\x00\x00\xff\xff", 10**9, 10**9)
     writer.close()
-    out = tool("render", str(tmp_path / "odd"), "--out", str(tmp_path / "r"))
+    out = bag_tool("render", str(tmp_path / "odd"), "--out", str(tmp_path / "r"))
     assert out.returncode == 2 and "does not decode" in out.stderr, out.stderr
     assert len(out.stderr.strip().splitlines()) == 1

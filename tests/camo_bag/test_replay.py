@@ -8,20 +8,12 @@ from support import (
     BAG_COLS,
     BAG_OPTIONS,
     BAG_ROWS,
+    BAG_RUN,
     ROOT,
     StatusListener,
+    bag_tool,
     domain,
 )
-
-
-def tool(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", f"camo_bag.{module}", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
 
 
 def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded, tmp_path):
@@ -33,6 +25,8 @@ def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded
             "-m",
             "camo_nodes.launcher",
             *BAG_OPTIONS,
+            "--run-id",
+            "again",  # the last --run-id counts: a run of its own, driven by the bag
             "--no-projector",
             "--domain-id",
             str(domain_id),
@@ -44,11 +38,13 @@ def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded
         stderr=subprocess.PIPE,
         text=True,
     )
-    replay = tool(
+    replay = bag_tool(
         "replay",
         str(bag),
         "--topics",
-        "/camo/background",
+        f"/{BAG_RUN}/camo/background",
+        "--run-id",
+        "again",
         "--linger",
         "15",
         "--domain-id",
@@ -66,7 +62,7 @@ def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded
 def test_replay_publishes_recorded_messages_with_their_qos(recorded):
     bag, live = recorded
     domain_id = domain()
-    with StatusListener(domain_id) as listener:
+    with StatusListener(domain_id, BAG_RUN) as listener:
         replay = subprocess.Popen(
             [
                 sys.executable,
@@ -76,7 +72,7 @@ def test_replay_publishes_recorded_messages_with_their_qos(recorded):
                 "--rate",
                 "20",
                 "--topics",
-                "/swarm/status",
+                f"/{BAG_RUN}/swarm/status",
                 "--domain-id",
                 str(domain_id),
             ],

@@ -101,13 +101,15 @@ def test_monitor_mode_turns_a_transcript_into_status_messages():
             "col:=2",
             "-p",
             f"transcript:={TRANSCRIPT}",
+            "-p",
+            "run_id:=firmware",
         ],
         env={**os.environ, "ROS_DOMAIN_ID": str(domain_id)},
         stderr=subprocess.PIPE,
         text=True,
     )
     try:
-        with StatusListener(domain_id) as listener:
+        with StatusListener(domain_id, "firmware") as listener:
             listener.spin_until(lambda: len(listener.got) >= 5, timeout=30)
     finally:
         bridge.send_signal(2)

@@ -6,11 +6,11 @@ import sys
 from support import ROOT, domain
 
 
-def test_bare_exchange_benchmark_measures_a_rate():
-    from camo_nodes.bench import bare_rate
+def test_bare_exchange_crosses_processes_and_measures_set_up_rate_and_wall_time():
+    from camo_nodes.bench import bare_exchange
 
-    rate = bare_rate(3, 10, 1, domain())
-    assert 0 < rate < 10_000
+    bare = bare_exchange(4, 20, 2, domain())
+    assert 0 < bare["setup_s"] < bare["wall_s"] and 0 < bare["steps_per_s"] < 100_000
 
 
 def test_bench_runs_are_longer_on_small_grids_and_reject_absurd_step_counts():

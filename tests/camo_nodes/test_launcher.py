@@ -279,10 +279,10 @@ def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one
         projector = rclpy.create_node("projector", context=context)
         got = []
         try:
-            message = "no projector listens on /camo/projector/load after 0.5 s"
+            message = f"no projector listens on {config.topics.load} after 0.5 s"
             with pytest.raises(RunFailed, match=message):
                 session.switch_background("desert", limit=0.5)
-            projector.create_subscription(String, "/camo/projector/load", got.append, 10)
+            projector.create_subscription(String, config.topics.load, got.append, 10)
             session.executor.add_node(projector)
             session.switch_background("desert", limit=10.0)
             session.wait(lambda: got, "the projector got nothing", 10.0)

@@ -30,6 +30,8 @@ def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
             "100000",
             "--domain-id",
             str(domain_id),
+            "--run-id",
+            "pattern",
             "--out",
             str(tmp_path),
         ],
@@ -42,7 +44,7 @@ def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
     try:
         with ros_context(domain_id) as context:
             node = rclpy.create_node("pattern_viewer", context=context)
-            node.create_subscription(Image, "/swarm/pattern", images.append, 10)
+            node.create_subscription(Image, "/pattern/swarm/pattern", images.append, 10)
             executor = rclpy.executors.SingleThreadedExecutor(context=context)
             executor.add_node(node)
             deadline = time.monotonic() + 120
@@ -72,10 +74,13 @@ def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(coun
     from camo_core.params import CamoParams
     from camo_msgs.msg import RobotStatus
     from camo_nodes.monitor_node import MonitorNode
+    from camo_nodes.topics import RunTopics
 
     made = count_round_records
     with ros_context() as context:
-        monitor = MonitorNode(CamoParams(rows=2, cols=2), context=context)
+        monitor = MonitorNode(
+            CamoParams(rows=2, cols=2), RunTopics("monitor_test"), context=context
+        )
         for round_index in (0, 1):
             for step in range(5):
                 for robot in range(4):
@@ -91,9 +96,12 @@ def test_monitor_counts_bridged_robots_whose_hardware_is_offline():
     from camo_core.params import CamoParams
     from camo_msgs.msg import RobotStatus
     from camo_nodes.monitor_node import MonitorNode
+    from camo_nodes.topics import RunTopics
 
     with ros_context() as context:
-        monitor = MonitorNode(CamoParams(rows=2, cols=2), context=context)
+        monitor = MonitorNode(
+            CamoParams(rows=2, cols=2), RunTopics("monitor_test"), context=context
+        )
         monitor._on_status(RobotStatus(sender_id=3, row=1, col=1, phase=2, alive=False))
         assert "hardware offline 1" in monitor.progress_line()
         monitor._on_status(RobotStatus(sender_id=3, row=1, col=1, phase=2, alive=True))

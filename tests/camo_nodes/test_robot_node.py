@@ -1,12 +1,12 @@
-"""Robots started alone with `robot_node`: one-line errors, and a swarm of them equals the
-simulator."""
+"""Robots started alone with `robot_node`, and a worker started by hand: one-line errors, and a
+run of them equals the simulator."""
 
 import json
 import os
 import subprocess
 import sys
 
-from support import StatusListener, domain, run_camo
+from support import ROOT, domain, run_camo
 
 
 def test_robot_with_cell_outside_grid_exits_with_one_line():
@@ -46,87 +46,56 @@ def test_robot_with_negative_rho_exits_with_one_line():
     assert "rho_comm must be" in out.stderr and len(out.stderr.strip().splitlines()) == 1
 
 
-def test_robots_started_alone_with_robot_node_finish_like_the_simulator(tmp_path):
+def test_robots_started_alone_and_a_remote_worker_join_a_run_and_equal_the_simulator(tmp_path):
     domain_id = domain()
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
-    procs = [
-        subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "camo_projector.projector_node",
-                "--ros-args",
-                "-p",
-                "pattern:=desert",
-            ],
-            env=env,
-            stderr=subprocess.DEVNULL,
-        )
-    ]
+    options = ["--pattern", "desert", "--rows", "2", "--cols", "3", "--seed", "4"]
+    options += ["--rho-comm", "0.2"]
+    # The launcher starts no robot: row 0 is a worker's, row 1 three robots alone.
+    launcher = subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.launcher", *options, "--remote-cells", "0-2"]
+        + ["--remote-cells", "3-5", "--run-id", "alone", "--out", str(tmp_path / "run")],
+        env=env,
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    robots = []
     for col in range(3):
-        procs.append(
+        robots.append(
             subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "camo_nodes.robot_node",
-                    "--ros-args",
-                    "-p",
-                    "rows:=2",
-                    "-p",
-                    "cols:=3",
-                    "-p",
-                    "row:=1",
-                    "-p",
-                    f"col:={col}",
-                    "-p",
-                    "seed:=4",
-                    "-p",
-                    "rho_comm:=0.2",
-                ],
+                [sys.executable, "-m", "camo_nodes.robot_node", "--ros-args"]
+                + ["-p", "rows:=2", "-p", "cols:=3", "-p", "row:=1", "-p", f"col:={col}"]
+                + ["-p", "seed:=4", "-p", "rho_comm:=0.2", "-p", "run_id:=alone"],
                 env=env,
+                stderr=subprocess.PIPE,
+                text=True,
             )
         )
-    # The other row's robots share one process, as a second machine might.
-    procs.append(
-        subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "camo_nodes.worker",
-                "--params",
-                json.dumps({"rows": 2, "cols": 3, "seed": 4, "rho_comm": 0.2}),
-                "--cells",
-                "0,1,2",
-            ],
-            env=env,
-        )
+    # The other row's robots share one process, as a second machine might; it finds the run.
+    worker = subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.worker", "--cells", "0-2"],
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     try:
-        with StatusListener(domain_id) as listener:
-            listener.spin_until(lambda: len(listener.final_states()) == 6, timeout=120)
-        done = listener.final_states()
+        _, err = launcher.communicate(timeout=180)
+        assert launcher.returncode == 0, err[-2000:]
+        # Every one of them notices that the run has ended, and exits 0.
+        assert worker.wait(timeout=60) == 0
+        assert all(robot.wait(timeout=60) == 0 for robot in robots)
+        worker_said = worker.stderr.read()
     finally:
-        for proc in procs:
-            proc.send_signal(2)
-        for proc in procs:
-            proc.wait(timeout=30)
-    sim = run_camo(
-        "sim",
-        "--pattern",
-        "desert",
-        "--rows",
-        "2",
-        "--cols",
-        "3",
-        "--seed",
-        "4",
-        "--rho-comm",
-        "0.2",
-        "--out",
-        str(tmp_path),
-    )
+        for proc in (launcher, worker, *robots):
+            if proc.poll() is None:
+                proc.kill()
+    assert "hosting robots 0-2 of alone" in worker_said and "alone has ended" in worker_said
+    sim = run_camo(*["sim", *options], "--out", str(tmp_path / "sim"))
     assert sim.returncode == 0, sim.stderr
-    final = json.loads((tmp_path / "summary.json").read_text())["final"]
-    assert done == {r * 3 + c: final[r][c] for r in range(2) for c in range(3)}
-    assert all(proc.returncode == 0 for proc in procs[1:4])
+    ran = json.loads((tmp_path / "run" / "summary.json").read_text())
+    expected = json.loads((tmp_path / "sim" / "summary.json").read_text())
+    assert {k: v for k, v in ran.items() if k != "elapsed_s"} == {
+        k: v for k, v in expected.items() if k != "elapsed_s"
+    }

@@ -41,6 +41,7 @@ class TopicInfo:
     qos: str = ""  # offered_qos_profiles, YAML text
     type_hash: str = ""
     count: int = 0
+    definition: str = ""  # the ros2msg schema text the bag holds for its type
 
 
 @dataclass
@@ -249,6 +250,7 @@ def read_summary(path: str | Path) -> BagSummary:
                 schema.name if schema else "",
                 _qos_of(channel),
                 count=counts.get(channel_id, 0),
+                definition=schema.data.decode(errors="replace") if schema else "",
             )
         )
     return BagSummary(

@@ -30,17 +30,18 @@ from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
-from camo_core.exceptions import CamoError
-from camo_core.options import Parser
+from camo_core.exceptions import CamoError, UsageError
+from camo_core.options import Parser, add_network_options, network_env, new_folder_problem
 from camo_core.params import CamoParams
 from camo_core.protocol import DONE
 from camo_core.shutdown import StopFlag
 from camo_nodes.topics import (
-    BACKGROUND_TOPIC,
     LATCHED,
-    PARAMS_TOPIC,
-    RECORDED_TOPIC,
-    STATUS_TOPIC,
+    LEAN_NODE,
+    RunTopics,
+    check_run_id,
+    run_ended,
+    wait_for_run,
 )
 
 from . import msgdefs, qos_yaml
@@ -48,7 +49,7 @@ from .container import BagWriter, TopicInfo
 from .ledger import Ledger
 
 PROFILE = Path(__file__).with_name("recorder_profile.xml")
-SKIPPED = {"/rosout", "/parameter_events", RECORDED_TOPIC}
+SKIPPED = {"/rosout", "/parameter_events"}
 ROBOT_KINDS = {
     "camo_msgs/msg/Hello": "hello",
     "camo_msgs/msg/Color": "color",
@@ -70,13 +71,17 @@ class RecorderNode(Node):
     def __init__(
         self,
         path: str,
+        run: RunTopics | None,
         topics: list[str] | None = None,
         discovery_period: float = 0.5,
         flush_period: float = 1.0,
         **kwargs,
     ) -> None:
-        super().__init__("recorder", namespace="/camo", **kwargs)
+        """Records the run's topics (those under /<run>/), or with `topics` only those."""
+        namespace = run.swarm_namespace if run else "/"
+        super().__init__("recorder", namespace=namespace, **kwargs)
         self.bag = BagWriter(path, library="camo recorder_node")
+        self.run = run
         self.wanted = set(topics) if topics else None
         self.ledger = Ledger()
         self._stamped: dict[str, bool] = {}
@@ -86,9 +91,11 @@ class RecorderNode(Node):
         self.flush_period = flush_period
         self._flushed = time.monotonic()
         self.create_timer(flush_period, self._flush)
-        self.report_pub = self.create_publisher(String, RECORDED_TOPIC, LATCHED)
+        self.report_pub = None
+        if run is not None:
+            self.report_pub = self.create_publisher(String, run.recorded, LATCHED)
+            self.create_timer(0.25, self.report)
         self._reported = None
-        self.create_timer(0.25, self.report)
         self.discover()
         self.report()
 
@@ -99,11 +106,7 @@ class RecorderNode(Node):
 
     def discover(self) -> None:
         for name, types in self.get_topic_names_and_types():
-            if (
-                name in self._recorded
-                or name in SKIPPED
-                or (self.wanted and name not in self.wanted)
-            ):
+            if name in self._recorded or name in SKIPPED or not self._wants(name):
                 continue
             if len(types) != 1:
                 self.get_logger().warning(f"{name} carries several types {types}; not recorded")
@@ -113,6 +116,12 @@ class RecorderNode(Node):
             if not publishers:
                 continue  # only subscribers so far: wait for a publisher's QoS
             self._subscribe(name, msgdefs.full_name(types[0]), [p.qos_profile for p in publishers])
+
+    def _wants(self, name: str) -> bool:
+        if self.wanted is not None:
+            return name in self.wanted
+        run = self.run
+        return run is not None and name.startswith(f"/{run.run}/") and name != run.recorded
 
     def _subscribe(self, name: str, type_name: str, offered: list[QoSProfile]) -> None:
         try:
@@ -128,7 +137,8 @@ class RecorderNode(Node):
         )
         fields = list(cls.get_fields_and_field_types().items())
         self._stamped[name] = bool(fields) and fields[0] == ("header", "std_msgs/Header")
-        if type_name in ROBOT_KINDS or name in (STATUS_TOPIC, PARAMS_TOPIC):
+        run = self.run
+        if run is not None and (type_name in ROBOT_KINDS or name in (run.status, run.params)):
             self._decoders[name] = cls
         # As rosbag2 adapts: reliable and transient-local only when every publisher offers it.
         reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
@@ -152,20 +162,20 @@ class RecorderNode(Node):
         cls = self._decoders.get(topic)
         if cls is not None:
             self._account(topic, deserialize_message(data, cls))
-        elif topic == BACKGROUND_TOPIC:
+        elif self.run is not None and topic == self.run.background:
             self.ledger.backgrounds = self.recorded(topic)
         if time.monotonic() - self._flushed > self.flush_period:  # timers starve under floods
             self._flush()
 
     def _account(self, topic: str, msg) -> None:
         """What the ledger must know of a run message: who sent it, in which round."""
-        if topic == PARAMS_TOPIC:
+        if topic == self.run.params:
             try:
                 setup = json.loads(msg.data)
                 self.ledger.set_run(CamoParams(**setup["params"]), len(setup["backgrounds"]))
             except (ValueError, KeyError, TypeError, CamoError):
-                self.get_logger().warning(f"{PARAMS_TOPIC} does not hold a run's parameters")
-        elif topic == STATUS_TOPIC:
+                self.get_logger().warning(f"{topic} does not hold a run's parameters")
+        elif topic == self.run.status:
             if msg.phase == DONE:
                 self.ledger.reported_done(msg.sender_id, msg.round)
         else:
@@ -173,7 +183,7 @@ class RecorderNode(Node):
             self.ledger.message(kind, msg.sender_id, msg.round)
 
     def report(self) -> None:
-        """/swarm/recorded: per round, how many robots' rounds the bag holds completely."""
+        """/<run>/swarm/recorded: per round, how many robots' rounds the bag holds completely."""
         ledger = self.ledger
         rounds = ledger.rounds or 0
         report = {
@@ -194,16 +204,42 @@ class RecorderNode(Node):
         self.bag.close()
 
 
+def join(executor, run_id: str | None, wait: float, stop) -> RunTopics:
+    """The run to record: as soon as its topics appear, to miss nothing."""
+    finder = Node("recorder_join", **LEAN_NODE)
+    executor.add_node(finder)
+    try:
+        found = wait_for_run(
+            finder, lambda: executor.spin_once(timeout_sec=0.05), run_id, wait, stop
+        )
+    finally:
+        executor.remove_node(finder)
+        finder.destroy_node()
+    return RunTopics(found)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = Parser(prog="recorder_node", description="record topics into an MCAP bag folder")
     parser.add_argument(
         "path", help="bag folder to create (NAME/ with NAME_0.mcap and metadata.yaml)"
     )
     parser.add_argument(
-        "--topics", nargs="+", default=None, help="only these topics (default: every topic)"
+        "--topics", nargs="+", default=None, help="only these topics (default: the run's)"
     )
+    parser.add_argument(
+        "--run-id", default=None, help="the run to record (default: the only one in the domain)"
+    )
+    parser.add_argument(
+        "--wait", type=float, default=120.0, help="seconds to wait for the run (default 120)"
+    )
+    add_network_options(parser)
     try:
         args, ros_args = parser.parse_known_args(argv)
+        os.environ.update(network_env(args, os.environ))
+        run_id = check_run_id(args.run_id) if args.run_id else None
+        problem = new_folder_problem(Path(args.path), "the bag")
+        if problem:
+            raise UsageError(problem)
     except CamoError as exc:
         print(f"recorder_node: error: {exc}", file=sys.stderr)
         return 2
@@ -214,10 +250,17 @@ def main(argv: list[str] | None = None) -> int:
     node = None
     executor = EventsExecutor()
     try:
-        node = RecorderNode(args.path, args.topics)
+        run = None
+        if args.topics is None:
+            run = join(executor, run_id, args.wait, stop)
+        node = RecorderNode(args.path, run, args.topics)
         executor.add_node(node)
-        print(f"recorder_node: recording to {node.bag.file} (Ctrl-C to stop)", file=sys.stderr)
-        while not stop and rclpy.ok():
+        what = f"run {run.run}" if run else "topics"
+        print(
+            f"recorder_node: recording {what} to {node.bag.file} (Ctrl-C to stop)", file=sys.stderr
+        )
+        ended = run_ended(node, run) if run else (lambda: False)
+        while not stop and rclpy.ok() and not ended():
             executor.spin_once(timeout_sec=0.2)
     except CamoError as exc:
         print(f"recorder_node: error: {exc}", file=sys.stderr)

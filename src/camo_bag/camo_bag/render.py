@@ -16,6 +16,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from mcap.records import Schema
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
@@ -27,9 +28,10 @@ from camo_core.output import run_title, write_round
 from camo_core.params import CamoParams
 from camo_core.record import Backgrounds, Rounds
 from camo_msgs.msg import RobotStatus
-from camo_nodes.topics import BACKGROUND_TOPIC, PARAMS_TOPIC, STATUS_TOPIC, image_from_msg
+from camo_nodes.topics import PARAMS_SUFFIX, image_from_msg
 
-from .container import BagError, read_messages
+from .container import BagError, BagSummary, read_messages, read_summary
+from .msgdefs import message_definition
 
 
 @dataclass
@@ -43,33 +45,60 @@ class RecordedRun:
     elapsed_s: dict[int, float]  # span of each round's statuses in the bag
 
 
+def run_topics_of(summary: BagSummary) -> tuple[str, str, str]:
+    """The bag's run: its parameters, status and background topics. A bag recorded before runs
+    had identities holds them at the root (/swarm/params, ...)."""
+    params = sorted(t.name for t in summary.topics if t.name.endswith(PARAMS_SUFFIX))
+    if not params:
+        raise BagError(
+            f"{summary.path} has no {PARAMS_SUFFIX} topic: it was not recorded from `./camo run`"
+        )
+    if len(params) > 1:
+        raise BagError(f"{summary.path} holds several runs ({', '.join(params)}): not rendered")
+    root = params[0][: -len(PARAMS_SUFFIX)]  # "/<run>", or "" in the older layout
+    return params[0], f"{root}/swarm/status", f"{root}/camo/background"
+
+
+def status_decoder(summary: BagSummary, topic: str):
+    """Statuses decode with the installed RobotStatus when the bag's schema is its, else (a bag
+    of an older camo) with the schema the bag holds; fields it lacks read as empty."""
+    info = next((t for t in summary.topics if t.name == topic), None)
+    if info is None or info.definition == message_definition("camo_msgs/msg/RobotStatus"):
+        return lambda data: deserialize_message(data, RobotStatus)
+    from mcap_ros2.decoder import DecoderFactory
+
+    schema = Schema(id=1, name=info.type, encoding="ros2msg", data=info.definition.encode())
+    return DecoderFactory().decoder_for("cdr", schema)
+
+
 def load_run(path: str | Path) -> RecordedRun:
     """The run's parameters, statuses and backgrounds, from a bag."""
+    summary = read_summary(path)
+    params_topic, status_topic, background_topic = run_topics_of(summary)
+    decode_status = status_decoder(summary, status_topic)
     setup = None
     images = Backgrounds()
     pending: list[tuple[RobotStatus, int]] = []
     try:
-        for message in read_messages(path, [PARAMS_TOPIC, STATUS_TOPIC, BACKGROUND_TOPIC]):
-            if message.topic == PARAMS_TOPIC and setup is None:
+        for message in read_messages(path, [params_topic, status_topic, background_topic]):
+            if message.topic == params_topic and setup is None:
                 setup = json.loads(deserialize_message(message.data, String).data)
-            elif message.topic == BACKGROUND_TOPIC:
+            elif message.topic == background_topic:
                 msg = deserialize_message(message.data, Image)
                 stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
                 images.add(stamp, lambda msg=msg: image_from_msg(msg))
-            elif message.topic == STATUS_TOPIC:
-                pending.append((deserialize_message(message.data, RobotStatus), message.log_time))
+            elif message.topic == status_topic:
+                pending.append((decode_status(message.data), message.log_time))
     except CamoError:
         raise
     except Exception as exc:  # noqa: BLE001 - bytes that do not decode as their recorded type
         raise BagError(f"{path}: a message does not decode as its recorded type ({exc})") from None
     if setup is None:
-        raise BagError(
-            f"{path} has no {PARAMS_TOPIC} message: it was not recorded from `./camo run`"
-        )
+        raise BagError(f"{path} has no message on {params_topic}")
     try:
         params = CamoParams(**setup["params"])
     except (TypeError, KeyError):
-        raise BagError(f"{path}: {PARAMS_TOPIC} does not hold a run's parameters") from None
+        raise BagError(f"{path}: {params_topic} does not hold a run's parameters") from None
     rounds = Rounds(params)
     times: dict[int, list[int]] = {}
     for status, log_time in pending:

@@ -18,9 +18,10 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.options import Parser
+from camo_core.options import Parser, add_network_options, network_env
 from camo_core.progress import ProgressBar
 from camo_core.shutdown import StopFlag
+from camo_nodes.topics import LEAN_NODE, check_run_id
 
 from . import msgdefs, qos_yaml
 from .container import BagSummary, read_messages, read_summary
@@ -52,9 +53,21 @@ def build_parser() -> Parser:
         help="seconds to keep publishers up after the last message (default 2)",
     )
     parser.add_argument(
-        "--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited)"
+        "--run-id",
+        default=None,
+        help="publish the bag's run under this run id instead (/<old>/... becomes /<new>/...), "
+        "e.g. to drive a fresh swarm with the recorded background",
     )
+    add_network_options(parser)
     return parser
+
+
+def renamed(topic: str, run_id: str | None) -> str:
+    """A recorded topic under another run id (topics of the older layout, at the root, keep
+    their names)."""
+    if run_id is None or topic.count("/") < 3:
+        return topic
+    return "/" + run_id + "/" + topic.split("/", 2)[2]
 
 
 def sleep_until(due: float, stop: StopFlag) -> None:
@@ -68,11 +81,13 @@ def replay(args, summary: BagSummary, stop: StopFlag) -> int:
         unknown = sorted(set(args.topics) - {t.name for t in summary.topics})
         if unknown:
             raise UsageError(f"the bag has no topic {unknown[0]} (see ./camo bag info {args.bag})")
-    node = Node("replay", namespace="/camo", start_parameter_services=False, enable_rosout=False)
+    node = Node("replay", **LEAN_NODE)
     try:
         publishers = {
             t.name: node.create_publisher(
-                msgdefs.message_class(t.type), t.name, qos_yaml.load_first(t.qos)
+                msgdefs.message_class(t.type),
+                renamed(t.name, args.run_id),
+                qos_yaml.load_first(t.qos),
             )
             for t in topics
         }
@@ -112,14 +127,14 @@ def main(argv: list[str] | None = None) -> int:
                 raise UsageError(
                     f"--{name} must be in 0..3600 seconds (got {getattr(args, name)})"
                 )
-        if args.domain_id is not None and not 0 <= args.domain_id <= 232:
-            raise UsageError(f"--domain-id must be in 0..232 (got {args.domain_id})")
+        if args.run_id is not None:
+            check_run_id(args.run_id)
+        env = network_env(args, os.environ)
         summary = read_summary(args.bag)  # a bad bag fails before ROS starts
     except CamoError as exc:
         print(f"camo replay: error: {exc}", file=sys.stderr)
         return 2
-    if args.domain_id is not None:
-        os.environ["ROS_DOMAIN_ID"] = str(args.domain_id)
+    os.environ.update(env)
     stop = StopFlag()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     try:

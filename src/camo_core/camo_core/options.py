@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
 import time
 from pathlib import Path
@@ -118,3 +119,82 @@ def node_help(prog: str, description: str, parameters: dict[str, object]) -> str
         lines += ["", "parameters (default):"]
         lines += [f"  {name} ({value!r})" for name, value in parameters.items()]
     return "\n".join(lines)
+
+
+# ---- how a process finds the others: DDS discovery ----------------------------------------
+
+NETWORKS = ("localhost", "subnet")
+
+
+def add_network_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--network",
+        choices=NETWORKS,
+        default=None,
+        help="discovery range: localhost (this machine only, the default) or subnet "
+        "(multicast on the LAN: robots on several machines)",
+    )
+    parser.add_argument(
+        "--discovery-server",
+        metavar="HOST:PORT",
+        default=None,
+        help="use this Fast DDS discovery server (./camo discovery-server) instead of multicast",
+    )
+    parser.add_argument(
+        "--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited, else 0)"
+    )
+
+
+def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, str]:
+    """The environment a ROS process of ours runs in, from --network, --discovery-server and
+    --domain-id (raises UsageError)."""
+    env = dict(environ)
+    if args.domain_id is not None:
+        if not 0 <= args.domain_id <= 232:
+            raise UsageError(f"--domain-id must be in 0..232 (got {args.domain_id})")
+        env["ROS_DOMAIN_ID"] = str(args.domain_id)
+    if args.network is not None:
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = args.network.upper()
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if args.discovery_server is not None:
+        host, _, port = args.discovery_server.rpartition(":")
+        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise UsageError(f"--discovery-server takes HOST:PORT (got {args.discovery_server!r})")
+        env["ROS_DISCOVERY_SERVER"] = args.discovery_server
+        # A server tells plain clients only of endpoints that match theirs; tools that list the
+        # graph (a recorder, a worker looking for its run) must see everything.
+        env["ROS_SUPER_CLIENT"] = "TRUE"
+    return env
+
+
+def parse_ranges(texts: list[str], count: int, option: str = "--cells") -> list[tuple[int, int]]:
+    """FIRST-LAST options (robot ids, inclusive; a single id is a range of one) as sorted,
+    non-overlapping ranges inside 0..count-1."""
+    ranges = []
+    for text in texts:
+        first, dash, last = text.partition("-")
+        try:
+            a, b = int(first), int(last if dash else first)
+        except ValueError:
+            raise UsageError(f"{option} takes FIRST-LAST, robot ids (got {text!r})") from None
+        if not 0 <= a <= b < count:
+            raise UsageError(
+                f"{option} {text}: robot ids run from 0 to {count - 1}, first <= last"
+            )
+        ranges.append((a, b))
+    ranges.sort()
+    for (_, b), (c, _) in itertools.pairwise(ranges):
+        if c <= b:
+            raise UsageError(f"{option}: ranges overlap at robot {c}")
+    return ranges
+
+
+def contiguous(cells: list[int]) -> list[tuple[int, int]]:
+    """Sorted robot ids as (first, last) runs of consecutive ids."""
+    runs: list[tuple[int, int]] = []
+    for cell in sorted(cells):
+        if runs and cell == runs[-1][1] + 1:
+            runs[-1] = (runs[-1][0], cell)
+        else:
+            runs.append((cell, cell))
+    return runs

@@ -47,8 +47,9 @@ class RoundRecord:
         self.sensed[i] = report.sensed
         self.state[i] = report.state
         self.deadlines[i] = report.deadlines
-        if report.silent or i in self.given_up:
-            self.given_up[i] = frozenset(report.silent)
+        silent = getattr(report, "silent", ())  # a status of an older camo has none
+        if silent or i in self.given_up:
+            self.given_up[i] = frozenset(silent)
         if report.phase >= CONSENSUS:
             self.p_latest[i] = report.p
         if report.phase == CONSENSUS:

@@ -31,8 +31,8 @@ from camo_core.protocol import CONSENSUS, NO_PATTERN, SENSING
 from camo_core.sensing import Calibration
 from camo_core.shutdown import StopFlag
 from camo_msgs.msg import RobotStatus
-from camo_nodes.robot_node import LEAN_NODE, ROBOT_PARAMETERS, host_robots, params_from_node
-from camo_nodes.topics import STATUS_TOPIC, history_qos
+from camo_nodes.robot_node import ROBOT_PARAMETERS, host_robots, params_from_node
+from camo_nodes.topics import LEAN_NODE, RunTopics, history_qos, run_ended, run_from_parameter
 
 from .firmware import FirmwareState
 from .link import DropletDisconnected, DropletError, DropletLink
@@ -59,20 +59,22 @@ class DropletMonitorNode(Node):
     def __init__(
         self,
         params: CamoParams,
+        topics: RunTopics,
         row: int,
         col: int,
         link: DropletLink | None = None,
         transcript: Path | None = None,
         **kwargs,
     ) -> None:
-        super().__init__(f"droplet_monitor_{row}_{col}", namespace="/camo", **kwargs)
+        name = f"droplet_monitor_{row}_{col}"
+        super().__init__(name, namespace=topics.robot_namespace, **kwargs)
         self.params, self.row, self.col = params, row, col
         self.link = link
         self.lines = (
             list(Path(transcript).read_text(errors="replace").splitlines()) if transcript else None
         )
         self.state: FirmwareState | None = None
-        self.status_pub = self.create_publisher(RobotStatus, STATUS_TOPIC, history_qos(10_000))
+        self.status_pub = self.create_publisher(RobotStatus, topics.status, history_qos(10_000))
         self.reconnector = Reconnector(link, self.get_logger()) if link else None
         self.finished = False
         self.create_timer(0.05, self._poll)
@@ -132,7 +134,9 @@ class DropletMonitorNode(Node):
         self.status_pub.publish(status)
 
 
-def run_bridge(params: CamoParams, row: int, col: int, values: dict, timeouts, stop) -> int:
+def run_bridge(
+    params: CamoParams, topics: RunTopics, row: int, col: int, values: dict, timeouts, stop
+) -> int:
     """Robot mode: this cell's robot, with the Droplet's sensor and LED."""
     link = DropletLink(values["port"], timeout=values["serial_timeout"], retries=values["retries"])
     if values["calibration"]:
@@ -146,18 +150,26 @@ def run_bridge(params: CamoParams, row: int, col: int, values: dict, timeouts, s
         link, reconnector, parse_rgb(values["led_on"]), parse_rgb(values["led_off"]), (row, col)
     )
     host = host_robots(
-        params, [cell], *timeouts, lean=False, sensors={cell: sensor}, displays={cell: led}
+        params,
+        topics,
+        [(cell, cell)],
+        *timeouts,
+        lean=False,
+        sensors={cell: sensor},
+        displays={cell: led},
     )
     reconnector.logger = host.node.get_logger()
     host.node.create_timer(0.25, led.keep)
     led.keep()
     try:
-        return host.run(stop)
+        return host.run(stop, until=run_ended(host.node, topics))
     finally:
         link.close()
 
 
-def run_monitor(params: CamoParams, row: int, col: int, values: dict, stop) -> int:
+def run_monitor(
+    params: CamoParams, topics: RunTopics, row: int, col: int, values: dict, stop
+) -> int:
     """Monitor mode: a Droplet running the firmware, or a transcript of one."""
     link = None
     if values["port"]:
@@ -167,7 +179,7 @@ def run_monitor(params: CamoParams, row: int, col: int, values: dict, stop) -> i
     transcript = Path(values["transcript"]) if values["transcript"] else None
     if transcript is not None and not transcript.is_file():
         raise ParameterError(f"transcript not found: {transcript}")
-    node = DropletMonitorNode(params, row, col, link=link, transcript=transcript)
+    node = DropletMonitorNode(params, topics, row, col, link=link, transcript=transcript)
     try:
         while not stop and rclpy.ok():
             rclpy.spin_once(node, timeout_sec=0.1)
@@ -195,15 +207,16 @@ def main(args=None) -> int:
             values = {
                 n: reader.declare_parameter(n, v).value for n, v in BRIDGE_PARAMETERS.items()
             }
+            if not values["port"] and not values["transcript"]:
+                raise ParameterError("give the Droplet's serial port: -p port:=/dev/ttyUSB0")
+            if not (values["serial_timeout"] > 0 and values["retries"] >= 0):
+                raise ParameterError("serial_timeout must be positive and retries not negative")
+            topics = run_from_parameter(reader, stop)
         finally:
             reader.destroy_node()
-        if not values["port"] and not values["transcript"]:
-            raise ParameterError("give the Droplet's serial port: -p port:=/dev/ttyUSB0")
-        if not (values["serial_timeout"] > 0 and values["retries"] >= 0):
-            raise ParameterError("serial_timeout must be positive and retries not negative")
         if values["monitor"] or values["transcript"]:
-            return run_monitor(params, row, col, values, stop)
-        return run_bridge(params, row, col, values, timeouts, stop)
+            return run_monitor(params, topics, row, col, values, stop)
+        return run_bridge(params, topics, row, col, values, timeouts, stop)
     except CamoError as exc:
         print(f"droplet_bridge: error: {exc}", file=sys.stderr)
         return 2

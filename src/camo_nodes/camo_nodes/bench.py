@@ -1,10 +1,17 @@
-"""`./camo bench ros`: the swarm's speed against a bare rclpy exchange of the same shape.
+"""`./camo bench ros`: the swarm against a bare rclpy exchange of the same shape, in one run.
 
-The bare exchange has the same topology (each node subscribes to its neighbours'
-per-robot Vote topics, slots 0-7), message type and size, QoS, executor and
-split over processes as `./camo run`, and does nothing else: publish step t,
-wait for every neighbour's step t, publish step t+1. The ratio of the swarm's
-step rate to the bare rate is the cost of the algorithm and its bookkeeping.
+The bare exchange moves the same messages the same way and does nothing else:
+the same processes, each hosting a contiguous block of robot ids; per block the
+same eight tile topics (edge and core, four kinds); each process subscribes to
+the edge topics of the blocks that hold its robots' neighbours and hands the
+rest over in memory. Each step every robot publishes a `camo_msgs/Vote`, and a
+process moves on once every remote vote of that step that its robots need has
+arrived. No robot nodes, no protocol, no statuses, no monitor: the ratio of the
+swarm's figures to these is the cost of the algorithm and its bookkeeping.
+
+Figures: set-up (launch until every robot has voted; bare: until the
+processes are matched), steps per second (every robot voting to every robot
+done; bare: its steps), and launch to exit.
 """
 
 from __future__ import annotations
@@ -20,133 +27,127 @@ from pathlib import Path
 
 import rclpy
 from rclpy.experimental import EventsExecutor
-from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from camo_core.grid import neighbor_ids
+from camo_core.params import CamoParams
 from camo_msgs.msg import Vote
 
 from .processes import split_cells
-from .topics import history_qos, robot_topic
+from .topics import LEAN_NODE, RunTopics, history_qos, tile_name
+from .transport import edge_of, listener_qos
+
+BARE_RUN = "bench_bare"
 
 
-class BareNode(Node):
-    """Publishes step t and moves on when every neighbour's step t has arrived."""
-
-    def __init__(self, robot: int, rows: int, cols: int, steps: int, qos) -> None:
-        super().__init__(f"bare_{robot}", start_parameter_services=False, enable_rosout=False)
-        self.robot, self.steps, self.step = robot, steps, 0
-        row, col = divmod(robot, cols)
-        self.neighbors = [n for n in neighbor_ids(row, col, rows, cols)[:8] if n is not None]
-        self.pub = self.create_publisher(Vote, robot_topic(robot, "vote"), qos)
-        self.got: dict[int, set[int]] = {}
-        for n in self.neighbors:
-            self.create_subscription(Vote, robot_topic(n, "vote"), self._on_vote, qos)
-        self.started = self.finished = None
-        self._send()
-
-    def _send(self) -> None:
-        self.pub.publish(Vote(sender_id=self.robot, step=self.step, p=[0.2, 0.3, 0.5], degree=8))
-
-    def _on_vote(self, msg: Vote) -> None:
-        self.got.setdefault(msg.step, set()).add(msg.sender_id)
-        while self.step < self.steps and len(self.got.get(self.step, ())) == len(self.neighbors):
-            if self.step == 0:
-                self.started = time.monotonic()
-            self.step += 1
-            if self.step < self.steps:
-                self._send()
-            else:
-                self.finished = time.monotonic()
-
-
-def bare_worker(rows: int, cols: int, steps: int, cells: list[int]) -> dict:
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    executor = EventsExecutor()
-    nodes = [BareNode(c, rows, cols, steps, history_qos(steps + 4)) for c in cells]
-    for node in nodes:
-        executor.add_node(node)
-    deadline = time.monotonic() + 600
-    while any(n.finished is None for n in nodes) and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.1)
-    # Keep serving our messages a little for neighbours in the other processes.
-    linger = time.monotonic() + 3
-    while time.monotonic() < linger:
-        executor.spin_once(timeout_sec=0.1)
-    report = {
-        "start": min(n.started for n in nodes if n.started),
-        "end": max(n.finished or 0 for n in nodes),
-        "finished": sum(n.finished is not None for n in nodes),
+def bare_worker(side: int, steps: int, block: int, procs: int) -> dict:
+    """One process of the bare exchange (block `block` of `procs`); its timings."""
+    started = time.monotonic()
+    params = CamoParams(rows=side, cols=side, consensus_steps=steps)
+    blocks = split_cells(list(range(side * side)), procs)
+    mine = blocks[block]
+    hosted = set(mine)
+    first, last = mine[0], mine[-1]
+    edge = edge_of(params, hosted, mine)
+    needed = {
+        n
+        for r in mine
+        for n in neighbor_ids(*divmod(r, side), side, side)[:8]
+        if n is not None and n not in hosted
     }
+    topics = RunTopics(BARE_RUN)
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node(f"bare_{block}", **LEAN_NODE)
+    qos = history_qos(len(mine) * (steps + 4))
+    name = tile_name(first, last)
+    writers = {
+        part: node.create_publisher(Vote, topics.tile(name, part, "vote"), qos)
+        for part in ("edge", "core")
+    }
+    got: dict[int, int] = {}  # step -> remote votes of it received
+
+    def on_vote(msg: Vote) -> None:
+        if msg.sender_id in needed:
+            got[msg.step] = got.get(msg.step, 0) + 1
+
+    peers = [b for b in blocks if b is not mine and any(n in b for n in needed)]
+    for peer in peers:
+        topic = topics.tile(tile_name(peer[0], peer[-1]), "edge", "vote")
+        node.create_subscription(Vote, topic, on_vote, listener_qos())
+    executor = EventsExecutor()
+    executor.add_node(node)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and (
+        writers["edge"].get_subscription_count() < len(peers)
+        or sum(s.get_publisher_count() for s in node.subscriptions) < len(peers)
+    ):
+        executor.spin_once(timeout_sec=0.05)
+    matched = time.monotonic()
+    vote = Vote(p=[0.2, 0.3, 0.5], degree=8)
+    local = {}
+    for step in range(steps):
+        vote.step = step
+        for robot in mine:
+            vote.sender_id = robot
+            writers["edge" if robot in edge else "core"].publish(vote)
+            local[robot] = step  # the in-memory hand-over to this process's robots
+        while got.get(step, 0) < len(needed) and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+    done = time.monotonic()
+    linger = time.monotonic() + 2  # serve our history to slower peers a little longer
+    while time.monotonic() < linger:
+        executor.spin_once(timeout_sec=0.05)
+    executor.shutdown()
+    node.destroy_node()
     rclpy.shutdown()
-    return report
+    return {"started": started, "matched": matched, "done": done, "complete": done < deadline}
 
 
-def bare_rate(side: int, steps: int, procs: int, domain: int) -> float:
-    """Steps per second of the bare exchange (first step-0 completion to last finish)."""
+def bare_exchange(side: int, steps: int, procs: int, domain: int) -> dict:
+    """The bare exchange in `procs` processes: set-up, steps per second, launch to exit."""
     env = {
         **os.environ,
         "ROS_DOMAIN_ID": str(domain),
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
     }
+    launched = time.monotonic()
+    command = [sys.executable, "-m", "camo_nodes.bench", "--bare-worker", str(side), str(steps)]
     workers = [
         subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "camo_nodes.bench",
-                "--bare-worker",
-                str(side),
-                str(steps),
-                ",".join(map(str, cells)),
-            ],
-            env=env,
-            stdout=subprocess.PIPE,
-            text=True,
+            [*command, str(k), str(procs)], env=env, stdout=subprocess.PIPE, text=True
         )
-        for cells in split_cells(list(range(side * side)), procs)
+        for k in range(min(procs, side * side))
     ]
     reports = [json.loads(w.communicate(timeout=900)[0].strip().splitlines()[-1]) for w in workers]
-    if sum(r["finished"] for r in reports) != side * side:
-        raise RuntimeError(f"bare exchange at {side}x{side} did not finish")
-    return (steps - 1) / (max(r["end"] for r in reports) - min(r["start"] for r in reports))
+    exited = time.monotonic()
+    if not all(r["complete"] for r in reports):
+        raise RuntimeError(f"the bare exchange at {side}x{side} did not finish")
+    start = max(r["matched"] for r in reports)
+    end = max(r["done"] for r in reports)
+    return {
+        "setup_s": start - launched,
+        "steps_per_s": steps / max(end - start, 1e-9),
+        "wall_s": exited - launched,
+    }
 
 
 def swarm_run(side: int, procs: int, domain: int, out: Path, steps: int | None = None) -> dict:
-    """Run `./camo run` once (paper profile; `steps` consensus + formation steps if given);
-    its timing.json has the wall time and the step rate."""
-    start = time.monotonic()
-    length = (
-        [] if steps is None else ["--consensus-steps", str(steps - 10), "--formation-steps", "10"]
-    )
+    """`./camo run` once (paper profile; `steps` consensus + formation steps if given): its
+    timing.json, and launch to exit."""
+    length = [] if steps is None else ["--consensus-steps", str(steps - 10)]
+    launched = time.monotonic()
     proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "camo_nodes.launcher",
-            "--rows",
-            str(side),
-            "--cols",
-            str(side),
-            "--procs",
-            str(procs),
-            "--domain-id",
-            str(domain),
-            "--out",
-            str(out),
-            *length,
-        ],
+        [sys.executable, "-m", "camo_nodes.launcher", "--rows", str(side), "--cols", str(side)]
+        + ["--procs", str(procs), "--domain-id", str(domain), "--out", str(out), *length],
         capture_output=True,
         text=True,
         timeout=1800,
     )
-    wall = time.monotonic() - start
+    wall = time.monotonic() - launched
     if proc.returncode != 0:
-        raise RuntimeError(
-            f"camo run {side}x{side} failed: {proc.stderr.strip().splitlines()[-1:]}"
-        )
+        raise RuntimeError(f"camo run {side}x{side} failed: {proc.stderr.strip()[-300:]}")
     timing = json.loads((out / "timing.json").read_text())
-    return {"robots": f"{side}x{side}", "procs": procs, "wall_s": wall, **timing}
+    return {"setup_s": timing["startup_s"], "steps_per_s": timing["steps_per_s"], "wall_s": wall}
 
 
 def default_steps(side: int) -> int:
@@ -154,95 +155,99 @@ def default_steps(side: int) -> int:
     return max(300, 100_000 // side**2)
 
 
+def compare(side: int, procs: int, domain: int, out: Path, steps: int | None, repeat: int) -> dict:
+    """Medians of alternating swarm and bare runs (this shared machine's speed drifts)."""
+    swarm, bare = [], []
+    bare_steps = steps or 45
+    for k in range(repeat):
+        swarm.append(swarm_run(side, procs, domain, out / f"{side}_{k}", steps))
+        bare.append(bare_exchange(side, bare_steps, procs, domain))
+        print(
+            f"{side}x{side}: swarm {swarm[-1]['steps_per_s']:.1f} steps/s, "
+            f"bare {bare[-1]['steps_per_s']:.1f}; launch to exit {swarm[-1]['wall_s']:.1f} s, "
+            f"bare {bare[-1]['wall_s']:.1f} s",
+            file=sys.stderr,
+        )
+    row = {"robots": f"{side}x{side}", "procs": procs, "steps": steps or 45, "repeat": repeat}
+    for key in ("setup_s", "steps_per_s", "wall_s"):
+        row[f"swarm_{key}"] = statistics.median(r[key] for r in swarm)
+        row[f"bare_{key}"] = statistics.median(r[key] for r in bare)
+    row["rate_ratio"] = row["swarm_steps_per_s"] / row["bare_steps_per_s"]
+    return row
+
+
+def format_table(rows: list[dict]) -> str:
+    head = (
+        f"{'robots':>8} {'steps':>6} {'set-up s':>17} {'steps/s':>21} {'ratio':>6} "
+        f"{'launch to exit s':>18}"
+    )
+    lines = [f"{'':>15} {'swarm / bare':>17} {'swarm / bare':>21} {'':>6} {'swarm / bare':>18}"]
+    lines.insert(0, head)
+    for r in rows:
+        setup = f"{r['swarm_setup_s']:>8.1f} / {r['bare_setup_s']:<6.1f}"
+        rate = f"{r['swarm_steps_per_s']:>9.1f} / {r['bare_steps_per_s']:<9.1f}"
+        wall = f"{r['swarm_wall_s']:>8.1f} / {r['bare_wall_s']:<7.1f}"
+        lines.append(
+            f"{r['robots']:>8} {r['steps']:>6} {setup} {rate} {r['rate_ratio']:>6.2f} {wall}"
+        )
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="camo bench ros")
+    parser = argparse.ArgumentParser(prog="camo bench ros", description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument(
-        "--sides", default="8,16", help="grid sides for the rate comparison (default 8,16)"
+        "--rate-sides", default="8", help="grid sides of the long-run rate comparison (default 8)"
     )
     parser.add_argument(
-        "--wall-sides", default="8,32", help="grid sides for whole-run wall times (default 8,32)"
+        "--sides", default="16,32,64", help="grid sides of the whole-run comparison"
     )
     parser.add_argument("--procs", type=int, default=os.cpu_count() or 1)
     parser.add_argument(
         "--steps",
         type=int,
         default=None,
-        help="steps per rate measurement, swarm and bare alike (default 100000 / robots, at "
-        "least 300: 1562 at 8x8, 390 at 16x16; 300-step 8x8 runs last under 3 s and "
-        "their rates varied by a factor of 4)",
+        help="steps per rate run (default 100000 / robots, at least 300)",
     )
     parser.add_argument(
-        "--repeat", type=int, default=3, help="runs per rate; the median is reported (default 3)"
+        "--repeat", type=int, default=3, help="runs per figure (median; default 3)"
     )
     parser.add_argument(
         "--out", type=Path, default=Path("results") / time.strftime("bench-ros-%Y%m%d-%H%M%S")
     )
-    parser.add_argument("--bare-worker", nargs=3, help=argparse.SUPPRESS)
+    parser.add_argument("--bare-worker", nargs=4, type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.bare_worker:
-        side, steps, cells = (
-            int(args.bare_worker[0]),
-            int(args.bare_worker[1]),
-            args.bare_worker[2],
-        )
-        print(json.dumps(bare_worker(side, side, steps, [int(c) for c in cells.split(",")])))
+        print(json.dumps(bare_worker(*args.bare_worker)))
         return 0
     if not ((args.steps is None or 20 <= args.steps <= 100_000) and args.repeat >= 1):
         parser.error("--steps must be in 20..100000 and --repeat at least 1")
     domain = 180 + os.getpid() % 40
-    rates, walls = [], []
-    for side in (int(s) for s in args.sides.split(",")):
-        # Alternate swarm and bare runs and take medians: this shared machine's speed drifts.
-        swarm_rates, bare_rates = [], []
-        steps = args.steps or default_steps(side)
-        for k in range(args.repeat):
-            swarm = swarm_run(side, args.procs, domain, args.out / f"swarm_{side}_{k}", steps)
-            swarm_rates.append(swarm["steps_per_s"])
-            bare_rates.append(bare_rate(side, steps, args.procs, domain))
-            print(
-                f"{side}x{side}: swarm {swarm_rates[-1]:.2f} steps/s, "
-                f"bare exchange {bare_rates[-1]:.2f} steps/s",
-                file=sys.stderr,
-            )
-        swarm_rate, bare = statistics.median(swarm_rates), statistics.median(bare_rates)
-        rates.append(
-            {
-                "robots": f"{side}x{side}",
-                "swarm_steps_per_s": swarm_rate,
-                "bare_steps_per_s": bare,
-                "ratio": swarm_rate / bare,
-                "steps": steps,
-                "repeat": args.repeat,
-            }
+    rates = [
+        compare(
+            side,
+            args.procs,
+            domain,
+            args.out / "rate",
+            args.steps or default_steps(side),
+            args.repeat,
         )
-    for side in (int(s) for s in args.wall_sides.split(",")):
-        walls.append(swarm_run(side, args.procs, domain, args.out / f"wall_{side}"))
-        print(f"{side}x{side}: whole run {walls[-1]['wall_s']:.1f} s", file=sys.stderr)
-    report = {"rates": rates, "wall": walls}
+        for side in map(int, args.rate_sides.split(","))
+        if side
+    ]
+    whole = [
+        compare(side, args.procs, domain, args.out / "whole", None, args.repeat)
+        for side in map(int, args.sides.split(","))
+        if side
+    ]
     if args.json:
-        print(json.dumps(report))
+        print(json.dumps({"rates": rates, "whole": whole}))
     else:
-        print(f"rates: median of {args.repeat} runs each")
-        print(
-            f"{'robots':>8} {'steps':>6} {'swarm steps/s':>14} {'bare steps/s':>13} {'ratio':>6}"
-        )
-        for r in rates:
-            print(
-                f"{r['robots']:>8} {r['steps']:>6} {r['swarm_steps_per_s']:>14.2f} "
-                f"{r['bare_steps_per_s']:>13.2f} "
-                f"{r['ratio']:>6.2f}"
-            )
-        print()
-        print(
-            f"{'robots':>8} {'procs':>5} {'launch to exit s':>17} {'nodes up s':>11} "
-            f"{'steps/s':>8}"
-        )
-        for w in walls:
-            print(
-                f"{w['robots']:>8} {w['procs']:>5} {w['wall_s']:>17.1f} {w['startup_s']:>11.1f} "
-                f"{w['steps_per_s']:>8.2f}"
-            )
+        print(f"medians of {args.repeat} alternating runs, {args.procs} processes")
+        print("long runs (step rate):")
+        print(format_table(rates))
+        print("whole runs (35 + 10 steps):")
+        print(format_table(whole))
     return 0
 
 

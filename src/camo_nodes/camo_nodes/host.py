@@ -1,9 +1,10 @@
 """A process hosting robots: the background, the clock and the spin loop they share.
 
-Every process with robots runs one Host: a worker started by the launcher, a
-robot alone (`robot_node`), a Droplet bridge. It owns one node of its own,
-which holds the transport's DDS endpoints (`transport.py`), the background
-subscription and the one timer that ticks every robot's protocol.
+Every process with robots runs one Host: a worker started by the launcher or by
+hand on another machine, a robot alone (`robot_node`), a Droplet bridge. It
+owns one node of its own, which holds the transport's DDS endpoints
+(`transport.py`), the background subscription and the one timer that ticks
+every robot's protocol; its loop spins the executor and polls the transport.
 """
 
 from __future__ import annotations
@@ -15,27 +16,22 @@ import time
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import Image
 
 from camo_core.protocol import TICK
 from camo_core.sensing import ImageError, Projection
-from camo_core.shutdown import StopFlag
 
-from .topics import BACKGROUND_TOPIC, LATCHED, ImageEncodingError, image_from_msg
+from .topics import LATCHED, LEAN_NODE, ImageEncodingError, RunTopics, image_from_msg
+from .transport import Transport
 
-# Hosted robots need no parameter, rosout or type-description services: fewer DDS entities.
-LEAN_NODE = {
-    "start_parameter_services": False,
-    "enable_rosout": False,
-    "parameter_overrides": [Parameter("start_type_description_service", value=False)],
-}
+POLL = 0.002  # s the loop waits for the executor before it polls the transport again
 
 
-def host_node() -> Node:
-    """The process's own node: /camo/worker_<host>_<pid>."""
+def host_node(topics: RunTopics) -> Node:
+    """The process's own node: /<run>/camo/worker_<machine>_<pid>."""
     name = f"worker_{socket.gethostname().split('.')[0]}_{os.getpid()}"
-    return Node("".join(c if c.isalnum() else "_" for c in name), namespace="/camo", **LEAN_NODE)
+    name = "".join(c if c.isalnum() else "_" for c in name).lower()
+    return Node(name, namespace=topics.robot_namespace, **LEAN_NODE)
 
 
 class Host:
@@ -43,14 +39,20 @@ class Host:
     `spin_robots` (robots with services of their own)."""
 
     def __init__(
-        self, node: Node, projection: Projection, robots: list, spin_robots: bool
+        self,
+        node: Node,
+        transport: Transport,
+        projection: Projection,
+        robots: list,
+        spin_robots: bool,
     ) -> None:
         self.node = node
+        self.transport = transport
         self.projection = projection
         self.robots = robots
         self._stamps: set[tuple[int, int]] = set()
         self.spun = [node, *robots] if spin_robots else [node]
-        node.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
+        node.create_subscription(Image, transport.topics.background, self._on_background, LATCHED)
         node.create_timer(TICK, self._tick)
 
     def _on_background(self, msg: Image) -> None:
@@ -72,21 +74,24 @@ class Host:
         for robot in self.robots:
             robot.tick(now)
 
-    def run(self, stop: StopFlag | None = None, extra_nodes: tuple[Node, ...] = ()) -> int:
-        """Start every robot and spin until Ctrl-C, SIGTERM or shutdown."""
+    def run(self, stop=None, until=None, extra_nodes: tuple[Node, ...] = ()) -> int:
+        """Start every robot and spin until Ctrl-C, SIGTERM, shutdown or `until()`."""
         executor = EventsExecutor()
         nodes = [*self.spun, *extra_nodes]
+        transport = self.transport
         try:
             for node in nodes:
                 executor.add_node(node)
+            transport.announce()
             for robot in self.robots:
                 robot.start()
             # spin_once in a loop: EventsExecutor.spin() busy-waits and starves its timers here.
-            while not stop and rclpy.ok():
-                executor.spin_once(timeout_sec=0.2)
+            while not stop and rclpy.ok() and not (until and until()):
+                executor.spin_once(timeout_sec=0.0 if transport.poll() else POLL)
         except KeyboardInterrupt:
             pass
         finally:
+            transport.close()
             # Executor first, then nodes: the EventsExecutor must let go of the nodes' handles
             # before they are destroyed, or interpreter exit can crash.
             executor.shutdown()

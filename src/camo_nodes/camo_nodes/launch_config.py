@@ -17,14 +17,19 @@ from camo_core.backgrounds import BACKGROUNDS
 from camo_core.exceptions import UsageError
 from camo_core.options import (
     Parser,
+    add_network_options,
     add_run_options,
     image_from,
+    network_env,
     new_folder_problem,
     out_dir,
     params_from,
+    parse_ranges,
 )
 from camo_core.params import CamoParams
 from camo_core.sensing import Calibration, load_image, sense_image
+
+from .topics import RunTopics, check_run_id, new_run_id
 
 
 def build_parser() -> Parser:
@@ -37,7 +42,20 @@ def build_parser() -> Parser:
         default=os.cpu_count() or 1,
         help="worker processes hosting the robot nodes (default: number of cores)",
     )
-    add("--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited, else 0)")
+    add_network_options(parser)
+    add(
+        "--run-id",
+        default=None,
+        help="name of the run: its topics live under /<run id>/ (default: a new unique one)",
+    )
+    add(
+        "--remote-cells",
+        action="append",
+        default=[],
+        metavar="FIRST-LAST",
+        help="robots this run does not start: `./camo worker --cells FIRST-LAST` hosts them, "
+        "on this machine or another (repeatable)",
+    )
     add(
         "--step-timeout",
         type=float,
@@ -48,8 +66,9 @@ def build_parser() -> Parser:
         "--discovery-timeout",
         type=float,
         default=None,
-        help="seconds a robot waits for its neighbours' hellos (default 300 + 0.15 per robot: "
-        "node start-up of big swarms is slow; a robot that never starts costs this once)",
+        help="seconds a robot waits for its neighbours' hellos (default 60 + 0.01 per robot; "
+        "with --remote-cells, time to start the remote workers; a robot that never starts "
+        "costs this once)",
     )
     add(
         "--own-process",
@@ -105,6 +124,9 @@ class RunConfig:
     folder: Path
     env: dict[str, str]
     projector: list[str] | None  # the projector's ROS parameters, None with --no-projector
+    topics: RunTopics = field(default_factory=lambda: RunTopics(new_run_id()))
+    remote: list[tuple[int, int]] = field(default_factory=list)  # robots left to remote workers
+    named: bool = False  # the run id was given (--run-id): refuse it if a run of it is live
     alone: list[int] = field(default_factory=list)  # robots in processes of their own
     bridges: dict[int, str] = field(default_factory=dict)  # robot -> serial port
     calibration: Path | None = None
@@ -148,14 +170,16 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         raise UsageError(f"--procs must be an integer in 1..256 (got {args.procs})")
     discovery = args.discovery_timeout
     if discovery is None:
-        discovery = 300.0 + 0.15 * params.count  # 64x64 needed about 505 s to start here
+        discovery = 60.0 + 0.01 * params.count
     for name, value in (("--step-timeout", args.step_timeout), ("--discovery-timeout", discovery)):
         if not value > 0:
             raise UsageError(f"{name} must be positive (got {value})")
     alone = parse_cells(args.own_process, params)
     bridges = parse_bridges(args.bridge, params)
-    if set(alone) & set(bridges):
-        raise UsageError("a cell cannot be both --own-process and --bridge")
+    remote = parse_ranges(args.remote_cells, params.count, "--remote-cells")
+    remote_cells = {c for a, b in remote for c in range(a, b + 1)}
+    if set(alone) & set(bridges) or (set(alone) | set(bridges)) & remote_cells:
+        raise UsageError("a cell can be only one of --own-process, --bridge and --remote-cells")
     calibration = None
     if args.calibration:
         calibration = Path(args.calibration).resolve()
@@ -170,12 +194,8 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
     for then in args.then:
         if then not in BACKGROUNDS:
             sense_image(load_image(then), params.rows, params.cols, params.profile)
-    env = dict(os.environ if environ is None else environ)
-    if args.domain_id is not None:
-        if not 0 <= args.domain_id <= 232:
-            raise UsageError(f"--domain-id must be in 0..232 (got {args.domain_id})")
-        env["ROS_DOMAIN_ID"] = str(args.domain_id)
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    env = network_env(args, os.environ if environ is None else environ)
+    topics = RunTopics(check_run_id(args.run_id) if args.run_id else new_run_id())
     if args.no_projector:
         projector = None
     elif args.image:
@@ -196,4 +216,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         bridges=bridges,
         calibration=calibration,
         record=record,
+        topics=topics,
+        remote=remote,
+        named=args.run_id is not None,
     )

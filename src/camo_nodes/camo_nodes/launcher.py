@@ -25,13 +25,14 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
 from camo_core.exceptions import EXIT_USAGE, CamoError
+from camo_core.options import contiguous
 from camo_core.protocol import CONSENSUS
 from camo_core.shutdown import StopFlag
 
 from .launch_config import RunConfig, build_parser, config_from
 from .monitor_node import MonitorNode
 from .processes import ProcessGroup
-from .topics import LATCHED, LOAD_TOPIC, PARAMS_TOPIC, RECORDED_TOPIC
+from .topics import LATCHED
 
 
 class RunFailed(CamoError):
@@ -54,19 +55,33 @@ class Session:
     def __init__(self, config: RunConfig, stop: StopFlag, context=None) -> None:
         self.config = config
         self.stop = stop
-        params = config.params
-        self.node = Node("launcher", namespace="/swarm", context=context)
-        self.monitor = MonitorNode(params, context=context)
-        self.loader = self.node.create_publisher(String, LOAD_TOPIC, 10)
-        setup = {"params": params.as_dict(), "backgrounds": config.labels}
-        self.node.create_publisher(String, PARAMS_TOPIC, LATCHED).publish(
-            String(data=json.dumps(setup))
-        )
-        self.recorded: dict | None = None  # the recorder's latest report
-        self.node.create_subscription(String, RECORDED_TOPIC, self._on_recorded, LATCHED)
+        topics = config.topics
+        self.topics = topics
+        self.node = Node("launcher", namespace=topics.swarm_namespace, context=context)
         self.executor = EventsExecutor(context=context)
         self.executor.add_node(self.node)
+        if config.named:
+            self.refuse_a_live_run()
+        self.monitor = MonitorNode(config.params, topics, context=context)
         self.executor.add_node(self.monitor)
+        self.loader = self.node.create_publisher(String, topics.load, 10)
+        self.node.create_publisher(String, topics.params, LATCHED).publish(
+            String(data=json.dumps(run_setup(config)))
+        )
+        self.recorded: dict | None = None  # the recorder's latest report
+        self.node.create_subscription(String, topics.recorded, self._on_recorded, LATCHED)
+
+    def refuse_a_live_run(self, settle: float = 1.0) -> None:
+        """Two launchers of one run id would share its topics: the second refuses to start."""
+        deadline = time.monotonic() + settle  # discovery needs a moment to show a live run
+        while time.monotonic() < deadline:
+            if self.node.count_publishers(self.topics.params):
+                raise RunFailed(
+                    f"a run named {self.topics.run} is already running in this domain; "
+                    f"choose another --run-id (or leave it out for a new one)",
+                    2,
+                )
+            self.spin(0.05)
 
     def _on_recorded(self, msg: String) -> None:
         self.recorded = json.loads(msg.data)
@@ -122,7 +137,7 @@ class Session:
         """/camo/projector/load is volatile: it reaches only a projector matched when sent."""
         self.wait(
             lambda: self.loader.get_subscription_count() > 0,
-            f"no projector listens on {LOAD_TOPIC}",
+            f"no projector listens on {self.topics.load}",
             limit,
         )
         self.loader.publish(String(data=label))
@@ -159,6 +174,29 @@ class Session:
             node.destroy_node()
 
 
+def run_setup(config: RunConfig) -> dict:
+    """What /<run>/swarm/params says of the run: all a worker on another machine needs."""
+    return {
+        "run": config.topics.run,
+        "params": config.params.as_dict(),
+        "backgrounds": config.labels,
+        "step_timeout": config.step_timeout,
+        "discovery_timeout": config.discovery_timeout,
+        "remote": [list(r) for r in config.remote],
+    }
+
+
+def missing_remote_cells(config: RunConfig, record) -> str:
+    """The --remote-cells whose robots never reported, as FIRST-LAST ranges."""
+    cells = [
+        c
+        for first, last in config.remote
+        for c in range(first, last + 1)
+        if record.phase[c] < CONSENSUS and not record.finished[c]
+    ]
+    return ", ".join(f"{a}-{b}" if a != b else str(a) for a, b in contiguous(cells))
+
+
 def round_folder(config: RunConfig, index: int) -> Path:
     folder = config.folder if config.rounds == 1 else config.folder / f"round_{index}"
     folder.mkdir(exist_ok=True)
@@ -187,6 +225,9 @@ def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dic
     dead = summary.get("dead", [])
     if dead:
         notes += f"; {len(dead)} dead robots {dead[:8]}{' ...' if len(dead) > 8 else ''}"
+    missing = missing_remote_cells(config, monitor.record(index))
+    if missing:
+        notes += f"; remote cells {missing} never joined (no worker hosted them)"
     if missed:
         notes += (
             f"; {missed} step deadlines passed (robots moved on without silent neighbours: "
@@ -206,14 +247,22 @@ def run(config: RunConfig) -> int:
         args=["--ros-args", "--log-level", "warn"], signal_handler_options=SignalHandlerOptions.NO
     )
     group = ProcessGroup(config.env)
-    session = Session(config, stop)
+    try:
+        session = Session(config, stop)
+    except RunFailed as exc:
+        print(f"camo run: error: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return exc.code
     written = 0
     code = 0
     try:
         if config.record:
-            group.start_recorder(str(config.record))
+            group.start_recorder(str(config.record), config.topics.run)
             session.recorder_ready(group)
             print(f"camo run: recording every topic to {config.record}/", file=sys.stderr)
+        print(
+            f"camo run: {config.topics.run}: topics under /{config.topics.run}/", file=sys.stderr
+        )
         group.start_swarm(config)
         (config.folder / "processes.json").write_text(
             json.dumps({str(pid): cells for pid, cells in group.cells.items()})

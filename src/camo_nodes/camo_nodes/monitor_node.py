@@ -9,13 +9,13 @@ the launcher saw its process die; a robot that is merely late to report is
 waited for.
 
 `monitor_node` (console script) watches a run started elsewhere: it reads the
-run's parameters from /swarm/params, prints progress, and writes each round's
-summary.json and figure.png to --out.
+run's parameters from /<run>/swarm/params, prints progress, and writes each
+round's summary.json and figure.png to --out.
 """
 
 from __future__ import annotations
 
-import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -26,10 +26,9 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
-from std_msgs.msg import String
 
 from camo_core.exceptions import CamoError
-from camo_core.options import Parser, out_dir
+from camo_core.options import Parser, add_network_options, network_env, out_dir
 from camo_core.output import run_title, write_round
 from camo_core.params import CamoParams
 from camo_core.protocol import CONSENSUS, PHASE_NAMES
@@ -39,29 +38,32 @@ from camo_core.shutdown import StopFlag
 from camo_msgs.msg import RobotStatus
 
 from .topics import (
-    BACKGROUND_TOPIC,
     LATCHED,
-    PARAMS_TOPIC,
-    PATTERN_TOPIC,
-    STATUS_TOPIC,
+    RunTopics,
+    check_run_id,
     image_from_msg,
     image_to_msg,
     status_listener_qos,
+    wait_for_run,
+    wait_for_setup,
 )
 
 
 class MonitorNode(Node):
-    def __init__(self, params: CamoParams, **kwargs) -> None:
-        super().__init__("monitor", namespace="/swarm", **kwargs)
+    def __init__(self, params: CamoParams, topics: RunTopics, **kwargs) -> None:
+        super().__init__("monitor", namespace=topics.swarm_namespace, **kwargs)
         self.params = params
+        self.topics = topics
         self.rounds = Rounds(params)
         self.images = Backgrounds()  # the background of round k is images[k]
         self.lost = np.zeros(params.count, bool)  # robots whose process is known to have died
         self.offline = np.zeros(params.count, bool)
         self.statuses_heard = 0  # a recording of the run must hold at least these
-        self.create_subscription(RobotStatus, STATUS_TOPIC, self._on_status, status_listener_qos())
-        self.create_subscription(Image, BACKGROUND_TOPIC, self._on_background, LATCHED)
-        self.pattern_pub = self.create_publisher(Image, PATTERN_TOPIC, 10)
+        self.create_subscription(
+            RobotStatus, topics.status, self._on_status, status_listener_qos()
+        )
+        self.create_subscription(Image, topics.background, self._on_background, LATCHED)
+        self.pattern_pub = self.create_publisher(Image, topics.pattern, 10)
         self.create_timer(0.2, self._publish_pattern)
 
     def _on_background(self, msg: Image) -> None:
@@ -132,28 +134,16 @@ class MonitorNode(Node):
         self.pattern_pub.publish(msg)
 
 
-def wait_for_params(executor, node: Node, stop, timeout: float) -> dict:
-    """The run's /swarm/params (latched), as the launcher published it."""
-    got: list[dict] = []
-    node.create_subscription(
-        String, PARAMS_TOPIC, lambda m: got.append(json.loads(m.data)), LATCHED
-    )
-    deadline = time.monotonic() + timeout
-    while not got and not stop:
-        if time.monotonic() > deadline:
-            raise CamoError(f"no run publishes {PARAMS_TOPIC} after {timeout:g} s")
-        executor.spin_once(timeout_sec=0.1)
-    if stop:
-        raise KeyboardInterrupt
-    return got[0]
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = Parser(prog="monitor_node", description="watch a running swarm and write its results")
     parser.add_argument("--out", type=Path, default=None, help="output folder (default results/)")
+    parser.add_argument("--run-id", default=None, help="the run to watch (default: the only one)")
     parser.add_argument("--wait", type=float, default=60.0, help="seconds to wait for a run")
+    add_network_options(parser)
     try:
         args, ros_args = parser.parse_known_args(argv)
+        os.environ.update(network_env(args, os.environ))
+        run_id = check_run_id(args.run_id) if args.run_id else None
         folder = out_dir(args)
     except CamoError as exc:
         print(f"monitor_node: error: {exc}", file=sys.stderr)
@@ -163,11 +153,16 @@ def main(argv: list[str] | None = None) -> int:
     executor = EventsExecutor()
     nodes: list[Node] = []
     try:
-        reader = rclpy.create_node("monitor_params", namespace="/swarm")
+        reader = rclpy.create_node("monitor_join")
         nodes.append(reader)
         executor.add_node(reader)
-        setup = wait_for_params(executor, reader, stop, args.wait)
-        monitor = MonitorNode(CamoParams(**setup["params"]))
+
+        def spin() -> None:
+            executor.spin_once(timeout_sec=0.1)
+
+        topics = RunTopics(wait_for_run(reader, spin, run_id, args.wait, stop))
+        setup = wait_for_setup(reader, spin, topics, args.wait, stop)
+        monitor = MonitorNode(CamoParams(**setup["params"]), topics)
         nodes.append(monitor)
         executor.add_node(monitor)
         labels = setup.get("backgrounds") or ["background"]

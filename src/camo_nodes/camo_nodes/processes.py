@@ -8,12 +8,13 @@ to stop (SIGTERM) when the launcher dies, however it dies.
 from __future__ import annotations
 
 import ctypes
-import json
 import signal
 import subprocess
 import sys
 import time
 from collections.abc import Callable
+
+from camo_core.options import contiguous
 
 from .launch_config import RunConfig
 
@@ -46,6 +47,7 @@ def robot_parameters(config: RunConfig, robot: int) -> list[str]:
         "formation_steps": params.formation_steps,
         "step_timeout": float(config.step_timeout),
         "discovery_timeout": float(config.discovery_timeout),
+        "run_id": config.topics.run,
     }
     return [
         x
@@ -62,9 +64,11 @@ def split_cells(cells: list[int], procs: int) -> list[list[int]]:
 
 
 def worker_groups(config: RunConfig) -> list[list[int]]:
-    """The robots of each worker process: one each for --own-process, the rest in blocks."""
+    """The robots of each worker process: one each for --own-process, the rest in blocks (none
+    for the bridges' and the remote workers' cells)."""
     params = config.params
     taken = set(config.alone) | set(config.bridges)
+    taken |= {c for first, last in config.remote for c in range(first, last + 1)}
     shared = [i for i in range(params.count) if i not in taken]
     return [[i] for i in config.alone] + (split_cells(shared, config.procs) if shared else [])
 
@@ -84,16 +88,17 @@ class ProcessGroup:
         self.procs.append(proc)
         return proc
 
-    def start_recorder(self, bag: str) -> subprocess.Popen:
+    def start_recorder(self, bag: str, run: str) -> subprocess.Popen:
         self.recorder = self._start(
-            "camo_bag.recorder_node", bag, "--ros-args", "--log-level", "warn"
+            "camo_bag.recorder_node", bag, "--run-id", run, "--ros-args", "--log-level", "warn"
         )
         return self.recorder
 
     def start_swarm(self, config: RunConfig) -> None:
         quiet = ("--ros-args", "--log-level", "warn")
+        run = ("-p", f"run_id:={config.topics.run}")
         if config.projector is not None:
-            self._start("camo_projector.projector_node", *quiet, *config.projector)
+            self._start("camo_projector.projector_node", *quiet, *run, *config.projector)
         for robot, port in config.bridges.items():
             extra = ["-p", f"calibration:={config.calibration}"] if config.calibration else []
             bridge = self._start(
@@ -106,17 +111,9 @@ class ProcessGroup:
             )
             self.cells[bridge.pid] = [robot]
         for cells in worker_groups(config):
+            ranges = [f"--cells={a}-{b}" for a, b in contiguous(cells)]
             worker = self._start(
-                "camo_nodes.worker",
-                "--params",
-                json.dumps(config.params.as_dict()),
-                "--cells",
-                ",".join(map(str, cells)),
-                "--step-timeout",
-                str(config.step_timeout),
-                "--discovery-timeout",
-                str(config.discovery_timeout),
-                *quiet,
+                "camo_nodes.worker", "--launched", "--run-id", config.topics.run, *ranges, *quiet
             )
             self.cells[worker.pid] = cells
 

@@ -28,7 +28,8 @@ from camo_core.protocol import Display, Message, Output, Sensor, StepProtocol
 from camo_core.sensing import ProjectedSensor, Projection
 from camo_core.shutdown import StopFlag
 
-from .host import LEAN_NODE, Host, host_node
+from .host import Host, host_node
+from .topics import LEAN_NODE, RunTopics, run_ended, run_from_parameter
 from .transport import Transport
 
 
@@ -41,7 +42,8 @@ class RobotNode(Node):
         **node_kwargs,
     ) -> None:
         core = protocol.core
-        super().__init__(f"robot_{core.row}_{core.col}", namespace="/camo", **node_kwargs)
+        name = f"robot_{core.row}_{core.col}"
+        super().__init__(name, namespace=transport.topics.robot_namespace, **node_kwargs)
         self.protocol = protocol
         self.transport = transport
         self.clock = clock
@@ -88,6 +90,7 @@ ROBOT_PARAMETERS = {
     "formation_steps": -1,
     "step_timeout": 10.0,
     "discovery_timeout": 300.0,
+    "run_id": "",
 }
 
 
@@ -125,20 +128,21 @@ def params_from_node(node: Node) -> tuple[CamoParams, int, int, float, float]:
 
 def host_robots(
     params: CamoParams,
-    cells: list[int],
+    topics: RunTopics,
+    tiles: list[tuple[int, int]],
     step_timeout: float,
     discovery_timeout: float,
     lean: bool = True,
     sensors: dict[int, Sensor] | None = None,
     displays: dict[int, Display] | None = None,
 ) -> Host:
-    """This process's robots, ready to run: a projected-image sensor unless `sensors` names
-    another (a Droplet's); `lean` robots have no services of their own."""
-    node = host_node()
-    transport = Transport(node, params, cells)
+    """This process's robots (tiles of robot ids), ready to run: a projected-image sensor
+    unless `sensors` names another (a Droplet's); `lean` robots have no services of their own."""
+    node = host_node(topics)
+    transport = Transport(node, params, topics, tiles)
     projection = Projection(params.rows, params.cols, params.profile)
     robots = []
-    for cell in cells:
+    for cell in sorted(transport.hosted):
         row, col = divmod(cell, params.cols)
         sensor = (sensors or {}).get(cell) or ProjectedSensor(projection, row, col)
         display = (displays or {}).get(cell)
@@ -146,7 +150,7 @@ def host_robots(
             params, row, col, sensor, display, step_timeout, discovery_timeout, transport.hosts
         )
         robots.append(RobotNode(protocol, transport, **(LEAN_NODE if lean else {})))
-    return Host(node, projection, robots, spin_robots=not lean)
+    return Host(node, transport, projection, robots, spin_robots=not lean)
 
 
 def main(args=None) -> int:
@@ -161,10 +165,12 @@ def main(args=None) -> int:
         reader = Node("robot_parameters", **LEAN_NODE)
         try:
             params, row, col, step_timeout, discovery_timeout = params_from_node(reader)
+            topics = run_from_parameter(reader, stop)
         finally:
             reader.destroy_node()
-        cells = [row * params.cols + col]
-        return host_robots(params, cells, step_timeout, discovery_timeout, lean=False).run(stop)
+        cell = row * params.cols + col
+        host = host_robots(params, topics, [(cell, cell)], step_timeout, discovery_timeout, False)
+        return host.run(stop, until=run_ended(host.node, topics))
     except CamoError as exc:
         print(f"robot_node: error: {exc}", file=sys.stderr)
         return 2

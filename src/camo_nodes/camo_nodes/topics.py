@@ -1,4 +1,5 @@
-"""The swarm's topics in one place: names, QoS profiles and the wire form of images.
+"""The swarm's topics in one place: run identities, names, QoS profiles and the wire form of
+images.
 
 Robots, workers, the monitor, the projector, recorders and viewers all take
 their topic names and QoS from here, so that they always match.
@@ -6,21 +7,201 @@ their topic names and QoS from here, so that they always match.
 
 from __future__ import annotations
 
+import json
+import re
+import secrets
+import time
+from dataclasses import dataclass
+
 import numpy as np
+import rclpy
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
+from std_msgs.msg import String
 
 from camo_core.exceptions import CamoError
 
-STATUS_TOPIC = "/swarm/status"
-PATTERN_TOPIC = "/swarm/pattern"
-# std_msgs/String, latched: the run's parameters and backgrounds as JSON, for recorders and render.
-PARAMS_TOPIC = "/swarm/params"
-# std_msgs/String, latched: what a recorder holds of the run, per round (JSON).
-RECORDED_TOPIC = "/swarm/recorded"
-BACKGROUND_TOPIC = "/camo/background"
-# std_msgs/String: a built-in background name or an image path for the projector to show next.
-LOAD_TOPIC = "/camo/projector/load"
+RUN_ID = re.compile(r"^[a-z][a-z0-9_]{0,39}$")
+PARAMS_SUFFIX = "/swarm/params"
+
+
+class RunIdError(CamoError):
+    """A run id that cannot name ROS topics."""
+
+
+def check_run_id(run_id: str) -> str:
+    if not RUN_ID.match(run_id):
+        raise RunIdError(
+            f"a run id is a lowercase letter then up to 39 lowercase letters, digits or _ "
+            f"(got {run_id!r})"
+        )
+    return run_id
+
+
+def new_run_id() -> str:
+    """Unique per run, so that two runs in one domain never share a topic."""
+    return f"run_{secrets.token_hex(3)}"
+
+
+@dataclass(frozen=True)
+class RunTopics:
+    """Every topic of one run lives under /<run id>/: runs in one domain never meet.
+
+    /<run>/swarm/ holds what the run says of itself (parameters, statuses, the
+    pattern, the recording's ledger); /<run>/camo/ what the robots and the
+    projector exchange: the background, and per tile of robots (the robots one
+    process hosts) four topics of its edge robots (those with a neighbour in
+    another process) and four of the rest."""
+
+    run: str
+
+    def __post_init__(self) -> None:
+        check_run_id(self.run)
+
+    @property
+    def swarm_namespace(self) -> str:
+        return f"/{self.run}/swarm"
+
+    @property
+    def robot_namespace(self) -> str:
+        return f"/{self.run}/camo"
+
+    @property
+    def params(self) -> str:
+        """std_msgs/String, latched: the run's parameters and backgrounds as JSON."""
+        return f"/{self.run}{PARAMS_SUFFIX}"
+
+    @property
+    def status(self) -> str:
+        return f"/{self.run}/swarm/status"
+
+    @property
+    def pattern(self) -> str:
+        return f"/{self.run}/swarm/pattern"
+
+    @property
+    def recorded(self) -> str:
+        """std_msgs/String, latched: what a recorder holds of the run, per round (JSON)."""
+        return f"/{self.run}/swarm/recorded"
+
+    @property
+    def background(self) -> str:
+        return f"/{self.run}/camo/background"
+
+    @property
+    def load(self) -> str:
+        """std_msgs/String: a built-in background name or an image path for the projector."""
+        return f"/{self.run}/camo/projector/load"
+
+    @property
+    def hosts(self) -> str:
+        """camo_msgs/Host, latched: which robots each process hosts."""
+        return f"/{self.run}/camo/hosts"
+
+    def tile(self, tile: str, part: str, kind: str) -> str:
+        """A tile's robot messages: part is "edge" or "core", kind hello, color, vote or state."""
+        return f"/{self.run}/camo/{tile}/{part}/{kind}"
+
+
+def tile_name(first: int, last: int) -> str:
+    return f"tile_{first}_{last}"
+
+
+def runs_on_graph(topic_names: list[str]) -> list[str]:
+    """The run ids whose parameters topic is on the graph (from get_topic_names_and_types)."""
+    return sorted(
+        name[1 : -len(PARAMS_SUFFIX)]
+        for name in topic_names
+        if name.endswith(PARAMS_SUFFIX) and name.count("/") == 3
+    )
+
+
+class NoRun(CamoError):
+    """No run (or not the one asked for) appeared in time."""
+
+
+def wait_for_run(node, spin, run_id: str | None, timeout: float, stop=None) -> str:
+    """The run to join: `run_id` once its parameters are published, or without one the only run
+    whose parameters are. `spin()` lets the node take in discovery."""
+    deadline = time.monotonic() + timeout
+    while not stop:
+        names = [name for name, _ in node.get_topic_names_and_types()]
+        live = [r for r in runs_on_graph(names) if node.count_publishers(RunTopics(r).params)]
+        if run_id is not None and run_id in live:
+            return run_id
+        if run_id is None and len(live) == 1:
+            return live[0]
+        if run_id is None and len(live) > 1:
+            raise NoRun(
+                f"several runs in this domain ({', '.join(live)}): choose one with --run-id"
+            )
+        if time.monotonic() > deadline:
+            wanted = f"run {run_id}" if run_id else "a run"
+            raise NoRun(f"no {wanted} found in {timeout:g} s (check the domain id and network)")
+        spin()
+    raise KeyboardInterrupt
+
+
+def run_from_parameter(node, stop=None, timeout: float = 60.0) -> RunTopics:
+    """The run a standalone node joins: its `run_id` parameter (declared here if it is not), or
+    without one the only run in its domain."""
+    if not node.has_parameter("run_id"):
+        node.declare_parameter("run_id", "")
+    wanted = node.get_parameter("run_id").value
+    if wanted:
+        return RunTopics(check_run_id(wanted))
+
+    def spin() -> None:
+        rclpy.spin_once(node, timeout_sec=0.1)
+
+    return RunTopics(wait_for_run(node, spin, None, timeout, stop))
+
+
+def run_ended(node, topics: RunTopics, period: float = 0.5):
+    """A check, cheap to call often: has the run's launcher (the publisher of its parameters)
+    gone, after it was there? A run started without a launcher never ends this way."""
+    state = {"seen": False, "checked": 0.0}
+
+    def ended() -> bool:
+        now = time.monotonic()
+        if now - state["checked"] < period:
+            return False
+        state["checked"] = now
+        if node.count_publishers(topics.params):
+            state["seen"] = True
+            return False
+        return state["seen"]
+
+    return ended
+
+
+def wait_for_setup(node, spin, topics: RunTopics, timeout: float, stop=None) -> dict:
+    """The run's /swarm/params (latched) as the launcher published it."""
+    got: list[dict] = []
+    subscription = node.create_subscription(
+        String, topics.params, lambda m: got.append(json.loads(m.data)), LATCHED
+    )
+    deadline = time.monotonic() + timeout
+    try:
+        while not got and not stop:
+            if time.monotonic() > deadline:
+                raise NoRun(f"no parameters on {topics.params} after {timeout:g} s")
+            spin()
+    finally:
+        node.destroy_subscription(subscription)
+    if stop:
+        raise KeyboardInterrupt
+    return got[0]
+
+
+# Nodes with no parameter, rosout or type-description services: no DDS entities of their own
+# (hosted robots, and short-lived helper nodes).
+LEAN_NODE = {
+    "start_parameter_services": False,
+    "enable_rosout": False,
+    "parameter_overrides": [Parameter("start_type_description_service", value=False)],
+}
 
 # Latched: a robot that starts late still gets the background that is up.
 LATCHED = QoSProfile(
@@ -29,10 +210,6 @@ LATCHED = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
-
-
-def robot_topic(robot_id: int, kind: str) -> str:
-    return f"/camo/robot_{robot_id}/{kind}"
 
 
 def history_qos(depth: int) -> QoSProfile:

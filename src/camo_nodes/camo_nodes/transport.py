@@ -1,43 +1,66 @@
-"""How a process's robots exchange messages: DDS for the world, memory between themselves.
+"""How a process's robots exchange messages: memory between themselves, tile topics for the world.
 
-Every robot publishes on its own topics (`/camo/robot_<id>/<kind>`), which a
-neighbour in another process, a recorder or a viewer subscribes to. A robot
-hosted in the same process as its neighbour gets the message handed over in
-memory instead, as rclcpp's intra-process communication does, so a process
-subscribes only to the topics of neighbours that live elsewhere: DDS endpoint
-matching grows with readers x writers, and in-memory hand-over keeps a large
-swarm's set-up short.
+A process hosts one or more *tiles* of robots (contiguous ranges of robot ids,
+row-major: bands of the grid). Each tile publishes on eight topics, one per
+message kind for its *edge* robots (those with a neighbour hosted elsewhere)
+and one per kind for the rest (its *core*), every message carrying its
+sender's id (`RunTopics.tile`). A robot hosted by the same process as its
+neighbour gets the message handed over in memory, as rclcpp's intra-process
+communication does. A process subscribes only to the edge topics of the tiles
+that hold its robots' neighbours, which it learns from the tiles' hosts'
+announcements (`camo_msgs/Host`, latched); a recorder or a viewer subscribes
+to all of them. So the DDS endpoints of a run grow with its processes, not
+with robots x neighbours, and a process takes only the messages its robots
+need (a tile's two boundary rows, not the whole band).
+
+The edge subscriptions are not spun by the executor: `poll()` takes their
+messages with their publisher's GID (`rcl_take.py`), so that a message is
+accepted only from the tile's own host.
 """
 
 from __future__ import annotations
 
-from collections import defaultdict, deque
-from collections.abc import Callable
+import time
+from collections import defaultdict
+from collections.abc import Callable, Iterable
 
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 
+from camo_core.grid import neighbor_ids
 from camo_core.params import CamoParams
-from camo_core.protocol import CONSENSUS, DISCOVERY, FORMATION, SENSING, Message, Report
-from camo_msgs.msg import Color, Hello, RobotStatus, State, Vote
+from camo_core.protocol import CONSENSUS, DISCOVERY, FORMATION, KINDS, SENSING, Message, Report
+from camo_msgs.msg import Color, Hello, Host, RobotStatus, State, Vote
 
-from .topics import STATUS_TOPIC, history_qos, robot_topic
+from .rcl_take import PREFIX, Taker
+from .topics import LATCHED, LEAN_NODE, RunTopics, history_qos, tile_name
 
 MESSAGE_TYPES = {"hello": Hello, "color": Color, "vote": Vote, "state": State}
+PHASES = {"hello": DISCOVERY, "color": SENSING, "vote": CONSENSUS, "state": FORMATION}
 Receiver = Callable[[Message], None]
+Tile = tuple[int, int]  # first and last robot id, inclusive
 
 
-def to_ros(message: Message):
-    """The camo_msgs message of a protocol message (header stamp and frame left to the sender)."""
-    kind, common = message.kind, {"sender_id": message.sender, "round": message.round}
+def stamp(msg) -> None:
+    now = time.time_ns()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now, 1_000_000_000)
+    msg.header.frame_id = "camo"
+
+
+def fill(msg, message: Message) -> None:
+    """Write a protocol message into a (reused) camo_msgs message of its kind."""
+    msg.sender_id, msg.round, msg.step = message.sender, message.round, message.step
+    kind = message.kind
     if kind == "hello":
-        row, col = message.value
-        return Hello(phase=DISCOVERY, step=0, row=row, col=col, **common)
-    if kind == "color":
-        return Color(phase=SENSING, step=0, value=message.value, **common)
-    if kind == "vote":
-        p, degree = message.value
-        return Vote(phase=CONSENSUS, step=message.step, p=list(p), degree=degree, **common)
-    return State(phase=FORMATION, step=message.step, state=message.value, **common)
+        msg.row, msg.col = message.value
+    elif kind == "color":
+        msg.value = message.value
+    elif kind == "vote":
+        p, msg.degree = message.value
+        msg.p[0], msg.p[1], msg.p[2] = p
+    else:
+        msg.state = message.value
 
 
 def from_ros(kind: str, msg) -> Message:
@@ -71,9 +94,16 @@ def status_msg(report: Report) -> RobotStatus:
     )
 
 
-def message_depth(params: CamoParams) -> int:
-    """History per robot topic: a whole phase, so a neighbour that starts late misses nothing."""
-    return max(params.consensus_steps, params.formation_steps) + 4
+def messages_per_robot(params: CamoParams, kind: str) -> int:
+    """History a topic keeps per robot on it: a whole phase, so that a process (or a recorder)
+    that joins late still gets every message of the round."""
+    steps = {
+        "hello": 1,
+        "color": 1,
+        "vote": params.consensus_steps,
+        "state": params.formation_steps,
+    }
+    return steps[kind] + 4
 
 
 def status_depth(params: CamoParams) -> int:
@@ -81,58 +111,147 @@ def status_depth(params: CamoParams) -> int:
     return params.consensus_steps + params.formation_steps + 8
 
 
+def listener_qos() -> QoSProfile:
+    """A reader of a tile's edge: everything, in order (a late joiner gets the history)."""
+    return QoSProfile(
+        depth=1,
+        history=HistoryPolicy.KEEP_ALL,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+
+
+def edge_of(params: CamoParams, hosted: set[int], robots: Iterable[int]) -> set[int]:
+    """Robots with a neighbour (any of the 12 slots) that this process does not host."""
+    edge = set()
+    for robot in robots:
+        row, col = divmod(robot, params.cols)
+        if any(
+            n is not None and n not in hosted
+            for n in neighbor_ids(row, col, params.rows, params.cols)
+        ):
+            edge.add(robot)
+    return edge
+
+
 class Transport:
     """The DDS endpoints of one process's robots, owned by one node (the process's own)."""
 
-    def __init__(self, node: Node, params: CamoParams, hosted: list[int]) -> None:
+    def __init__(self, node: Node, params: CamoParams, topics: RunTopics, tiles: list[Tile]):
         self.node = node
         self.params = params
-        self.hosted = set(hosted)
-        self.qos = history_qos(message_depth(params))
+        self.topics = topics
+        self.tiles = tiles
+        self.hosted = {r for first, last in tiles for r in range(first, last + 1)}
+        self.edge = edge_of(params, self.hosted, self.hosted)
+        self.writers: dict[tuple[int, str], object] = {}  # (robot, kind) -> its tile's writer
+        for first, last in tiles:
+            self._create_writers(first, last)
         self.status_pub = node.create_publisher(
-            RobotStatus, STATUS_TOPIC, history_qos(status_depth(params) * len(hosted))
+            RobotStatus, topics.status, history_qos(status_depth(params) * len(self.hosted))
         )
-        self.publishers: dict[tuple[int, str], object] = {}
+        self._reused = {kind: cls() for kind, cls in MESSAGE_TYPES.items()}
         self.receivers: dict[tuple[int, str], list[Receiver]] = defaultdict(list)
-        self._queue: deque[tuple[Receiver, Message]] = deque()
+        self.needed: set[int] = set()  # neighbours hosted elsewhere
+        self.remote: dict[str, Tile] = {}  # tiles subscribed to, by name
+        self.takers: list[tuple[Taker, str, Tile]] = []
+        self.rejected: dict[str, int] = defaultdict(int)  # reason -> messages dropped
+        self._queue: list[tuple[Receiver, Message]] = []
         self._pumping = False
+        self._buffer: list[tuple[bytes, bytes]] = []
+        self.host_pub = node.create_publisher(Host, topics.hosts, LATCHED)
+        node.create_subscription(Host, topics.hosts, self._on_host, host_listener_qos())
+        # The edge readers' node: never spun by an executor, which would take their messages
+        # before poll() could (it takes them with their publisher's GID).
+        self.listener = Node(
+            f"{node.get_name()}_edges", namespace=node.get_namespace(), **LEAN_NODE
+        )
+
+    def _create_writers(self, first: int, last: int) -> None:
+        robots = range(first, last + 1)
+        edge = [r for r in robots if r in self.edge]
+        parts = {"edge": edge, "core": [r for r in robots if r not in self.edge]}
+        name = tile_name(first, last)
+        for part, members in parts.items():
+            if not members:
+                continue
+            for kind, msg_type in MESSAGE_TYPES.items():
+                depth = len(members) * messages_per_robot(self.params, kind)
+                writer = self.node.create_publisher(
+                    msg_type, self.topics.tile(name, part, kind), history_qos(depth)
+                )
+                for robot in members:
+                    self.writers[(robot, kind)] = writer
 
     def hosts(self, robot: int) -> bool:
         """A robot of this process: alive as long as the process is."""
         return robot in self.hosted
 
-    def add(self, robot: int, listens_to, receive: Receiver) -> None:
-        """A hosted robot: its topics, and what it hears from whom (`listens_to`: (sender,
-        kind))."""
-        for kind, msg_type in MESSAGE_TYPES.items():
-            self.publishers[(robot, kind)] = self.node.create_publisher(
-                msg_type, robot_topic(robot, kind), self.qos
-            )
+    def add(self, robot: int, listens_to: Iterable[tuple[int, str]], receive: Receiver) -> None:
+        """A hosted robot, and what it hears from whom (`listens_to`: (sender, kind))."""
         for sender, kind in listens_to:
-            key = (sender, kind)
-            if key not in self.receivers and sender not in self.hosted:
-                self.node.create_subscription(
-                    MESSAGE_TYPES[kind],
-                    robot_topic(sender, kind),
-                    lambda msg, k=kind: self._received(from_ros(k, msg)),
-                    self.qos,
+            self.receivers[(sender, kind)].append(receive)
+            if sender not in self.hosted:
+                self.needed.add(sender)
+
+    def announce(self) -> None:
+        """Say which tiles this process hosts (once every robot is added)."""
+        msg = Host(name=self.node.get_name(), first=[f for f, _ in self.tiles])
+        msg.last = [last for _, last in self.tiles]
+        stamp(msg)
+        self.host_pub.publish(msg)
+
+    def _on_host(self, msg: Host) -> None:
+        for first, last in zip(msg.first, msg.last, strict=False):
+            name = tile_name(first, last)
+            if name in self.remote or first in self.hosted:
+                continue
+            if not any(first <= n <= last for n in self.needed):
+                continue  # nothing there that this process's robots hear
+            self.remote[name] = (first, last)
+            for kind, msg_type in MESSAGE_TYPES.items():
+                topic = self.topics.tile(name, "edge", kind)
+                subscription = self.listener.create_subscription(
+                    msg_type, topic, lambda m: None, listener_qos(), raw=True
                 )
-            self.receivers[key].append(receive)
+                self.takers.append((Taker(subscription), kind, (first, last)))
+
+    # ---- out ----------------------------------------------------------------------
 
     def send(self, message: Message) -> None:
-        msg = to_ros(message)
-        msg.header.stamp = self.node.get_clock().now().to_msg()
-        msg.header.frame_id = "camo"
-        self.publishers[(message.sender, message.kind)].publish(msg)
-        self._received(message)
+        msg = self._reused[message.kind]
+        fill(msg, message)
+        stamp(msg)
+        self.writers[(message.sender, message.kind)].publish(msg)
+        self._deliver(message)
 
     def report(self, report: Report) -> None:
         msg = status_msg(report)
-        msg.header.stamp = self.node.get_clock().now().to_msg()
-        msg.header.frame_id = "camo"
+        stamp(msg)
         self.status_pub.publish(msg)
 
-    def _received(self, message: Message) -> None:
+    # ---- in -----------------------------------------------------------------------
+
+    def poll(self) -> int:
+        """Take what the other processes' tiles sent; hand each message to its listeners."""
+        count = 0
+        buffer = self._buffer
+        for taker, kind, (first, last) in self.takers:
+            if not taker.take_all(buffer):
+                continue
+            cls = MESSAGE_TYPES[kind]
+            for data, gid in buffer:
+                msg = deserialize_message(data, cls)
+                if not first <= msg.sender_id <= last:
+                    self.rejected["sender not in its tile"] += 1
+                    continue
+                del gid  # checked against the tile's host in the trust layer (issue 12)
+                self._deliver(from_ros(kind, msg))
+                count += 1
+            buffer.clear()
+        return count
+
+    def _deliver(self, message: Message) -> None:
         """Hand a message to every hosted robot that listens to its sender. Queued, not called
         at once: a robot that steps on it sends again, and that must not recurse."""
         for receive in self.receivers.get((message.sender, message.kind), ()):
@@ -141,8 +260,28 @@ class Transport:
             return
         self._pumping = True
         try:
-            while self._queue:
-                receive, queued = self._queue.popleft()
+            queue = self._queue
+            while queue:
+                receive, queued = queue.pop()
                 receive(queued)
         finally:
             self._pumping = False
+
+    def close(self) -> None:
+        """Before the node is destroyed: the takers use its subscriptions' handles."""
+        for taker, _, _ in self.takers:
+            taker.close()
+        self.listener.destroy_node()
+
+
+def host_listener_qos() -> QoSProfile:
+    """Every host's latest announcement (each host's writer keeps one, latched)."""
+    return QoSProfile(
+        depth=1,
+        history=HistoryPolicy.KEEP_ALL,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+
+
+__all__ = ["KINDS", "MESSAGE_TYPES", "PREFIX", "Transport"]

@@ -1,38 +1,118 @@
-"""`python -m camo_nodes.worker --cells ...`: a process hosting many robots (started by the
-launcher)."""
+"""`./camo worker --cells FIRST-LAST`: a process hosting robots of a run, here or elsewhere.
+
+It joins the run with `--run-id` (or the only run in its domain and network),
+takes the run's parameters from the run itself (its latched /<run>/swarm/params,
+published by the launcher), hosts the robots it is given and exits 0 when the
+run's launcher is gone. The launcher starts its own workers the same way; a
+second machine needs only a clone and this command line, for cells the run
+left to remote workers (`./camo run --remote-cells FIRST-LAST`).
+"""
 
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import sys
 
 import rclpy
+from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from camo_core.exceptions import CamoError
+from camo_core.exceptions import CamoError, UsageError
+from camo_core.options import Parser, add_network_options, network_env, parse_ranges
 from camo_core.params import CamoParams
 from camo_core.shutdown import StopFlag
 
 from .robot_node import host_robots
+from .topics import (
+    LEAN_NODE,
+    RunTopics,
+    check_run_id,
+    run_ended,
+    wait_for_run,
+    wait_for_setup,
+)
+
+
+def build_parser() -> Parser:
+    parser = Parser(prog="camo worker", description="host robots of a running swarm")
+    parser.add_argument(
+        "--cells",
+        action="append",
+        required=True,
+        metavar="FIRST-LAST",
+        help="robot ids to host, row-major, inclusive (repeatable)",
+    )
+    parser.add_argument("--run-id", default=None, help="the run to join (default: the only one)")
+    parser.add_argument(
+        "--wait", type=float, default=120.0, help="seconds to wait for the run (default 120)"
+    )
+    add_network_options(parser)
+    # The launcher's own workers host cells it keeps for itself.
+    parser.add_argument("--launched", action="store_true", help=argparse.SUPPRESS)
+    return parser
+
+
+def tiles_for(setup: dict, params: CamoParams, texts: list[str], launched: bool):
+    """The tiles to host; a worker started by hand may host only cells left to remote workers."""
+    tiles = parse_ranges(texts, params.count)
+    if launched:
+        return tiles
+    remote = [tuple(r) for r in setup.get("remote", [])]
+    for first, last in tiles:
+        if not any(a <= first and last <= b for a, b in remote):
+            left = ", ".join(f"{a}-{b}" for a, b in remote) or "none"
+            raise UsageError(
+                f"cells {first}-{last} are not left to remote workers by this run "
+                f"(its --remote-cells: {left})"
+            )
+    return tiles
+
+
+def join(node: Node, args, stop) -> tuple[RunTopics, dict]:
+    def spin() -> None:
+        rclpy.spin_once(node, timeout_sec=0.1)
+
+    run_id = check_run_id(args.run_id) if args.run_id else None
+    topics = RunTopics(wait_for_run(node, spin, run_id, args.wait, stop))
+    return topics, wait_for_setup(node, spin, topics, args.wait, stop)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="swarm worker")
-    parser.add_argument("--params", required=True, help="CamoParams as JSON")
-    parser.add_argument("--cells", required=True, help="robot ids, comma-separated")
-    parser.add_argument("--step-timeout", type=float, default=10.0)
-    parser.add_argument("--discovery-timeout", type=float, default=300.0)
-    args, ros_args = parser.parse_known_args(argv)
     stop = StopFlag()
+    try:
+        args, ros_args = build_parser().parse_known_args(argv)
+        if not args.wait > 0:
+            raise UsageError(f"--wait must be positive (got {args.wait})")
+        os.environ.update(network_env(args, os.environ))
+    except CamoError as exc:
+        print(f"camo worker: error: {exc}", file=sys.stderr)
+        return 2
     rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        params = CamoParams(**json.loads(args.params))
-        cells = [int(c) for c in args.cells.split(",") if c]
-        return host_robots(params, cells, args.step_timeout, args.discovery_timeout).run(stop)
+        finder = Node("worker_join", **LEAN_NODE)
+        try:
+            topics, setup = join(finder, args, stop)
+        finally:
+            finder.destroy_node()
+        params = CamoParams(**setup["params"])
+        launched = args.launched
+        tiles = tiles_for(setup, params, args.cells, launched)
+        host = host_robots(
+            params, topics, tiles, setup["step_timeout"], setup["discovery_timeout"]
+        )
+        if not launched:
+            cells = ", ".join(f"{a}-{b}" for a, b in tiles)
+            print(f"camo worker: hosting robots {cells} of {topics.run}", file=sys.stderr)
+        code = host.run(stop, until=run_ended(host.node, topics))
+        if not launched and not stop:
+            print(f"camo worker: {topics.run} has ended", file=sys.stderr)
+        return code
     except CamoError as exc:
-        print(f"swarm worker: error: {exc}", file=sys.stderr)
+        print(f"camo worker: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        return 130
     finally:
         rclpy.try_shutdown()
 

@@ -21,7 +21,7 @@ from camo_core.backgrounds import BACKGROUNDS, background
 from camo_core.exceptions import CamoError
 from camo_core.options import node_help, wants_help
 from camo_core.sensing import load_image
-from camo_nodes.topics import BACKGROUND_TOPIC, LATCHED, LOAD_TOPIC, image_to_msg
+from camo_nodes.topics import LATCHED, LEAN_NODE, RunTopics, image_to_msg, run_from_parameter
 
 
 def load(image_path: str, pattern: str) -> np.ndarray:
@@ -29,15 +29,16 @@ def load(image_path: str, pattern: str) -> np.ndarray:
 
 
 class ProjectorNode(Node):
-    def __init__(self, **kwargs) -> None:
-        super().__init__("projector", **kwargs)
+    def __init__(self, topics: RunTopics, **kwargs) -> None:
+        super().__init__("projector", namespace=topics.robot_namespace, **kwargs)
         self.declare_parameter("image", "")
         self.declare_parameter("pattern", "forest")
-        self.publisher = self.create_publisher(Image, BACKGROUND_TOPIC, LATCHED)
+        self.declare_parameter("run_id", topics.run)
+        self.publisher = self.create_publisher(Image, topics.background, LATCHED)
         self.image = load(self.get_parameter("image").value, self.get_parameter("pattern").value)
         self.add_on_set_parameters_callback(self._on_set)
         # A topic as well as the parameters: data is a built-in name or an image path.
-        self.create_subscription(String, LOAD_TOPIC, self._on_load, 10)
+        self.create_subscription(String, topics.load, self._on_load, 10)
         self.publish()
 
     def _on_load(self, msg: String) -> None:
@@ -72,12 +73,18 @@ class ProjectorNode(Node):
 def main(args=None) -> int:
     if wants_help(args):
         about = "Publishes the background image projected onto the arena (latched)."
-        print(node_help("projector_node", about, {"image": "", "pattern": "forest"}))
+        parameters = {"image": "", "pattern": "forest", "run_id": ""}
+        print(node_help("projector_node", about, parameters))
         return 0
     rclpy.init(args=args)
     node = None
     try:
-        node = ProjectorNode()
+        reader = Node("projector_run", **LEAN_NODE)
+        try:
+            topics = run_from_parameter(reader)
+        finally:
+            reader.destroy_node()
+        node = ProjectorNode(topics)
         rclpy.spin(node)
     except CamoError as exc:
         print(f"projector_node: error: {exc}", file=sys.stderr)
