@@ -14,9 +14,9 @@ from camo_core.protocol import (
     DONE,
     SENSING,
     TICK,
-    Message,
     StepProtocol,
 )
+from camo_core.robot_io import Message
 from camo_core.sensing import Reading
 from camo_core.simulator import simulate
 
@@ -298,3 +298,33 @@ def test_a_neighbour_known_to_be_alive_is_waited_for_past_the_deadline():
     assert protocol.step == 0
     protocol.deliver(vote(0, 0, 2), 5.1)
     assert protocol.step == 1 and protocol.deadlines == 1
+
+
+def test_reports_spaced_in_time_still_carry_every_step_and_rebuild_the_same_record():
+    from camo_core.record import RoundRecord
+
+    params = CamoParams(rows=2, cols=3, consensus_steps=12, formation_steps=6, seed=2)
+    grid = np.random.default_rng(5).uniform(0, 255, (params.rows, params.cols))
+    records = []
+    for period in (0.0, 10.0):  # every step, or (almost) only at phase changes
+        bus = Bus(params, grid, seed=1)
+        for p in bus.robots.values():
+            p.report_period = period
+        reports = []
+        original = bus.post
+
+        def post(out, original=original, reports=reports):
+            reports.extend(out.reports)
+            original(out)
+
+        bus.post = post
+        bus.run()
+        record = RoundRecord(params)
+        for report in reports:
+            record.add(report)
+        records.append((record, len(reports)))
+    (every, n_every), (spaced, n_spaced) = records
+    assert n_spaced == 3 * params.count < n_every  # vote, end of consensus, done
+    for name in ("p_trace", "state_trace", "initial", "state", "selected", "sensed"):
+        assert np.array_equal(getattr(every, name), getattr(spaced, name), equal_nan=True), name
+    assert not np.isnan(spaced.p_trace).any() and (spaced.state_trace >= 0).all()

@@ -188,7 +188,7 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
             "--discovery-timeout",
             "20",
             "--consensus-steps",
-            "1000",
+            "1500",
             "--domain-id",
             str(domain()),
             "--out",

@@ -13,7 +13,7 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 
 from camo_core.params import CamoParams
-from camo_core.protocol import messages_per_round
+from camo_core.robot_io import messages_per_round
 
 
 @dataclass

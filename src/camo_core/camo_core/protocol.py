@@ -25,14 +25,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 from . import rng
 from .grid import NUM_SLOTS
 from .params import CamoParams
 from .robot import RobotCore
-from .sensing import Reading
+from .robot_io import Display, Message, NoDisplay, Output, Report, Sensor
 
 DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = range(5)
 PHASE_NAMES = ("discovery", "sensing", "consensus", "formation", "done")
@@ -51,89 +50,6 @@ TICK = 0.05  # s between the transport's calls to tick()
 STALL = 0.5  # s: a tick this late means the robot's own process stalled
 
 
-def messages_per_round(params: CamoParams) -> dict[str, int]:
-    """What each robot sends in a round it finishes: one hello, one colour, a vote per consensus
-    step and a state per formation step (a recording of the run must hold them all)."""
-    return {
-        "hello": 1,
-        "color": 1,
-        "vote": params.consensus_steps,
-        "state": params.formation_steps,
-    }
-
-
-@dataclass(frozen=True)
-class Message:
-    """What one robot sends its neighbours. `value`: hello (row, col); colour the sensed grey;
-    vote (p, degree); state 0 or 1."""
-
-    kind: str
-    sender: int
-    round: int
-    step: int
-    value: Any
-
-
-@dataclass(frozen=True)
-class Report:
-    """Where a robot is and what it shows, for monitors and recorders (a RobotStatus)."""
-
-    sender_id: int
-    row: int
-    col: int
-    phase: int
-    step: int
-    round: int
-    sensed: float
-    p: tuple[float, float, float]
-    pattern: int
-    state: int
-    alive: bool
-    known_slots: int
-    deadlines: int
-    silent: tuple[int, ...] = ()  # neighbours it has given up on (robot ids)
-
-
-@dataclass
-class Output:
-    send: list[Message] = field(default_factory=list)
-    reports: list[Report] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-
-
-class Sensor(Protocol):
-    def read(self) -> Reading | None:
-        """This robot's grey value now, or None if it cannot be read yet (try again later)."""
-
-    def next_round(self) -> None:
-        """A new background is up: later reads are of it."""
-
-    def ok(self) -> bool:
-        """The hardware behind the sensor is reachable."""
-
-
-class Display(Protocol):
-    def show(self, state: int) -> None: ...
-
-    def ready(self) -> bool:
-        """It shows the last state it was given."""
-
-    def ok(self) -> bool: ...
-
-
-class NoDisplay:
-    """A simulated robot shows nothing."""
-
-    def show(self, state: int) -> None:
-        pass
-
-    def ready(self) -> bool:
-        return True
-
-    def ok(self) -> bool:
-        return True
-
-
 class StepProtocol:
     def __init__(
         self,
@@ -145,12 +61,20 @@ class StepProtocol:
         step_timeout: float = 10.0,
         discovery_timeout: float = 300.0,
         known_alive: Callable[[int], bool] | None = None,
+        report_period: float = 0.0,
     ) -> None:
         self.params = params
         # A neighbour the transport knows to be alive (e.g. hosted by the same process) is waited
         # for past the deadline: it is itself waiting, and giving up on it would wrongly spread
         # one dead robot's silence through its living neighbours.
         self.known_alive = known_alive or (lambda robot: False)
+        # Between phase changes a robot reports at most this often (0: every step): a large,
+        # fast swarm's statuses would otherwise outnumber its messages.
+        self.report_period = report_period
+        self.last_report = -math.inf
+        self.p_trace: list[float] = []  # p before consensus step 0, 1, ... (flattened)
+        self.state_trace: list[int] = []  # the state before formation step 0, 1, ...
+        self.reported = (0, 0)  # how many p values and states went into reports already
         self.core = RobotCore(params, row, col)
         self.sensor = sensor
         self.display = display or NoDisplay()
@@ -265,22 +189,25 @@ class StepProtocol:
             if not self._ready(self._waiting_for("color", 0, 4), self.step_timeout, now, ticking):
                 return False
             core.decide_vote(self._take("color", 0, 4))
+            self.p_trace, self.state_trace, self.reported = list(core.p), [], (0, 0)
             self._next(CONSENSUS, 0, now)
-            self._report()
+            self._report(now, forced=True)
             self._send_vote()
         elif self.phase == CONSENSUS:
             if self.step == params.consensus_steps:
                 core.finish_consensus()
+                self.state_trace = [core.state]
                 self._next(FORMATION, 0, now)
-                self._report()
+                self._report(now, forced=True)
                 self._send("state", 0, core.state)
                 return True
             pending = self._waiting_for("vote", self.step, 8)
             if not self._ready(pending, self.step_timeout, now, ticking):
                 return False
             core.consensus(self.step, self._take("vote", self.step, 8))
+            self.p_trace.extend(core.p)
             self._next(CONSENSUS, self.step + 1, now)
-            self._report()
+            self._report(now)
             if self.step < params.consensus_steps:
                 self._send_vote()
         elif self.phase == FORMATION:
@@ -289,14 +216,15 @@ class StepProtocol:
                     self.hardware_wait = True
                     return False
                 self._next(DONE, self.step, now)
-                self._report()
+                self._report(now, forced=True)
                 return True
             pending = self._waiting_for("state", self.step, NUM_SLOTS)
             if not self._ready(pending, self.step_timeout, now, ticking):
                 return False
             core.form(self.step, self._take("state", self.step, NUM_SLOTS))
+            self.state_trace.append(core.state)
             self._next(FORMATION, self.step + 1, now)
-            self._report()
+            self._report(now)
             if self.step < params.formation_steps:
                 self._send("state", self.step, core.state)
         elif self.newer_background:  # done, and a new background is up
@@ -360,10 +288,17 @@ class StepProtocol:
     def _send_vote(self) -> None:
         self._send("vote", self.step, (tuple(self.core.p), self.core.degree))
 
-    def _report(self) -> None:
+    def _report(self, now: float, forced: bool = False) -> None:
+        """A report at every phase change; within a phase at most every `report_period` s,
+        carrying every p and state since the last report."""
         core = self.core
         if self.phase >= FORMATION:
             self.display.show(core.state)
+        if not forced and now - self.last_report < self.report_period:
+            return
+        self.last_report = now
+        p_from, state_from = self.reported
+        self.reported = (len(self.p_trace), len(self.state_trace))
         self._out.reports.append(
             Report(
                 sender_id=core.id,
@@ -380,6 +315,10 @@ class StepProtocol:
                 known_slots=core.known_mask,
                 deadlines=self.deadlines,
                 silent=tuple(sorted(core.neighbors[s] for s in self.silent)),
+                p_from=p_from // 3,
+                p_trace=tuple(self.p_trace[p_from:]),
+                state_from=state_from,
+                state_trace=tuple(self.state_trace[state_from:]),
             )
         )
 

@@ -57,6 +57,18 @@ class RoundRecord:
             self.initial[i] = report.state
         elif report.phase == FORMATION:
             self.state_trace[report.step, i] = report.state
+        # The steps since the robot's last report (statuses of an older camo have none: they came
+        # one a step).
+        p_trace = getattr(report, "p_trace", ())
+        if len(p_trace):
+            first = report.p_from
+            steps = max(0, min(len(p_trace) // 3, len(self.p_trace) - first))
+            self.p_trace[first : first + steps, i] = np.reshape(p_trace[: 3 * steps], (steps, 3))
+        state_trace = getattr(report, "state_trace", ())
+        if len(state_trace):
+            first = report.state_from
+            steps = max(0, min(len(state_trace), len(self.state_trace) - first))
+            self.state_trace[first : first + steps, i] = state_trace[:steps]
         if report.phase == DONE:
             self.state_trace[report.step, i] = report.state
             self.selected[i] = report.pattern

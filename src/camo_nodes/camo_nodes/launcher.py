@@ -91,6 +91,11 @@ class Session:
             raise Interrupted
         self.executor.spin_once(timeout_sec=seconds)
 
+    def spin_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            self.spin(left)
+
     def wait(self, done, what: str, limit: float) -> None:
         deadline = time.monotonic() + limit
         while not done():
@@ -148,10 +153,9 @@ class Session:
         last_print = 0.0
         all_voted = None
         while not monitor.complete(index):
-            self.spin()
-            # Handle a burst of statuses before the (numpy) checks below, so the monitor keeps up.
-            for _ in range(200):
-                self.executor.spin_once(timeout_sec=0.0)
+            # Everything that arrives in 0.1 s, then the (numpy) checks below: they cost more than
+            # a status, and a burst of statuses must not wait behind them.
+            self.spin_for(0.1)
             if all_voted is None and monitor.all_voted(index):
                 all_voted = time.monotonic()
             if time.monotonic() - last_print > 1.0:
@@ -274,10 +278,13 @@ def run(config: RunConfig) -> int:
                 session.switch_background(label)
             voted = session.run_round(index, group)
             times = {"launched": launched, "voted": voted, "done": time.monotonic()}
+            if index == config.rounds - 1:
+                if config.record:
+                    session.recording_holds(index)
+                # The robots tear down while this process writes the results.
+                group.interrupt(keep=lambda proc: proc is group.recorder)
             report_round(config, session.monitor, index, times)
             written += 1
-        if config.record:
-            session.recording_holds(config.rounds - 1)
     except Interrupted:
         print("camo run: interrupted; stopping the swarm and writing what it has", file=sys.stderr)
         code = 130

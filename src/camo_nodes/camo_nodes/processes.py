@@ -79,6 +79,7 @@ class ProcessGroup:
         self.procs: list[subprocess.Popen] = []
         self.cells: dict[int, list[int]] = {}  # pid -> robot ids
         self.recorder: subprocess.Popen | None = None
+        self._interrupted: list[subprocess.Popen] = []
 
     def _start(self, module: str, *args: str) -> subprocess.Popen:
         command = [sys.executable, "-m", module, *args]
@@ -128,12 +129,18 @@ class ProcessGroup:
         """Robots whose process has exited (killed, say): they cannot finish."""
         return [c for p in self.procs if p.poll() is not None for c in self.cells.get(p.pid, ())]
 
+    def interrupt(self, keep: Callable[[subprocess.Popen], bool] = lambda p: False) -> None:
+        """SIGINT to each running process (but those `keep` spares), once; no waiting."""
+        for proc in self.procs:
+            if proc.poll() is None and not keep(proc) and proc not in self._interrupted:
+                proc.send_signal(signal.SIGINT)
+                self._interrupted.append(proc)
+
     def stop(self, grace: float = 5.0, keep: Callable[[subprocess.Popen], bool] = lambda p: False):
         """SIGINT to each (but those `keep` spares), SIGKILL to those still running after
         `grace` seconds."""
         stopping = [p for p in self.procs if p.poll() is None and not keep(p)]
-        for proc in stopping:
-            proc.send_signal(signal.SIGINT)
+        self.interrupt(keep)
         deadline = time.monotonic() + grace
         for proc in stopping:
             try:

@@ -24,13 +24,22 @@ from rclpy.signals import SignalHandlerOptions
 from camo_core.exceptions import CamoError
 from camo_core.options import node_help, wants_help
 from camo_core.params import CamoParams, ParameterError
-from camo_core.protocol import Display, Message, Output, Sensor, StepProtocol
+from camo_core.protocol import StepProtocol
+from camo_core.robot_io import Display, Message, Output, Sensor
 from camo_core.sensing import ProjectedSensor, Projection
 from camo_core.shutdown import StopFlag
 
 from .host import Host, host_node
 from .topics import LEAN_NODE, RunTopics, run_ended, run_from_parameter
 from .transport import Transport
+
+
+class NoParameterEvents:
+    """Stands in for the /parameter_events writer rclpy gives every node: a hosted robot has no
+    parameters to change, and thousands of writers nobody reads cost discovery and teardown."""
+
+    def publish(self, msg) -> None:
+        pass
 
 
 class RobotNode(Node):
@@ -43,11 +52,17 @@ class RobotNode(Node):
     ) -> None:
         core = protocol.core
         name = f"robot_{core.row}_{core.col}"
+        self._lean = node_kwargs.get("start_parameter_services") is False
         super().__init__(name, namespace=transport.topics.robot_namespace, **node_kwargs)
         self.protocol = protocol
         self.transport = transport
         self.clock = clock
         transport.add(core.id, list(protocol.listens_to()), self.deliver)
+
+    def create_publisher(self, msg_type, topic, *args, **kwargs):
+        if topic == "/parameter_events" and self._lean:
+            return NoParameterEvents()
+        return super().create_publisher(msg_type, topic, *args, **kwargs)
 
     @property
     def done(self) -> bool:
@@ -75,6 +90,11 @@ class RobotNode(Node):
         for message in out.send:
             self.transport.send(message)
 
+
+# Between phase changes a robot reports every 0.25 s at most, and a process's robots together
+# about 2000 times a second at most: the monitor and the recorder take every status.
+REPORT_PERIOD = 0.25
+REPORTS_PER_PROCESS = 2000.0
 
 ROBOT_PARAMETERS = {
     "rows": 8,
@@ -147,7 +167,15 @@ def host_robots(
         sensor = (sensors or {}).get(cell) or ProjectedSensor(projection, row, col)
         display = (displays or {}).get(cell)
         protocol = StepProtocol(
-            params, row, col, sensor, display, step_timeout, discovery_timeout, transport.hosts
+            params,
+            row,
+            col,
+            sensor,
+            display,
+            step_timeout,
+            discovery_timeout,
+            transport.hosts,
+            max(REPORT_PERIOD, len(transport.hosted) / REPORTS_PER_PROCESS),
         )
         robots.append(RobotNode(protocol, transport, **(LEAN_NODE if lean else {})))
     return Host(node, transport, projection, robots, spin_robots=not lean)

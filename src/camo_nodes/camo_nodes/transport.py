@@ -30,7 +30,8 @@ from rclpy.serialization import deserialize_message
 
 from camo_core.grid import neighbor_ids
 from camo_core.params import CamoParams
-from camo_core.protocol import CONSENSUS, DISCOVERY, FORMATION, KINDS, SENSING, Message, Report
+from camo_core.protocol import CONSENSUS, DISCOVERY, FORMATION, KINDS, SENSING
+from camo_core.robot_io import Message, Report
 from camo_msgs.msg import Color, Hello, Host, RobotStatus, State, Vote
 
 from .rcl_take import PREFIX, Taker
@@ -91,6 +92,10 @@ def status_msg(report: Report) -> RobotStatus:
         known_slots=report.known_slots,
         deadlines=report.deadlines,
         silent=list(report.silent),
+        p_from=report.p_from,
+        p_trace=list(report.p_trace),
+        state_from=report.state_from,
+        state_trace=list(report.state_trace),
     )
 
 
