@@ -1,0 +1,76 @@
+"""One swarm across two "hosts" (network namespaces joined by a veth pair on their own subnet):
+the launcher and half the robots on one, a worker with the other half on the other, found by
+multicast or through a discovery server; the result equals the simulator."""
+
+import json
+import os
+import sys
+import time
+
+import pytest
+from support import domain, run_camo
+from two_hosts import TwoHosts, netns_available
+
+OK, WHY = netns_available()
+pytestmark = pytest.mark.skipif(not OK, reason=WHY)
+
+ROWS = COLS = 32
+OPTIONS = ["--pattern", "leopard", "--rows", str(ROWS), "--cols", str(COLS), "--seed", "6"]
+OPTIONS += ["--rho-comm", "0.1", "--rho-meas", "0.05"]
+
+
+def environment() -> dict[str, str]:
+    """UDP only (no shared memory): every byte between the hosts crosses the veth."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTRTPS_"))}
+    return {**env, "ROS_DOMAIN_ID": str(domain()), "FASTDDS_BUILTIN_TRANSPORTS": "UDPv4"}
+
+
+def discovery_server(net: TwoHosts, env: dict[str, str]) -> str:
+    """`./camo discovery-server` on host a; its HOST:PORT once it runs."""
+    port = 11811 + os.getpid() % 1000
+    server = net.popen(
+        "a",
+        [sys.executable, "-m", "camo_nodes.discovery_server", "--address", net.addr["a"]]
+        + ["--port", str(port)],
+        env,
+    )
+    deadline = time.monotonic() + 30
+    while "running" not in server.stdout.readline():
+        assert server.poll() is None and time.monotonic() < deadline, server.stderr.read()
+    return f"{net.addr['a']}:{port}"
+
+
+@pytest.mark.parametrize("mode", ["multicast", "discovery server"])
+def test_a_swarm_split_across_two_hosts_equals_the_simulator(tmp_path, mode):
+    half = ROWS * COLS // 2
+    env = environment()
+    with TwoHosts() as net:
+        if mode == "multicast":
+            network = ["--network", "subnet"]
+        else:
+            network = ["--discovery-server", discovery_server(net, env)]
+        before = net.traffic("a")
+        launcher = net.popen(
+            "a",
+            [sys.executable, "-m", "camo_nodes.launcher", *OPTIONS, "--procs", "1"]
+            + ["--remote-cells", f"{half}-{ROWS * COLS - 1}", "--run-id", "split"]
+            + ["--out", str(tmp_path / "run"), *network],
+            env,
+        )
+        worker = net.popen(
+            "b",
+            [sys.executable, "-m", "camo_nodes.worker", "--cells", f"{half}-{ROWS * COLS - 1}"]
+            + ["--run-id", "split", *network],
+            env,
+        )
+        _, said = launcher.communicate(timeout=240)
+        assert launcher.returncode == 0, said[-3000:]
+        assert worker.wait(timeout=60) == 0, worker.stderr.read()[-2000:]
+        crossed = net.traffic("a") - before
+    assert crossed > 100_000, f"only {crossed} bytes crossed between the hosts"
+    sim = run_camo("sim", *OPTIONS, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    ran = json.loads((tmp_path / "run" / "summary.json").read_text())
+    expected = json.loads((tmp_path / "sim" / "summary.json").read_text())
+    assert ran.pop("elapsed_s") >= 0 and expected.pop("elapsed_s") >= 0
+    assert ran == expected
