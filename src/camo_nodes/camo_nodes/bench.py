@@ -131,10 +131,14 @@ def bare_exchange(side: int, steps: int, procs: int, domain: int) -> dict:
     }
 
 
-def swarm_run(side: int, procs: int, domain: int, out: Path, steps: int | None = None) -> dict:
-    """`./camo run` once (paper profile; `steps` consensus + formation steps if given): its
-    timing.json, and launch to exit."""
+def swarm_run(
+    side: int, procs: int, domain: int, out: Path, steps: int | None = None, record: bool = False
+) -> dict:
+    """`./camo run` once (paper profile; `steps` consensus + formation steps if given; recorded
+    to out/bag with `record`): its timing.json, and launch to exit."""
     length = [] if steps is None else ["--consensus-steps", str(steps - 10)]
+    if record:
+        length += ["--record", str(out / "bag")]
     launched = time.monotonic()
     proc = subprocess.run(
         [sys.executable, "-m", "camo_nodes.launcher", "--rows", str(side), "--cols", str(side)]
@@ -176,6 +180,21 @@ def compare(side: int, procs: int, domain: int, out: Path, steps: int | None, re
     return row
 
 
+def recording_cost(side: int, procs: int, domain: int, out: Path, repeat: int) -> dict:
+    """Launch to exit of alternating recorded and unrecorded runs: the median ratio."""
+    plain, recorded = [], []
+    for k in range(repeat):
+        plain.append(swarm_run(side, procs, domain, out / f"plain_{k}")["wall_s"])
+        recorded.append(
+            swarm_run(side, procs, domain, out / f"recorded_{k}", record=True)["wall_s"]
+        )
+        print(f"{side}x{side}: {plain[-1]:.1f} s, recorded {recorded[-1]:.1f} s", file=sys.stderr)
+    row = {"robots": f"{side}x{side}", "plain_s": statistics.median(plain)}
+    row["recorded_s"] = statistics.median(recorded)
+    row["ratio"] = row["recorded_s"] / row["plain_s"]
+    return row
+
+
 def format_table(rows: list[dict]) -> str:
     head = (
         f"{'robots':>8} {'steps':>6} {'set-up s':>17} {'steps/s':>21} {'ratio':>6} "
@@ -201,6 +220,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--sides", default="16,32,64", help="grid sides of the whole-run comparison"
+    )
+    parser.add_argument(
+        "--record-side", type=int, default=16, help="side of the recording comparison (0: none)"
     )
     parser.add_argument("--procs", type=int, default=os.cpu_count() or 1)
     parser.add_argument(
@@ -240,14 +262,25 @@ def main(argv: list[str] | None = None) -> int:
         for side in map(int, args.sides.split(","))
         if side
     ]
+    recording = []
+    if args.record_side:
+        side = args.record_side
+        recording.append(
+            recording_cost(side, args.procs, domain, args.out / "record", args.repeat)
+        )
     if args.json:
-        print(json.dumps({"rates": rates, "whole": whole}))
+        print(json.dumps({"rates": rates, "whole": whole, "recording": recording}))
     else:
         print(f"medians of {args.repeat} alternating runs, {args.procs} processes")
         print("long runs (step rate):")
         print(format_table(rates))
         print("whole runs (35 + 10 steps):")
         print(format_table(whole))
+        for r in recording:
+            print(
+                f"recording {r['robots']}: launch to exit {r['plain_s']:.1f} s, recorded "
+                f"{r['recorded_s']:.1f} s, ratio {r['ratio']:.2f} (target <= 1.5)"
+            )
     return 0
 
 

@@ -105,16 +105,7 @@ class Session:
 
     # ---- the recorder ---------------------------------------------------------------
 
-    def recorder_ready(self, group: ProcessGroup) -> None:
-        def ready() -> bool:
-            if group.recorder.poll() is not None:  # it said why on stderr
-                code = group.recorder.returncode
-                raise RunFailed(f"the recorder exited with code {code}", 2 if code == 2 else 1)
-            return self.recorded is not None
-
-        self.wait(ready, "the recorder did not start", 60.0)
-
-    def recording_holds(self, round_index: int, limit: float = 60.0) -> None:
+    def recording_holds(self, round_index: int, group: ProcessGroup, limit: float = 60.0) -> None:
         """Before the robots stop or start a new round: a robot's topics keep one round of
         history for late subscribers, so the recorder must have taken this round in first."""
         finished = int(self.monitor.record(round_index).finished.sum())
@@ -125,6 +116,9 @@ class Session:
 
         deadline = time.monotonic() + limit
         while not holds():
+            problem = group.failed()
+            if problem:
+                raise RunFailed(problem)
             if time.monotonic() > deadline:
                 lacking = (self.recorded or {}).get("lacking", [])
                 short = lacking[round_index] if len(lacking) > round_index else {}
@@ -261,8 +255,8 @@ def run(config: RunConfig) -> int:
     code = 0
     try:
         if config.record:
+            # It starts with the swarm: the robots' topics keep their history for it.
             group.start_recorder(str(config.record), config.topics.run)
-            session.recorder_ready(group)
             print(f"camo run: recording every topic to {config.record}/", file=sys.stderr)
         print(
             f"camo run: {config.topics.run}: topics under /{config.topics.run}/", file=sys.stderr
@@ -274,13 +268,13 @@ def run(config: RunConfig) -> int:
         for index, label in enumerate(config.labels):
             if index > 0:
                 if config.record:
-                    session.recording_holds(index - 1)
+                    session.recording_holds(index - 1, group)
                 session.switch_background(label)
             voted = session.run_round(index, group)
             times = {"launched": launched, "voted": voted, "done": time.monotonic()}
             if index == config.rounds - 1:
                 if config.record:
-                    session.recording_holds(index)
+                    session.recording_holds(index, group)
                 # The robots tear down while this process writes the results.
                 group.interrupt(keep=lambda proc: proc is group.recorder)
             report_round(config, session.monitor, index, times)
