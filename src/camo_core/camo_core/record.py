@@ -39,9 +39,19 @@ class RoundRecord:
         self.finished = np.zeros(n, bool)
         self.deadlines = np.zeros(n, np.int64)  # step deadlines each robot let pass
         self.given_up: dict[int, frozenset[int]] = {}  # reporter -> neighbours it gave up on
+        # When each robot voted and finished, by its own clock (s since the epoch): a monitor
+        # that hears a report late still times the swarm right.
+        self.voted_at = np.full(n, np.nan)
+        self.done_at = np.full(n, np.nan)
 
-    def add(self, report) -> None:
+    def add(self, report, stamp: float | None = None) -> None:
+        """One report; `stamp`: when the robot sent it (s since the epoch), if known."""
         i = report.sender_id
+        if stamp is not None:
+            if report.phase >= CONSENSUS and np.isnan(self.voted_at[i]):
+                self.voted_at[i] = stamp
+            if report.phase == DONE:
+                self.done_at[i] = stamp
         self.phase[i] = report.phase
         self.step[i] = report.step
         self.sensed[i] = report.sensed
@@ -73,6 +83,12 @@ class RoundRecord:
             self.state_trace[report.step, i] = report.state
             self.selected[i] = report.pattern
             self.finished[i] = True
+
+    def timing(self) -> tuple[float, float] | None:
+        """(when the last robot voted, when the last robot finished), by the robots' clocks."""
+        if np.isnan(self.voted_at).all() or np.isnan(self.done_at).all():
+            return None
+        return float(np.nanmax(self.voted_at)), float(np.nanmax(self.done_at))
 
     def declared_silent(self) -> np.ndarray:
         """Robots that a neighbour has given up on (at its latest report)."""

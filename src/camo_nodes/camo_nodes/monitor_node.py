@@ -75,7 +75,8 @@ class MonitorNode(Node):
         if msg.sender_id >= self.params.count:
             return
         self.offline[msg.sender_id] = not msg.alive  # a bridged Droplet whose port went away
-        self.rounds[msg.round].add(msg)
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self.rounds[msg.round].add(msg, stamp)
 
     # ---- views ------------------------------------------------------------------
 
