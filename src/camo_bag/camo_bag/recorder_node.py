@@ -41,6 +41,7 @@ from camo_nodes.topics import (
     RunTopics,
     check_run_id,
     run_ended,
+    use_camo_dds_settings,
     wait_for_run,
 )
 
@@ -48,7 +49,6 @@ from . import msgdefs, qos_yaml
 from .container import BagWriter, TopicInfo
 from .ledger import Ledger
 
-PROFILE = Path(__file__).with_name("recorder_profile.xml")
 SKIPPED = {"/rosout", "/parameter_events"}
 ROBOT_KINDS = {
     "camo_msgs/msg/Hello": "hello",
@@ -244,8 +244,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"recorder_node: error: {exc}", file=sys.stderr)
         return 2
     stop = StopFlag()
-    # Before the DDS participant exists: readers with room for a fast swarm's bursts.
-    os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(PROFILE))
+    use_camo_dds_settings()  # readers with room for a fast swarm's bursts, quick discovery
     rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     executor = EventsExecutor()

@@ -31,7 +31,7 @@ from . import rng
 from .grid import NUM_SLOTS
 from .params import CamoParams
 from .robot import RobotCore
-from .robot_io import Display, Message, NoDisplay, Output, Report, Sensor
+from .robot_io import NOTHING, Display, Message, NoDisplay, Output, Report, Sensor
 
 DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = range(5)
 PHASE_NAMES = ("discovery", "sensing", "consensus", "formation", "done")
@@ -75,6 +75,8 @@ class StepProtocol:
         self.p_trace: list[float] = []  # p before consensus step 0, 1, ... (flattened)
         self.state_trace: list[int] = []  # the state before formation step 0, 1, ...
         self.reported = (0, 0)  # how many p values and states went into reports already
+        self._awaiting: set[int] | None = None  # slots still awaited for _awaiting_key's step
+        self._awaiting_key: tuple[int, str, int] | None = None
         self.core = RobotCore(params, row, col)
         self.sensor = sensor
         self.display = display or NoDisplay()
@@ -126,11 +128,22 @@ class StepProtocol:
     def deliver(self, message: Message, now: float) -> Output:
         slot = self.slot_of.get(message.sender)
         if slot is None or slot >= LISTEN[message.kind]:
-            return self._flush()  # not a neighbour this robot listens to for that kind
-        self.silent.discard(slot)  # it speaks again: wait for it again
+            return NOTHING  # not a neighbour this robot listens to for that kind
+        if slot in self.silent:
+            self.silent.discard(slot)  # it speaks again: wait for it again
+            self._awaiting = None
         if message.round >= self.round:
-            self.inbox[(message.round, message.kind, message.step, slot)] = message.value
-        return self._advance(now) if self.started else self._flush()
+            key = (message.round, message.kind, message.step)
+            self.inbox[(*key, slot)] = message.value
+            if self._awaiting is not None:
+                # The robot waits for these slots' messages of this step, and nothing else:
+                # a message that does not complete them changes nothing (one set operation,
+                # not a look at every slot, per message: robots get many).
+                if key == self._awaiting_key:
+                    self._awaiting.discard(slot)
+                if self._awaiting:
+                    return NOTHING
+        return self._advance(now) if self.started else NOTHING
 
     def background(self, now: float) -> Output:
         """The projected background changed (the sensor holds the image)."""
@@ -233,34 +246,40 @@ class StepProtocol:
             return False
         return True
 
-    def _waiting_for(self, kind: str, step: int, slots: int, known_only: bool = True) -> list[int]:
-        """Slots whose message for `step` is still to come: expected, not dropped, not silent."""
-        core = self.core
-        arriving = core.arrivals(STREAM[kind], step)
-        return [
-            s
-            for s in range(slots)
-            if arriving[s]
-            and (core.known[s] or not known_only)
-            and s not in self.silent
-            and (self.round, kind, step, s) not in self.inbox
-        ]
+    def _waiting_for(self, kind: str, step: int, slots: int, known_only: bool = True) -> set[int]:
+        """Slots whose message for `step` is still to come: expected, not dropped, not silent.
+        Computed once per step; deliveries, deadlines and silent neighbours keep it up to date."""
+        key = (self.round, kind, step)
+        if self._awaiting is None or self._awaiting_key != key:
+            core = self.core
+            arriving = core.arrivals(STREAM[kind], step)
+            self._awaiting_key = key
+            self._awaiting = {
+                s
+                for s in range(slots)
+                if arriving[s]
+                and (core.known[s] or not known_only)
+                and s not in self.silent
+                and (*key, s) not in self.inbox
+            }
+        return self._awaiting
 
-    def _ready(self, pending: list[int], timeout: float, now: float, ticking: bool) -> bool:
+    def _ready(self, pending: set[int], timeout: float, now: float, ticking: bool) -> bool:
         if not pending:
             return True
         # Only the tick lets a deadline pass: it has first discounted a stall of this process, and
         # a message handled before the tick after a stall would otherwise find the deadline gone.
         if not ticking or now - self.wait_started < timeout:
             return False
-        given_up = [s for s in pending if not self.known_alive(self.core.neighbors[s])]
+        given_up = sorted(s for s in pending if not self.known_alive(self.core.neighbors[s]))
         if given_up:
             self.silent.update(given_up)
+            pending.difference_update(given_up)
             self.deadlines += 1
             self._out.warnings.append(
                 f"step deadline passed; neighbours in slots {given_up} are silent"
             )
-        return len(given_up) == len(pending)
+        return not pending
 
     def _take(self, kind: str, step: int, slots: int) -> list:
         return [self.inbox.pop((self.round, kind, step, s), None) for s in range(slots)]
@@ -268,6 +287,7 @@ class StepProtocol:
     def _next(self, phase: int, step: int, now: float) -> None:
         self.phase, self.step = phase, step
         self.wait_started = now
+        self._awaiting = None
 
     def _start_next_round(self, now: float) -> None:
         """Camouflage again on the new background: same rules, a fresh robot state."""

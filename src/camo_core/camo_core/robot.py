@@ -44,12 +44,17 @@ class RobotCore:
             self.row, self.col, self.params.rows, self.params.cols
         )
         self._arrivals: dict[tuple[int, int], tuple[bool, ...]] = {}
+        # A lossless link delivers every neighbour's message: no draw needed.
+        self._everyone = tuple(n is not None for n in self.neighbors)
+        self._known_counts()
 
     # ---- the simulated link -------------------------------------------------
 
     def arrivals(self, stream: int, step: int) -> tuple[bool, ...]:
         """Per slot 0-11: does the message of `stream`/`step` from that slot's robot survive the
         link? Drawn once per (stream, step) and kept: the protocol asks on every delivery."""
+        if self.params.rho_comm <= 0.0:
+            return self._everyone
         key = (stream, step)
         cached = self._arrivals.get(key)
         if cached is None:
@@ -74,14 +79,12 @@ class RobotCore:
         """`heard[s]`: a hello from slot s was delivered. Known = delivered and not lost."""
         arriving = self.arrivals(rng.STREAM_HELLO, 0)
         self.known = [bool(heard[s]) and arriving[s] for s in range(NUM_SLOTS)]
+        self._known_counts()
 
-    @property
-    def degree(self) -> int:
-        return sum(self.known[s] for s in CONSENSUS_SLOTS)
-
-    @property
-    def known_mask(self) -> int:
-        return sum(1 << s for s in range(NUM_SLOTS) if self.known[s])
+    def _known_counts(self) -> None:
+        """The consensus degree and the known-slot mask, once known changes (read every step)."""
+        self.degree = sum(self.known[s] for s in CONSENSUS_SLOTS)
+        self.known_mask = sum(1 << s for s in range(NUM_SLOTS) if self.known[s])
 
     # ---- phase 1: sensing and the local vote ----------------------------------
 

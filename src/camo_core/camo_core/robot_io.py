@@ -26,7 +26,7 @@ def messages_per_round(params: CamoParams) -> dict[str, int]:
     }
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Message:
     """What one robot sends its neighbours. `value`: hello (row, col); colour the sensed grey;
     vote (p, degree); state 0 or 1."""
@@ -38,7 +38,7 @@ class Message:
     value: Any
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Report:
     """Where a robot is and what it shows, for monitors and recorders (a RobotStatus)."""
 
@@ -70,6 +70,9 @@ class Output:
     send: list[Message] = field(default_factory=list)
     reports: list[Report] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+
+
+NOTHING = Output()  # what most deliveries produce (never to be appended to)
 
 
 class Sensor(Protocol):

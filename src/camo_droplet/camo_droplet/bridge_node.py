@@ -32,7 +32,14 @@ from camo_core.sensing import Calibration
 from camo_core.shutdown import StopFlag
 from camo_msgs.msg import RobotStatus
 from camo_nodes.robot_node import ROBOT_PARAMETERS, host_robots, params_from_node
-from camo_nodes.topics import LEAN_NODE, RunTopics, history_qos, run_ended, run_from_parameter
+from camo_nodes.topics import (
+    LEAN_NODE,
+    RunTopics,
+    history_qos,
+    run_ended,
+    run_from_parameter,
+    use_camo_dds_settings,
+)
 
 from .firmware import FirmwareState
 from .link import DropletDisconnected, DropletError, DropletLink
@@ -199,6 +206,7 @@ def main(args=None) -> int:
         print(node_help("droplet_bridge", about, {**ROBOT_PARAMETERS, **BRIDGE_PARAMETERS}))
         return 0
     stop = StopFlag()
+    use_camo_dds_settings()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         reader = Node("droplet_parameters", **LEAN_NODE)

@@ -34,7 +34,7 @@ from camo_core.params import CamoParams
 from camo_msgs.msg import Vote
 
 from .processes import split_cells
-from .topics import LEAN_NODE, RunTopics, history_qos, tile_name
+from .topics import LEAN_NODE, RunTopics, history_qos, tile_name, use_camo_dds_settings
 from .transport import edge_of, listener_qos
 
 BARE_RUN = "bench_bare"
@@ -56,6 +56,7 @@ def bare_worker(side: int, steps: int, block: int, procs: int) -> dict:
         if n is not None and n not in hosted
     }
     topics = RunTopics(BARE_RUN)
+    use_camo_dds_settings()  # the swarm's DDS settings: the same footing
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node(f"bare_{block}", **LEAN_NODE)
     qos = history_qos(len(mine) * (steps + 4))

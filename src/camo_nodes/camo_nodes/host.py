@@ -24,7 +24,14 @@ from camo_core.sensing import ImageError, Projection
 from .topics import LATCHED, LEAN_NODE, ImageEncodingError, RunTopics, image_from_msg
 from .transport import Transport
 
-POLL = 0.002  # s the loop waits for the executor before it polls the transport again
+# The loop polls the transport's edge readers between turns of the executor (timers, the
+# background, hosts' announcements). While messages flow it waits at most POLL_BUSY for the
+# executor, so that a message from another process waits no longer than that; after IDLE
+# without one, POLL_IDLE.
+POLL_BUSY = 0.0002
+POLL_IDLE = 0.005
+IDLE = 0.05
+SPIN_EVERY = 0.002  # s between turns of the executor while messages keep coming
 
 
 def host_node(topics: RunTopics) -> Node:
@@ -74,6 +81,22 @@ class Host:
         for robot in self.robots:
             robot.tick(now)
 
+    def _loop(self, executor, stop, until) -> None:
+        transport = self.transport
+        last_message = next_turn = time.monotonic()
+        while not stop and rclpy.ok() and not (until and until()):
+            taken = transport.poll()
+            now = time.monotonic()
+            if taken:
+                last_message = now
+                if now < next_turn:
+                    continue  # more may be waiting: poll again before the executor's turn
+                timeout = 0.0
+            else:
+                timeout = POLL_BUSY if now - last_message < IDLE else POLL_IDLE
+            executor.spin_once(timeout_sec=timeout)
+            next_turn = time.monotonic() + SPIN_EVERY
+
     def run(self, stop=None, until=None, extra_nodes: tuple[Node, ...] = ()) -> int:
         """Start every robot and spin until Ctrl-C, SIGTERM, shutdown or `until()`."""
         executor = EventsExecutor()
@@ -86,8 +109,7 @@ class Host:
             for robot in self.robots:
                 robot.start()
             # spin_once in a loop: EventsExecutor.spin() busy-waits and starves its timers here.
-            while not stop and rclpy.ok() and not (until and until()):
-                executor.spin_once(timeout_sec=0.0 if transport.poll() else POLL)
+            self._loop(executor, stop, until)
         except KeyboardInterrupt:
             pass
         finally:

@@ -29,7 +29,7 @@ from camo_core.options import (
 from camo_core.params import CamoParams
 from camo_core.sensing import Calibration, load_image, sense_image
 
-from .topics import RunTopics, check_run_id, new_run_id
+from .topics import RunTopics, check_run_id, new_run_id, use_camo_dds_settings
 
 
 def build_parser() -> Parser:
@@ -195,6 +195,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         if then not in BACKGROUNDS:
             sense_image(load_image(then), params.rows, params.cols, params.profile)
     env = network_env(args, os.environ if environ is None else environ)
+    use_camo_dds_settings(env)
     topics = RunTopics(check_run_id(args.run_id) if args.run_id else new_run_id())
     if args.no_projector:
         projector = None

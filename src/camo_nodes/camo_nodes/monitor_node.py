@@ -44,6 +44,7 @@ from .topics import (
     image_from_msg,
     image_to_msg,
     status_listener_qos,
+    use_camo_dds_settings,
     wait_for_run,
     wait_for_setup,
 )
@@ -150,6 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"monitor_node: error: {exc}", file=sys.stderr)
         return 2
     stop = StopFlag()
+    use_camo_dds_settings()
     rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
     executor = EventsExecutor()
     nodes: list[Node] = []

@@ -25,12 +25,12 @@ from camo_core.exceptions import CamoError
 from camo_core.options import node_help, wants_help
 from camo_core.params import CamoParams, ParameterError
 from camo_core.protocol import StepProtocol
-from camo_core.robot_io import Display, Message, Output, Sensor
+from camo_core.robot_io import NOTHING, Display, Message, Output, Sensor
 from camo_core.sensing import ProjectedSensor, Projection
 from camo_core.shutdown import StopFlag
 
 from .host import Host, host_node
-from .topics import LEAN_NODE, RunTopics, run_ended, run_from_parameter
+from .topics import LEAN_NODE, RunTopics, run_ended, run_from_parameter, use_camo_dds_settings
 from .transport import Transport
 
 
@@ -83,6 +83,8 @@ class RobotNode(Node):
         self._emit(self.protocol.background(now))
 
     def _emit(self, out: Output) -> None:
+        if out is NOTHING:
+            return
         for warning in out.warnings:
             self.get_logger().warning(warning)
         for report in out.reports:
@@ -188,6 +190,7 @@ def main(args=None) -> int:
         print(node_help("robot_node", "One robot of the camouflage swarm.", ROBOT_PARAMETERS))
         return 0
     stop = StopFlag()
+    use_camo_dds_settings()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         reader = Node("robot_parameters", **LEAN_NODE)

@@ -156,6 +156,8 @@ class Transport:
             RobotStatus, topics.status, history_qos(status_depth(params) * len(self.hosted))
         )
         self._reused = {kind: cls() for kind, cls in MESSAGE_TYPES.items()}
+        for msg in self._reused.values():
+            msg.header.frame_id = "camo"
         self.receivers: dict[tuple[int, str], list[Receiver]] = defaultdict(list)
         self.needed: set[int] = set()  # neighbours hosted elsewhere
         self.remote: dict[str, Tile] = {}  # tiles subscribed to, by name
@@ -226,7 +228,7 @@ class Transport:
     def send(self, message: Message) -> None:
         msg = self._reused[message.kind]
         fill(msg, message)
-        stamp(msg)
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
         self.writers[(message.sender, message.kind)].publish(msg)
         self._deliver(message)
 

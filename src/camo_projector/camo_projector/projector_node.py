@@ -21,7 +21,14 @@ from camo_core.backgrounds import BACKGROUNDS, background
 from camo_core.exceptions import CamoError
 from camo_core.options import node_help, wants_help
 from camo_core.sensing import load_image
-from camo_nodes.topics import LATCHED, LEAN_NODE, RunTopics, image_to_msg, run_from_parameter
+from camo_nodes.topics import (
+    LATCHED,
+    LEAN_NODE,
+    RunTopics,
+    image_to_msg,
+    run_from_parameter,
+    use_camo_dds_settings,
+)
 
 
 def load(image_path: str, pattern: str) -> np.ndarray:
@@ -76,6 +83,7 @@ def main(args=None) -> int:
         parameters = {"image": "", "pattern": "forest", "run_id": ""}
         print(node_help("projector_node", about, parameters))
         return 0
+    use_camo_dds_settings()
     rclpy.init(args=args)
     node = None
     try:
