@@ -4,12 +4,20 @@ inside the project's venv and workspace."""
 from __future__ import annotations
 
 import os
+import random
 import re
 import subprocess
 import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
+
+import numpy as np
+
+from camo_core.params import CamoParams
+from camo_core.protocol import StepProtocol
+from camo_core.robot_io import Message
+from camo_core.sensing import Reading
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -144,3 +152,54 @@ BAG_OPTIONS = [
     str(BAG_COLS), "--rho-comm", "0.2", "--rho-meas", "0.1", "--seed", "4", "--procs", "2",
     "--run-id", BAG_RUN,
 ]  # fmt: skip
+
+
+# ---- the step protocol without ROS ------------------------------------------------------------
+
+
+class FixedSensor:
+    def __init__(self, value: float) -> None:
+        self.value = value
+
+    def read(self) -> Reading:
+        return Reading(self.value)
+
+    def next_round(self) -> None:
+        pass
+
+    def ok(self) -> bool:
+        return True
+
+
+class Bus:
+    """An in-memory transport that delivers every message in a random order."""
+
+    def __init__(self, params: CamoParams, image_grid: np.ndarray, seed: int) -> None:
+        self.random = random.Random(seed)
+        self.robots = {}
+        for i in range(params.rows):
+            for j in range(params.cols):
+                p = StepProtocol(params, i, j, FixedSensor(float(image_grid[i, j])))
+                self.robots[p.id] = p
+        self.listeners: dict[tuple[int, str], list[StepProtocol]] = {}
+        for p in self.robots.values():
+            for key in p.listens_to():
+                self.listeners.setdefault(key, []).append(p)
+        self.pending: list[tuple[StepProtocol, Message]] = []
+
+    def post(self, out) -> None:
+        for message in out.send:
+            for p in self.listeners.get((message.sender, message.kind), ()):
+                self.pending.append((p, message))
+
+    def run(self) -> None:
+        order = list(self.robots.values())
+        self.random.shuffle(order)
+        for p in order:
+            self.post(p.background(0.0))
+            self.post(p.start(0.0))
+        while self.pending:
+            k = self.random.randrange(len(self.pending))
+            self.pending[k], self.pending[-1] = self.pending[-1], self.pending[k]
+            p, message = self.pending.pop()
+            self.post(p.deliver(message, 0.0))

@@ -3,7 +3,7 @@
 import json
 import re
 
-from support import bag_tool, camo_run
+from support import ROOT, Bus, bag_tool, camo_run
 
 
 def test_render_reads_a_bag_into_one_record_per_round(recorded, count_round_records):
@@ -84,3 +84,61 @@ def test_render_refuses_a_bag_whose_messages_do_not_decode(tmp_path):
     out = bag_tool("render", str(tmp_path / "odd"), "--out", str(tmp_path / "r"))
     assert out.returncode == 2 and "does not decode" in out.stderr, out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
+
+
+def test_render_reads_a_bag_of_the_older_layout_with_its_older_status_type(tmp_path):
+    """A bag recorded before runs had ids: /swarm/params and /swarm/status at the root, one
+    status a step, of a RobotStatus without the newer fields. Render still rebuilds the run."""
+    import json as json_module
+
+    import numpy as np
+    from mcap_ros2._dynamic import serialize_dynamic
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from camo_bag.container import BagWriter, TopicInfo
+    from camo_bag.msgdefs import SEPARATOR, message_definition
+    from camo_core.params import CamoParams
+    from camo_core.simulator import simulate
+
+    params = CamoParams(rows=2, cols=3, consensus_steps=6, formation_steps=4, seed=3)
+    grid = np.random.default_rng(2).uniform(0, 255, (params.rows, params.cols))
+    bus = Bus(params, grid, seed=2)  # every robot reports every step, as camo did then
+    reports = []
+    original = bus.post
+
+    def post(out):
+        reports.extend(out.reports)
+        original(out)
+
+    bus.post = post
+    bus.run()
+    header = message_definition("std_msgs/msg/Header").split(SEPARATOR)[0].rstrip()
+    old = (ROOT / "tests" / "data" / "RobotStatus_before_run_ids.msg").read_text().rstrip()
+    schema = (
+        f"{old}\n{SEPARATOR}\nMSG: std_msgs/Header\n{header}\n"
+        f"{SEPARATOR}\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+    )
+    encode = serialize_dynamic("camo_msgs/msg/RobotStatus", schema)["camo_msgs/msg/RobotStatus"]
+    writer = BagWriter(tmp_path / "old")
+    writer.add_topic(TopicInfo("/swarm/params", "std_msgs/msg/String"), message_definition(
+        "std_msgs/msg/String"))  # fmt: skip
+    writer.add_topic(TopicInfo("/swarm/status", "camo_msgs/msg/RobotStatus"), schema)
+    setup = {"params": params.as_dict(), "backgrounds": ["an old run"]}
+    writer.write("/swarm/params", serialize_message(String(data=json_module.dumps(setup))), 1, 1)
+    for k, r in enumerate(reports):
+        status = {
+            "header": {"stamp": {"sec": 1, "nanosec": k}, "frame_id": "camo"},
+            "sender_id": r.sender_id, "row": r.row, "col": r.col, "phase": r.phase,
+            "step": r.step, "round": r.round, "sensed": r.sensed, "p": list(r.p),
+            "pattern": r.pattern, "state": r.state, "alive": r.alive,
+            "known_slots": r.known_slots, "deadlines": r.deadlines,
+        }  # fmt: skip
+        writer.write("/swarm/status", encode(status), 10 + k, 10 + k)
+    writer.close()
+    out = bag_tool("render", str(tmp_path / "old"), "--out", str(tmp_path / "r"))
+    assert out.returncode == 0, out.stderr
+    rendered = json_module.loads((tmp_path / "r" / "summary.json").read_text())
+    expected = simulate(params, grid).summary()
+    for key in ("final", "initial", "sensed", "votes", "mean_p", "consensus_trace", "pattern"):
+        assert rendered[key] == expected[key], key

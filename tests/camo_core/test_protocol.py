@@ -1,10 +1,9 @@
 """The robot's step protocol, driven with a fake clock and no ROS: when a robot steps, waits
 and gives up waiting."""
 
-import random
-
 import numpy as np
 import pytest
+from support import Bus, FixedSensor
 
 from camo_core import rng
 from camo_core.params import CamoParams
@@ -19,20 +18,6 @@ from camo_core.protocol import (
 from camo_core.robot_io import Message
 from camo_core.sensing import Reading
 from camo_core.simulator import simulate
-
-
-class FixedSensor:
-    def __init__(self, value: float) -> None:
-        self.value = value
-
-    def read(self) -> Reading:
-        return Reading(self.value)
-
-    def next_round(self) -> None:
-        pass
-
-    def ok(self) -> bool:
-        return True
 
 
 def robot(params: CamoParams, row: int, col: int, value: float = 100.0, **kwargs) -> StepProtocol:
@@ -231,40 +216,6 @@ def test_messages_from_strangers_and_other_kinds_slots_are_ignored():
     protocol.deliver(Message("vote", 8, 0, 0, ((1.0, 0.0, 0.0), 3)), 0.0)  # a diagonal: slot 5
     protocol.deliver(Message("color", 8, 0, 0, 3.0), 0.0)  # colours come from slots 0-3 only
     assert (0, "color", 0, 5) not in protocol.inbox and (0, "vote", 0, 5) in protocol.inbox
-
-
-class Bus:
-    """An in-memory transport that delivers every message in a random order."""
-
-    def __init__(self, params: CamoParams, image_grid: np.ndarray, seed: int) -> None:
-        self.random = random.Random(seed)
-        self.robots = {}
-        for i in range(params.rows):
-            for j in range(params.cols):
-                p = StepProtocol(params, i, j, FixedSensor(float(image_grid[i, j])))
-                self.robots[p.id] = p
-        self.listeners: dict[tuple[int, str], list[StepProtocol]] = {}
-        for p in self.robots.values():
-            for key in p.listens_to():
-                self.listeners.setdefault(key, []).append(p)
-        self.pending: list[tuple[StepProtocol, Message]] = []
-
-    def post(self, out) -> None:
-        for message in out.send:
-            for p in self.listeners.get((message.sender, message.kind), ()):
-                self.pending.append((p, message))
-
-    def run(self) -> None:
-        order = list(self.robots.values())
-        self.random.shuffle(order)
-        for p in order:
-            self.post(p.background(0.0))
-            self.post(p.start(0.0))
-        while self.pending:
-            k = self.random.randrange(len(self.pending))
-            self.pending[k], self.pending[-1] = self.pending[-1], self.pending[k]
-            p, message = self.pending.pop()
-            self.post(p.deliver(message, 0.0))
 
 
 @pytest.mark.parametrize(
