@@ -87,15 +87,15 @@ class Host:
         while not stop and rclpy.ok() and not (until and until()):
             taken = transport.poll()
             now = time.monotonic()
+            if now >= next_turn:  # the executor's turn (a turn costs more than a poll)
+                executor.spin_once(timeout_sec=0.0)
+                next_turn = now + SPIN_EVERY
             if taken:
                 last_message = now
-                if now < next_turn:
-                    continue  # more may be waiting: poll again before the executor's turn
-                timeout = 0.0
+            elif now - last_message < IDLE:
+                time.sleep(POLL_BUSY)  # the next message is near: a short sleep, then poll
             else:
-                timeout = POLL_BUSY if now - last_message < IDLE else POLL_IDLE
-            executor.spin_once(timeout_sec=timeout)
-            next_turn = time.monotonic() + SPIN_EVERY
+                executor.spin_once(timeout_sec=POLL_IDLE)  # idle: let the executor wait
 
     def run(self, stop=None, until=None, extra_nodes: tuple[Node, ...] = ()) -> int:
         """Start every robot and spin until Ctrl-C, SIGTERM, shutdown or `until()`."""
