@@ -291,3 +291,90 @@ def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one
             session.executor.remove_node(projector)
             projector.destroy_node()
             session.close()
+
+
+def test_two_runs_in_one_domain_each_equal_the_simulator(tmp_path):
+    domain_id = str(domain())
+    runs = {}
+    for pattern in ("forest", "desert"):
+        runs[pattern] = subprocess.Popen(
+            [sys.executable, "-m", "camo_nodes.launcher", "--pattern", pattern, "--rows", "6"]
+            + ["--cols", "6", "--procs", "1", "--domain-id", domain_id]
+            + ["--out", str(tmp_path / pattern)],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+    for proc in runs.values():
+        _, err = proc.communicate(timeout=240)
+        assert proc.returncode == 0, err[-2000:]
+    for pattern in runs:
+        sim = run_camo(
+            "sim",
+            "--pattern",
+            pattern,
+            "--rows",
+            "6",
+            "--cols",
+            "6",
+            "--out",
+            str(tmp_path / f"s{pattern}"),
+        )
+        assert sim.returncode == 0
+        ran = json.loads((tmp_path / pattern / "summary.json").read_text())
+        expected = json.loads((tmp_path / f"s{pattern}" / "summary.json").read_text())
+        assert ran["final"] == expected["final"] and ran["mean_p"] == expected["mean_p"], pattern
+
+
+def test_a_run_id_in_use_is_refused_in_one_line(tmp_path):
+    domain_id = str(domain())
+    first = subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.launcher", "--rows", "3", "--cols", "3"]
+        + ["--consensus-steps", "100000", "--run-id", "taken", "--domain-id", domain_id]
+        + ["--procs", "1", "--out", str(tmp_path / "first")],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        wait_for_line(first, "consensus 9")
+        second = subprocess.run(
+            [sys.executable, "-m", "camo_nodes.launcher", "--rows", "3", "--cols", "3"]
+            + ["--run-id", "taken", "--domain-id", domain_id, "--out", str(tmp_path / "second")],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    finally:
+        first.send_signal(2)
+        first.communicate(timeout=60)
+    assert second.returncode == 2, second.stderr
+    assert "a run named taken is already running" in second.stderr
+    assert len(second.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "second" / "summary.json").exists()
+
+
+def test_remote_cells_whose_worker_never_comes_are_dead_and_named(tmp_path):
+    out = camo_run(
+        "--rows", "4", "--cols", "4", "--remote-cells", "12-15", "--discovery-timeout", "3",
+        "--procs", "1", "--out", str(tmp_path),
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert sorted(summary["dead"]) == [[3, 0], [3, 1], [3, 2], [3, 3]]
+    assert "remote cells 12-15 never joined" in out.stdout
+
+
+def test_a_worker_with_no_run_to_join_says_so_in_one_line():
+    out = subprocess.run(
+        [sys.executable, "-m", "camo_nodes.worker", "--cells", "0-3", "--wait", "2"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
+    )
+    assert out.returncode == 2 and "no run found in 2 s" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1

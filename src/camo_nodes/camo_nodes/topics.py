@@ -149,7 +149,7 @@ def wait_for_run(node, spin, run_id: str | None, timeout: float, stop=None) -> s
                 f"several runs in this domain ({', '.join(live)}): choose one with --run-id"
             )
         if time.monotonic() > deadline:
-            wanted = f"run {run_id}" if run_id else "a run"
+            wanted = f"run {run_id}" if run_id else "run"
             raise NoRun(f"no {wanted} found in {timeout:g} s (check the domain id and network)")
         spin()
     raise KeyboardInterrupt
