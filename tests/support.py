@@ -3,6 +3,7 @@ inside the project's venv and workspace."""
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import re
@@ -203,3 +204,16 @@ class Bus:
             self.pending[k], self.pending[-1] = self.pending[-1], self.pending[k]
             p, message = self.pending.pop()
             self.post(p.deliver(message, 0.0))
+
+
+def assert_like_sim(run: Path, sim: Path, attacked: bool = False) -> dict:
+    """A run's summary.json says what the simulator's does (but for the time it took), and
+    nothing was refused unless the run was `attacked`; the run's summary."""
+    ran = json.loads((run / "summary.json").read_text())
+    expected = json.loads((sim / "summary.json").read_text())
+    for key in expected:
+        if key != "elapsed_s":
+            assert ran[key] == expected[key], key
+    if not attacked:
+        assert ran["rejected_messages"] == {"total": 0, "by_reason": {}}
+    return ran

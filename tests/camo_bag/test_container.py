@@ -49,7 +49,7 @@ def test_mcap_ros2_decoder_reads_every_robot_message(recorded):
         ).iter_decoded_messages():
             if channel.topic.endswith("/vote"):
                 assert msg.sender_id in tile_range(channel.topic)  # a tile's robots only
-                assert abs(sum(msg.p) - 1.0) < 1e-9
+                assert abs(sum(msg.p) - 1.0) < 1e-9 and msg.phase == 2  # as Vote.msg says
                 votes.setdefault(msg.sender_id, []).append(msg.step)
             elif channel.topic == f"/{BAG_RUN}/swarm/status" and msg.phase == 4:
                 final[(msg.row, msg.col)] = msg.state

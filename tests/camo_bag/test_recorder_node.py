@@ -1,5 +1,6 @@
 """The recorder: complete bags of whole runs, Ctrl-C and SIGKILL mid-run, refused folders."""
 
+import json
 import os
 import signal
 import subprocess
@@ -120,6 +121,47 @@ def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers
     assert set(steps) <= set(range(4)) and steps
     assert all(sorted(s) == list(range(len(s))) for s in steps.values())
     assert sum(map(len, steps.values())) >= seen
+    # What is left is named incomplete, and render will not take it for a result.
+    info = bag_tool("cli", "info", str(tmp_path / "fixed"))
+    assert "INCOMPLETE" in info.stdout and "the run's result is not in the bag" in info.stdout
+    refused = bag_tool("render", str(tmp_path / "fixed"), "--out", str(tmp_path / "r"))
+    assert refused.returncode == 1 and "is incomplete" in refused.stderr
+
+
+def test_a_recorder_started_before_a_run_records_all_of_it_and_stops_at_its_end(tmp_path):
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain())}
+    options = ["--rows", "4", "--cols", "5", "--pattern", "forest", "--seed", "3"]
+    recorder = subprocess.Popen(
+        [sys.executable, "-m", "camo_bag.recorder_node", str(tmp_path / "bag")],
+        cwd=ROOT,
+        env=env,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        time.sleep(4)  # the recorder waits for a run to appear
+        run = subprocess.run(
+            [sys.executable, "-m", "camo_nodes.launcher", *options, "--procs", "2"]
+            + ["--out", str(tmp_path / "live")],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=240,
+        )
+        assert run.returncode == 0, run.stderr[-2000:]
+        _, said = recorder.communicate(timeout=60)  # it ends by itself
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+    assert recorder.returncode == 0 and "is complete" in said, said[-2000:] + run.stderr[-3000:]
+    rendered = bag_tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "again"))
+    assert rendered.returncode == 0, rendered.stderr
+    live = json.loads((tmp_path / "live" / "summary.json").read_text())
+    again = json.loads((tmp_path / "again" / "summary.json").read_text())
+    assert {k: v for k, v in again.items() if k != "elapsed_s"} == {
+        k: v for k, v in live.items() if k != "elapsed_s"
+    }
 
 
 def test_ctrl_c_during_a_recorded_run_leaves_a_complete_indexed_bag(tmp_path):

@@ -136,9 +136,14 @@ def test_render_reads_a_bag_of_the_older_layout_with_its_older_status_type(tmp_p
         }  # fmt: skip
         writer.write("/swarm/status", encode(status), 10 + k, 10 + k)
     writer.close()
+    # Only statuses: no robot message and no background, so the bag is incomplete (named so),
+    # and rendered only when asked to be.
     out = bag_tool("render", str(tmp_path / "old"), "--out", str(tmp_path / "r"))
+    assert out.returncode == 1 and "6 robots lack hellos" in out.stderr, out.stderr
+    out = bag_tool("render", str(tmp_path / "old"), "--out", str(tmp_path / "r"), "--partial")
     assert out.returncode == 0, out.stderr
     rendered = json_module.loads((tmp_path / "r" / "summary.json").read_text())
+    assert "its background is not in the bag" in rendered["incomplete"]
     expected = simulate(params, grid).summary()
     for key in ("final", "initial", "sensed", "votes", "mean_p", "consensus_trace", "pattern"):
         assert rendered[key] == expected[key], key

@@ -1,14 +1,13 @@
 """The Droplet bridge: monitor mode, one-line errors, and bridged swarms that equal the
 reference simulator given the Droplets' readings."""
 
-import json
 import os
 import subprocess
 import sys
 
 import cv2
 import numpy as np
-from support import ROOT, StatusListener, camo_run, domain, run_camo
+from support import ROOT, StatusListener, assert_like_sim, camo_run, domain, run_camo
 
 from camo_core.backgrounds import background
 from camo_core.sensing import Calibration, rgb_to_gray
@@ -71,11 +70,7 @@ def bridged_run(tmp_path, emulator, faults: list[Faults]) -> list[DropletEmulato
     assert swarm.returncode == 0, swarm.stderr[-3000:]
     sim = run_camo("sim", *options, *overrides, "--out", str(tmp_path / "sim"))
     assert sim.returncode == 0, sim.stderr
-    run_summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    sim_summary = json.loads((tmp_path / "sim" / "summary.json").read_text())
-    for key in sim_summary:
-        if key != "elapsed_s":
-            assert run_summary[key] == sim_summary[key], key
+    run_summary = assert_like_sim(tmp_path / "run", tmp_path / "sim")
     for (row, col), em in zip(CELLS, emulators, strict=False):
         assert em.led == (LED_ON if run_summary["final"][row][col] == 1 else LED_OFF)
     return emulators

@@ -69,10 +69,34 @@ def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
     assert proc.returncode == 130
 
 
+HOST_GID = bytes(range(16))  # the writer of the statuses and of the host announcement
+
+
+def hosting_all(monitor, count: int) -> None:
+    """A host announcement, as if polled, that gives robots 0..count-1 to HOST_GID's process."""
+    from rclpy.serialization import serialize_message
+
+    from camo_msgs.msg import Host
+
+    monitor._on_host(serialize_message(Host(name="w", first=[0], last=[count - 1])), HOST_GID)
+
+
+def status(**fields):
+    """A RobotStatus as polled: its CDR bytes and its writer's GID."""
+    from rclpy.serialization import serialize_message
+
+    from camo_msgs.msg import RobotStatus
+
+    robot = fields["sender_id"]
+    fields.setdefault("row", robot // 2)
+    fields.setdefault("col", robot % 2)
+    msg = RobotStatus(sensed=100.0, p=[1.0, 0.0, 0.0], **fields)
+    return serialize_message(msg), HOST_GID
+
+
 def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(count_round_records):
     # A record allocated per status made a long run's monitor fall far behind its robots.
     from camo_core.params import CamoParams
-    from camo_msgs.msg import RobotStatus
     from camo_nodes.monitor_node import MonitorNode
     from camo_nodes.topics import RunTopics
 
@@ -81,11 +105,12 @@ def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(coun
         monitor = MonitorNode(
             CamoParams(rows=2, cols=2), RunTopics("monitor_test"), context=context
         )
+        hosting_all(monitor, 4)
         for round_index in (0, 1):
             for step in range(5):
                 for robot in range(4):
                     monitor._on_status(
-                        RobotStatus(sender_id=robot, phase=2, step=step, round=round_index)
+                        *status(sender_id=robot, phase=2, step=step, round=round_index)
                     )
         assert monitor.record(1).step.tolist() == [4, 4, 4, 4]
         assert len(made) == 2 and monitor.statuses_heard == 40
@@ -94,7 +119,6 @@ def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(coun
 
 def test_monitor_counts_bridged_robots_whose_hardware_is_offline():
     from camo_core.params import CamoParams
-    from camo_msgs.msg import RobotStatus
     from camo_nodes.monitor_node import MonitorNode
     from camo_nodes.topics import RunTopics
 
@@ -102,8 +126,9 @@ def test_monitor_counts_bridged_robots_whose_hardware_is_offline():
         monitor = MonitorNode(
             CamoParams(rows=2, cols=2), RunTopics("monitor_test"), context=context
         )
-        monitor._on_status(RobotStatus(sender_id=3, row=1, col=1, phase=2, alive=False))
+        hosting_all(monitor, 4)
+        monitor._on_status(*status(sender_id=3, phase=2, alive=False))
         assert "hardware offline 1" in monitor.progress_line()
-        monitor._on_status(RobotStatus(sender_id=3, row=1, col=1, phase=2, alive=True))
+        monitor._on_status(*status(sender_id=3, phase=2, alive=True))
         assert "offline" not in monitor.progress_line()
         monitor.destroy_node()

@@ -8,7 +8,8 @@ from pathlib import Path
 from camo_core.exceptions import CamoError
 from camo_core.options import Parser
 
-from .container import format_info, mcap_file, read_summary, repair
+from .completeness import examine
+from .container import BagError, format_info, mcap_file, read_summary, repair
 
 
 def build_parser() -> Parser:
@@ -28,11 +29,24 @@ def build_parser() -> Parser:
     return parser
 
 
+def run_verdict(bag: str) -> str:
+    """What `bag info` says of the run a bag holds: complete, or what it lacks."""
+    try:
+        ledger = examine(bag)
+    except BagError as exc:
+        return f"Run:               none ({exc})"
+    gaps = ledger.gaps()
+    if not gaps:
+        return "Run:               complete (every robot's messages of every round it finished)"
+    return "Run:               INCOMPLETE\n" + "\n".join(f"                   {g}" for g in gaps)
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         if args.command == "info":
             print(format_info(read_summary(args.bag)))
+            print(run_verdict(args.bag))
             return 0
         source = mcap_file(args.bag)
         out = args.out or Path(str(Path(args.bag)).rstrip("/") + "_repaired")

@@ -1,10 +1,14 @@
-"""What a recording holds of a run, against what the run's parameters say it must hold.
+"""What a recording holds of a run, against what the run says it must hold.
 
 A robot that finished a round sent, in it, one hello, one colour, a vote per
 consensus step and a state per formation step, and reported done. The ledger
-counts, per round and robot, what was recorded; a round is complete for a
-robot once all of it is there. No ROS here: the recorder and `bag info` feed
-it decoded fields.
+counts, per round and robot, the distinct steps recorded of each kind (a
+message heard twice, or a stranger's copy, counts once); a round is complete
+for a robot once all of it is there. What a bag must hold comes from the run's
+result (`/<run>/swarm/result`, published by the launcher at the end: the
+rounds it ran and which robots finished each) or, for a bag without one, from
+the run's parameters (every robot, every background). No ROS here: the
+recorder and `bag info` feed it decoded fields.
 """
 
 from __future__ import annotations
@@ -12,37 +16,59 @@ from __future__ import annotations
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 
+from camo_core.options import contiguous
 from camo_core.params import CamoParams
 from camo_core.robot_io import messages_per_round
+
+MAX_STEP = 1_000_000  # before the run's parameters are known: no step of a run is beyond this
 
 
 @dataclass
 class Ledger:
     params: CamoParams | None = None
     rounds: int | None = None  # how many backgrounds the run was to camouflage
-    counts: Counter = field(default_factory=Counter)  # (round, robot, kind) -> messages
+    counts: Counter = field(default_factory=Counter)  # (round, robot, kind) -> distinct steps
+    steps: dict[tuple[int, int, str], bytearray] = field(default_factory=dict)
     done: dict[int, set[int]] = field(default_factory=lambda: defaultdict(set))  # round -> robots
     backgrounds: int = 0
+    result: dict | None = None  # the launcher's /<run>/swarm/result, once recorded
+    limits: dict[str, int] = field(default_factory=dict)  # kind -> steps a robot sends
+    results_expected: bool = True  # bags of runs before run ids hold no result
 
     def set_run(self, params: CamoParams, rounds: int) -> None:
         self.params, self.rounds = params, rounds
+        self.limits = messages_per_round(params)
 
-    def message(self, kind: str, robot: int, round_index: int) -> None:
-        self.counts[(round_index, robot, kind)] += 1
+    def message(self, kind: str, robot: int, round_index: int, step: int = 0) -> None:
+        if not 0 <= step < self.limits.get(kind, MAX_STEP) or round_index < 0:
+            return  # no robot of the run sends that
+        key = (round_index, robot, kind)
+        flags = self.steps.get(key)
+        if flags is None:
+            flags = self.steps[key] = bytearray()
+        if step >= len(flags):
+            flags.extend(bytes(step + 1 - len(flags)))
+        if not flags[step]:
+            flags[step] = 1
+            self.counts[key] += 1
 
     def reported_done(self, robot: int, round_index: int) -> None:
         self.done[round_index].add(robot)
+
+    def set_result(self, result: dict) -> None:
+        self.result = result
+
+    def _holds(self, round_index: int, robot: int) -> bool:
+        wanted = messages_per_round(self.params)
+        return robot in self.done.get(round_index, ()) and all(
+            self.counts[(round_index, robot, k)] >= n for k, n in wanted.items()
+        )
 
     def complete(self, round_index: int) -> set[int]:
         """Robots whose whole round is recorded (done reported and every message there)."""
         if self.params is None or self.backgrounds <= round_index:
             return set()
-        wanted = messages_per_round(self.params)
-        return {
-            robot
-            for robot in self.done.get(round_index, ())
-            if all(self.counts[(round_index, robot, k)] >= n for k, n in wanted.items())
-        }
+        return {r for r in self.done.get(round_index, ()) if self._holds(round_index, r)}
 
     def lacking(self, round_index: int) -> dict[str, int]:
         """Messages missing from robots that reported done in this round, by kind."""
@@ -54,3 +80,75 @@ class Ledger:
             for kind, n in wanted.items():
                 short[kind] += max(0, n - self.counts[(round_index, robot, kind)])
         return {kind: n for kind, n in short.items() if n}
+
+    # ---- what a finished recording lacks ------------------------------------------------
+
+    def expected(self) -> list[set[int]]:
+        """Per round the bag must hold, the robots that must be whole in it."""
+        if self.result is not None:
+            return [set(cells(r.get("finished", []))) for r in self.result.get("rounds", [])]
+        if self.params is None:
+            return []
+        return [set(range(self.params.count)) for _ in range(self.rounds or 1)]
+
+    def gaps(self) -> list[str]:
+        """What the bag lacks of the run, one line per round (or for the whole bag); none when
+        the bag is complete."""
+        if self.params is None:
+            return ["the run's parameters are not in the bag"]
+        lines = []
+        if self.result is None and self.results_expected:
+            lines.append("the run's result is not in the bag (the recording stopped first)")
+        elif self.result is not None and self.result.get("ended") != "finished":
+            lines.append(f"the run ended early ({self.result.get('ended')}): not every round ran")
+        wanted = messages_per_round(self.params)
+        for k, robots in enumerate(self.expected()):
+            if self.backgrounds <= k:
+                lines.append(f"round {k}: its background is not in the bag")
+            missing = sorted(r for r in robots if not self._holds(k, r))
+            if not missing:
+                continue
+            kinds = [
+                kind
+                for kind, n in wanted.items()
+                if any(self.counts[(k, r, kind)] < n for r in missing)
+            ]
+            if any(r not in self.done.get(k, ()) for r in missing):
+                kinds.append("done reports")
+            lines.append(
+                f"round {k}: {robots_lack(len(missing))} {', '.join(map(plural, kinds))}: "
+                f"{ranges_text(missing)}"
+            )
+        return lines
+
+
+def gaps_of_round(gaps: list[str], round_index: int) -> list[str]:
+    """The gaps that concern one round: its own, and those of the whole bag."""
+    return [g for g in gaps if not g.startswith("round ") or g.startswith(f"round {round_index}:")]
+
+
+def robots_lack(n: int) -> str:
+    return "1 robot lacks" if n == 1 else f"{n} robots lack"
+
+
+def plural(kind: str) -> str:
+    return {"hello": "hellos", "color": "colours", "vote": "votes", "state": "states"}.get(
+        kind, kind
+    )
+
+
+def cells(ranges: list) -> list[int]:
+    """[[first, last], ...] as robot ids (bounded: a range is at most a million robots)."""
+    out = []
+    for pair in ranges:
+        first, last = int(pair[0]), int(pair[1])
+        if 0 <= first <= last < first + 1_000_000:
+            out.extend(range(first, last + 1))
+    return out
+
+
+def ranges_text(robots: list[int], most: int = 12) -> str:
+    """3-9, 12, 15-20 ... (the first `most` ranges)."""
+    spans = contiguous(robots)
+    text = ", ".join(f"{a}-{b}" if a != b else str(a) for a, b in spans[:most])
+    return text + (" ..." if len(spans) > most else "")

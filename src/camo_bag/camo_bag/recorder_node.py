@@ -9,20 +9,25 @@ flushes a chunk every second, so a recorder killed with SIGKILL loses at
 most the last second; Ctrl-C closes the bag with its index and summary.
 
 It also keeps a ledger of what the bag holds of the run (`ledger.py`) and
-publishes it on /swarm/recorded: `./camo run --record` waits for each round to
-be complete in the bag before it switches backgrounds or stops the robots.
+publishes it on /<run>/swarm/recorded: the run's launcher waits for each round
+to be complete in every recorder's bag before it switches backgrounds or stops
+the robots, and for its result (/<run>/swarm/result) to be recorded before it
+exits. A recorder of a run stops by itself once the result and all it names
+are in the bag (or the run's launcher is gone).
 """
 
 from __future__ import annotations
 
 import json
 import os
+import socket
 import struct
 import sys
 import time
 from pathlib import Path
 
 import rclpy
+from rclpy.duration import Duration
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -40,7 +45,9 @@ from camo_nodes.topics import (
     LEAN_NODE,
     RunTopics,
     check_run_id,
+    result_from,
     run_ended,
+    setup_from,
     use_camo_dds_settings,
     wait_for_run,
 )
@@ -50,6 +57,7 @@ from .container import BagWriter, TopicInfo
 from .ledger import Ledger
 
 SKIPPED = {"/rosout", "/parameter_events"}
+RESULT_GRACE = 10.0  # s a recorder waits, after the run's result, for what the result names
 ROBOT_KINDS = {
     "camo_msgs/msg/Hello": "hello",
     "camo_msgs/msg/Color": "color",
@@ -84,6 +92,7 @@ class RecorderNode(Node):
         self.run = run
         self.wanted = set(topics) if topics else None
         self.ledger = Ledger()
+        self.identity = f"{socket.gethostname()}:{os.getpid()}"
         self._stamped: dict[str, bool] = {}
         self._decoders: dict[str, object] = {}
         self._recorded: dict[str, object] = {}
@@ -138,7 +147,9 @@ class RecorderNode(Node):
         fields = list(cls.get_fields_and_field_types().items())
         self._stamped[name] = bool(fields) and fields[0] == ("header", "std_msgs/Header")
         run = self.run
-        if run is not None and (type_name in ROBOT_KINDS or name in (run.status, run.params)):
+        if run is not None and (
+            type_name in ROBOT_KINDS or name in (run.status, run.params, run.result)
+        ):
             self._decoders[name] = cls
         # As rosbag2 adapts: reliable and transient-local only when every publisher offers it.
         reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
@@ -169,32 +180,48 @@ class RecorderNode(Node):
 
     def _account(self, topic: str, msg) -> None:
         """What the ledger must know of a run message: who sent it, in which round."""
+        ledger = self.ledger
         if topic == self.run.params:
-            try:
-                setup = json.loads(msg.data)
-                self.ledger.set_run(CamoParams(**setup["params"]), len(setup["backgrounds"]))
-            except (ValueError, KeyError, TypeError, CamoError):
-                self.get_logger().warning(f"{topic} does not hold a run's parameters")
+            setup = setup_from(msg.data, self.run.run)
+            if setup is None:
+                self.get_logger().warning(f"{topic}: a message that is not the run's parameters")
+            elif ledger.params is None:
+                ledger.set_run(CamoParams(**setup["params"]), len(setup["backgrounds"]))
+        elif topic == self.run.result:
+            result = result_from(msg.data, self.run.run)
+            if result is None:
+                self.get_logger().warning(f"{topic}: a message that is not the run's result")
+            else:
+                ledger.set_result(result)
         elif topic == self.run.status:
             if msg.phase == DONE:
-                self.ledger.reported_done(msg.sender_id, msg.round)
+                ledger.reported_done(msg.sender_id, msg.round)
         else:
             kind = ROBOT_KINDS[msgdefs.full_name(self.bag.topics[topic].type)]
-            self.ledger.message(kind, msg.sender_id, msg.round)
+            ledger.message(kind, msg.sender_id, msg.round, msg.step)
 
-    def report(self) -> None:
-        """/<run>/swarm/recorded: per round, how many robots' rounds the bag holds completely."""
+    def finished(self) -> bool:
+        """The run's result is recorded, and all it says the bag must hold."""
+        return self.ledger.result is not None and not self.ledger.gaps()
+
+    def report(self, final: bool = False) -> None:
+        """/<run>/swarm/recorded: per round, how many robots' rounds the bag holds completely.
+        `final`: sent now, and waited for (a second at most) until its readers have it."""
         ledger = self.ledger
         rounds = ledger.rounds or 0
         report = {
+            "recorder": self.identity,
+            "result": ledger.result is not None,
             "messages": self.bag.message_count,
             "complete": [len(ledger.complete(k)) for k in range(rounds)],
             "lacking": [ledger.lacking(k) for k in range(rounds)],
         }
         changed = {k: v for k, v in report.items() if k != "messages"}
-        if changed != self._reported:
+        if changed != self._reported or final:
             self._reported = changed
             self.report_pub.publish(String(data=json.dumps(report)))
+        if final:
+            self.report_pub.wait_for_all_acked(Duration(seconds=1))
 
     def _flush(self) -> None:
         self.bag.flush()
@@ -259,8 +286,15 @@ def main(argv: list[str] | None = None) -> int:
             f"recorder_node: recording {what} to {node.bag.file} (Ctrl-C to stop)", file=sys.stderr
         )
         ended = run_ended(node, run) if run else (lambda: False)
+        result_at = None
         while not stop and rclpy.ok() and not ended():
             executor.spin_once(timeout_sec=0.2)
+            if run is not None and node.ledger.result is not None:
+                # The result came: what it names should follow at once; RESULT_GRACE at most.
+                result_at = result_at or time.monotonic()
+                if node.finished() or time.monotonic() - result_at > RESULT_GRACE:
+                    node.report(final=True)  # the launcher waits for it before it exits
+                    break
     except CamoError as exc:
         print(f"recorder_node: error: {exc}", file=sys.stderr)
         return 2
@@ -276,6 +310,12 @@ def main(argv: list[str] | None = None) -> int:
                 f"{len(node.bag.topics)} topics to {node.bag.folder}",
                 file=sys.stderr,
             )
+            if node.run is not None:
+                gaps = node.ledger.gaps()
+                verdict = "incomplete: " + "; ".join(gaps) if gaps else "complete"
+                print(
+                    f"recorder_node: the bag of run {node.run.run} is {verdict}", file=sys.stderr
+                )
             node.destroy_node()
         rclpy.try_shutdown()
     return 0

@@ -6,6 +6,12 @@ are read from the bag, decoded with rclpy's serialization and assembled by the
 monitor's own RoundRecord, so the summary equals the live run's (elapsed_s
 aside). A robot that never reported done is dead, as the live monitor decides
 at the end of a run.
+
+A bag that lacks part of its run (`completeness.py`: robots the run's result
+says finished whose messages or reports are missing, a round without its
+background, no result at all) is refused, in one line that says what it
+lacks; `--partial` renders what it holds, with the gaps named in summary.json
+(`incomplete`) and unknown values written as null.
 """
 
 from __future__ import annotations
@@ -16,7 +22,6 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from mcap.records import Schema
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
@@ -28,10 +33,11 @@ from camo_core.output import run_title, write_round
 from camo_core.params import CamoParams
 from camo_core.record import Backgrounds, Rounds
 from camo_msgs.msg import RobotStatus
-from camo_nodes.topics import PARAMS_SUFFIX, image_from_msg
+from camo_nodes.topics import image_from_msg
 
-from .container import BagError, BagSummary, read_messages, read_summary
-from .msgdefs import message_definition
+from .completeness import examine, run_topics_of, status_decoder
+from .container import BagError, read_messages, read_summary
+from .ledger import gaps_of_round
 
 
 @dataclass
@@ -45,36 +51,10 @@ class RecordedRun:
     elapsed_s: dict[int, float]  # span of each round's statuses in the bag
 
 
-def run_topics_of(summary: BagSummary) -> tuple[str, str, str]:
-    """The bag's run: its parameters, status and background topics. A bag recorded before runs
-    had identities holds them at the root (/swarm/params, ...)."""
-    params = sorted(t.name for t in summary.topics if t.name.endswith(PARAMS_SUFFIX))
-    if not params:
-        raise BagError(
-            f"{summary.path} has no {PARAMS_SUFFIX} topic: it was not recorded from `./camo run`"
-        )
-    if len(params) > 1:
-        raise BagError(f"{summary.path} holds several runs ({', '.join(params)}): not rendered")
-    root = params[0][: -len(PARAMS_SUFFIX)]  # "/<run>", or "" in the older layout
-    return params[0], f"{root}/swarm/status", f"{root}/camo/background"
-
-
-def status_decoder(summary: BagSummary, topic: str):
-    """Statuses decode with the installed RobotStatus when the bag's schema is its, else (a bag
-    of an older camo) with the schema the bag holds; fields it lacks read as empty."""
-    info = next((t for t in summary.topics if t.name == topic), None)
-    if info is None or info.definition == message_definition("camo_msgs/msg/RobotStatus"):
-        return lambda data: deserialize_message(data, RobotStatus)
-    from mcap_ros2.decoder import DecoderFactory
-
-    schema = Schema(id=1, name=info.type, encoding="ros2msg", data=info.definition.encode())
-    return DecoderFactory().decoder_for("cdr", schema)
-
-
 def load_run(path: str | Path) -> RecordedRun:
     """The run's parameters, statuses and backgrounds, from a bag."""
     summary = read_summary(path)
-    params_topic, status_topic, background_topic = run_topics_of(summary)
+    params_topic, status_topic, background_topic, _ = run_topics_of(summary)
     decode_status = status_decoder(summary, status_topic)
     setup = None
     images = Backgrounds()
@@ -111,9 +91,20 @@ def load_run(path: str | Path) -> RecordedRun:
     return RecordedRun(params, setup.get("backgrounds", []), rounds, images, elapsed)
 
 
-def render(path: str | Path, out: Path) -> list[dict]:
+class IncompleteBag(CamoError):
+    """The bag lacks part of its run."""
+
+
+def render(path: str | Path, out: Path, partial: bool = False) -> list[dict]:
+    held = examine(path)
+    gaps = held.gaps()
+    if gaps and not partial:
+        raise IncompleteBag(
+            f"{path} is incomplete: {'; '.join(gaps)} (--partial renders what it holds)"
+        )
     run = load_run(path)
     params, summaries = run.params, []
+    results = (held.result or {}).get("rounds", [])
     for index in sorted(run.rounds):
         record = run.rounds[index]
         folder = out if len(run.rounds) == 1 else out / f"round_{index}"
@@ -123,7 +114,11 @@ def render(path: str | Path, out: Path) -> list[dict]:
         label = run.labels[index] if index < len(run.labels) else f"round {index}"
         image = run.images[index] if index < len(run.images) else None
         title = run_title(f"{label} (from {Path(path).name})", params, "robot nodes")
-        summaries.append(write_round(result, image, folder, title))
+        extra = {}
+        if index < len(results) and "rejected_messages" in results[index]:
+            extra["rejected_messages"] = results[index]["rejected_messages"]
+        lacks = "; ".join(gaps_of_round(gaps, index))
+        summaries.append(write_round(result, image, folder, title, lacks or None, extra))
         figures.timeline_figure(
             record.timeline(),
             folder / "timeline.png",
@@ -143,10 +138,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--out", type=Path, default=None, help="output folder (default results/<timestamp>/)"
     )
+    parser.add_argument(
+        "--partial",
+        action="store_true",
+        help="render an incomplete bag: what it holds, its gaps named in summary.json",
+    )
     try:
         args = parser.parse_args(argv)
         out = out_dir(argparse.Namespace(out=args.out))
-        summaries = render(args.bag, out)
+        summaries = render(args.bag, out, args.partial)
+    except IncompleteBag as exc:
+        print(f"camo render: error: {exc}", file=sys.stderr)
+        return 1
     except CamoError as exc:
         print(f"camo render: error: {exc}", file=sys.stderr)
         return 2

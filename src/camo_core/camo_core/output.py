@@ -3,6 +3,7 @@ write them."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -19,17 +20,31 @@ def run_title(label: str, params: CamoParams, robots: str = "robots") -> str:
     )
 
 
+def no_nan(value):
+    """A summary value with every NaN (in nested lists too) as None."""
+    if isinstance(value, float):
+        return None if math.isnan(value) else value
+    if isinstance(value, list):
+        return [no_nan(v) for v in value]
+    return value
+
+
 def write_round(
     result: RunResult,
     image: np.ndarray | None,
     folder: Path,
     title: str,
     incomplete: str | None = None,
+    extra: dict | None = None,
 ) -> dict:
-    """summary.json (with `incomplete` saying how far a stopped run got) and figure.png."""
+    """summary.json (with `incomplete` saying how far a stopped run got, and `extra` keys) and
+    figure.png."""
     summary = result.summary()
     if incomplete is not None:
+        # What robots never said is unknown, not a number: null, never NaN.
+        summary = {key: no_nan(value) for key, value in summary.items()}
         summary["incomplete"] = incomplete
+    summary.update(extra or {})
     write_summary(summary, folder)
     figures.run_figure(result, image, folder / "figure.png", title=title)
     return summary

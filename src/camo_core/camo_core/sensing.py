@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,14 @@ def load_image(path: str | Path) -> np.ndarray:
     if image.ndim == 3 and image.shape[2] == 1:
         image = image[:, :, 0]
     return image
+
+
+def image_digest(image: np.ndarray) -> str:
+    """A short fingerprint of an image's pixels (and shape): the run's setup lists its
+    backgrounds' so that a process takes a background only if it is one of them."""
+    image = np.ascontiguousarray(image, dtype=np.uint8)
+    shape = "x".join(str(n) for n in image.shape).encode()
+    return hashlib.sha256(shape + b":" + image.tobytes()).hexdigest()[:32]
 
 
 def to_gray(image: np.ndarray, profile: str) -> np.ndarray:

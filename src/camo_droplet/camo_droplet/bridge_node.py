@@ -30,9 +30,10 @@ from camo_core.params import CamoParams, ParameterError
 from camo_core.protocol import CONSENSUS, NO_PATTERN, SENSING
 from camo_core.sensing import Calibration
 from camo_core.shutdown import StopFlag
-from camo_msgs.msg import RobotStatus
+from camo_msgs.msg import Host, RobotStatus
 from camo_nodes.robot_node import ROBOT_PARAMETERS, host_robots, params_from_node
 from camo_nodes.topics import (
+    LATCHED,
     LEAN_NODE,
     RunTopics,
     history_qos,
@@ -82,6 +83,11 @@ class DropletMonitorNode(Node):
         )
         self.state: FirmwareState | None = None
         self.status_pub = self.create_publisher(RobotStatus, topics.status, history_qos(10_000))
+        # The monitor takes a cell's statuses from the process that announced hosting it.
+        cell = row * params.cols + col
+        self.create_publisher(Host, topics.hosts, LATCHED).publish(
+            Host(name=self.get_name(), first=[cell], last=[cell])
+        )
         self.reconnector = Reconnector(link, self.get_logger()) if link else None
         self.finished = False
         self.create_timer(0.05, self._poll)

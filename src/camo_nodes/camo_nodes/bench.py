@@ -33,7 +33,7 @@ from camo_core.grid import neighbor_ids
 from camo_core.params import CamoParams
 from camo_msgs.msg import Vote
 
-from .processes import split_cells
+from .launch_config import split_cells
 from .topics import LEAN_NODE, RunTopics, history_qos, tile_name, use_camo_dds_settings
 from .transport import edge_of, listener_qos
 

@@ -16,13 +16,15 @@ import time
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
 from camo_core.protocol import TICK
-from camo_core.sensing import ImageError, Projection
+from camo_core.sensing import ImageError, Projection, image_digest
 
-from .topics import LATCHED, LEAN_NODE, ImageEncodingError, RunTopics, image_from_msg
+from .topics import LATCHED_READER, LEAN_NODE, ImageEncodingError, RunTopics, image_from_msg
 from .transport import Transport
+from .trust import BackgroundCheck
 
 # The loop polls the transport's edge readers between turns of the executor (timers, the
 # background, hosts' announcements). While messages flow it waits at most POLL_BUSY for the
@@ -59,17 +61,30 @@ class Host:
         self.robots = robots
         self._stamps: set[tuple[int, int]] = set()
         self.spun = [node, *robots] if spin_robots else [node]
-        node.create_subscription(Image, transport.topics.background, self._on_background, LATCHED)
+        self.backgrounds = BackgroundCheck(transport.setup)
+        transport.listen(Image, transport.topics.background, LATCHED_READER, self._on_background)
         node.create_timer(TICK, self._tick)
+        node.create_timer(1.0, transport.announce_rejections)
 
-    def _on_background(self, msg: Image) -> None:
+    def _on_background(self, data: bytes, gid: bytes) -> None:
+        msg = deserialize_message(data, Image)
         stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
         if stamp in self._stamps:
             return
+        try:
+            image = image_from_msg(msg)
+        except ImageEncodingError:
+            self.transport.rejected.refuse("a background that cannot be decoded", gid)
+            return
+        problem = self.backgrounds.problem(image_digest(image), gid)
+        if problem is not None:
+            if problem != BackgroundCheck.REPEAT:
+                self.transport.rejected.refuse(problem, gid)
+            return
         self._stamps.add(stamp)
         try:
-            self.projection.add(image_from_msg(msg))
-        except (ImageEncodingError, ImageError) as exc:
+            self.projection.add(image)
+        except ImageError as exc:
             self.node.get_logger().error(f"background not used: {exc}")
             return
         now = time.monotonic()

@@ -13,12 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
-from camo_core.backgrounds import BACKGROUNDS
+from camo_core.backgrounds import BACKGROUNDS, background
 from camo_core.exceptions import UsageError
 from camo_core.options import (
     Parser,
     add_network_options,
     add_run_options,
+    contiguous,
     image_from,
     network_env,
     new_folder_problem,
@@ -27,7 +28,7 @@ from camo_core.options import (
     parse_ranges,
 )
 from camo_core.params import CamoParams
-from camo_core.sensing import Calibration, load_image, sense_image
+from camo_core.sensing import Calibration, image_digest, load_image, sense_image
 
 from .topics import RunTopics, check_run_id, new_run_id, use_camo_dds_settings
 
@@ -131,10 +132,29 @@ class RunConfig:
     bridges: dict[int, str] = field(default_factory=dict)  # robot -> serial port
     calibration: Path | None = None
     record: Path | None = None
+    digests: list[str] = field(default_factory=list)  # of the backgrounds our projector shows
 
     @property
     def rounds(self) -> int:
         return len(self.labels)
+
+    def setup(self) -> dict:
+        """What /<run>/swarm/params says of the run: all a worker on another machine needs."""
+        return {
+            "run": self.topics.run,
+            "params": self.params.as_dict(),
+            "backgrounds": self.labels,
+            "step_timeout": self.step_timeout,
+            "discovery_timeout": self.discovery_timeout,
+            "remote": [list(r) for r in self.remote],
+            "tiles": [list(t) for t in self.tiles()],
+            "background_digests": self.digests,
+        }
+
+    def tiles(self) -> list[tuple[int, int]]:
+        """Every tile the run's own processes host: the workers' blocks, the lone robots."""
+        groups = [*worker_groups(self), *([b] for b in self.bridges)]
+        return [tile for cells in groups for tile in contiguous(cells)]
 
 
 def parse_cells(texts: list[str], params: CamoParams, option: str = "--own-process") -> list[int]:
@@ -191,9 +211,10 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
             raise UsageError(problem or f"--record {record}: give a bag folder, not a .mcap file")
     image, label = image_from(args)
     sense_image(image, params.rows, params.cols, params.profile)  # a too-small image fails here
+    images = [image]
     for then in args.then:
-        if then not in BACKGROUNDS:
-            sense_image(load_image(then), params.rows, params.cols, params.profile)
+        images.append(background(then) if then in BACKGROUNDS else load_image(then))
+        sense_image(images[-1], params.rows, params.cols, params.profile)
     env = network_env(args, os.environ if environ is None else environ)
     use_camo_dds_settings(env)
     topics = RunTopics(check_run_id(args.run_id) if args.run_id else new_run_id())
@@ -220,4 +241,22 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         topics=topics,
         remote=remote,
         named=args.run_id is not None,
+        digests=[] if projector is None else [image_digest(i) for i in images],
     )
+
+
+def split_cells(cells: list[int], procs: int) -> list[list[int]]:
+    """Robot ids in contiguous blocks, one per process, so neighbours mostly share a process."""
+    procs = max(1, min(procs, len(cells)))
+    bounds = [round(k * len(cells) / procs) for k in range(procs + 1)]
+    return [cells[bounds[k] : bounds[k + 1]] for k in range(procs)]
+
+
+def worker_groups(config: RunConfig) -> list[list[int]]:
+    """The robots of each worker process: one each for --own-process, the rest in blocks (none
+    for the bridges' and the remote workers' cells)."""
+    params = config.params
+    taken = set(config.alone) | set(config.bridges)
+    taken |= {c for first, last in config.remote for c in range(first, last + 1)}
+    shared = [i for i in range(params.count) if i not in taken]
+    return [[i] for i in config.alone] + (split_cells(shared, config.procs) if shared else [])

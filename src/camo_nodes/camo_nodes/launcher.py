@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
+from rclpy.duration import Duration
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -32,7 +33,7 @@ from camo_core.shutdown import StopFlag
 from .launch_config import RunConfig, build_parser, config_from
 from .monitor_node import MonitorNode
 from .processes import ProcessGroup
-from .topics import LATCHED
+from .topics import LATCHED, LATCHED_READER
 
 
 class RunFailed(CamoError):
@@ -42,6 +43,29 @@ class RunFailed(CamoError):
     def __init__(self, message: str, code: int = 1) -> None:
         super().__init__(message)
         self.code = code
+
+
+def recorder_report(text: str) -> dict | None:
+    """A recorder's /<run>/swarm/recorded report, or None if it is not one."""
+    try:
+        report = json.loads(text)
+        valid = (
+            isinstance(report["recorder"], str)
+            and isinstance(report["result"], bool)
+            and all(isinstance(n, int) for n in report["complete"])
+        )
+    except (ValueError, KeyError, TypeError):
+        return None
+    return report if valid else None
+
+
+def holds(report: dict, round_index: int, finished: int) -> bool:
+    """Whether a recorder's bag holds a round of `finished` robots."""
+    complete = report.get("complete", [])
+    return len(complete) > round_index and complete[round_index] >= finished
+
+
+RECORDER_SETTLE = 1.0  # s after the parameters appear that a waiting recorder has joined
 
 
 class Interrupted(Exception):
@@ -62,14 +86,19 @@ class Session:
         self.executor.add_node(self.node)
         if config.named:
             self.refuse_a_live_run()
-        self.monitor = MonitorNode(config.params, topics, context=context)
+        self.monitor = MonitorNode(config.params, topics, config.setup(), context=context)
         self.executor.add_node(self.monitor)
         self.loader = self.node.create_publisher(String, topics.load, 10)
+        self.started = time.monotonic()
         self.node.create_publisher(String, topics.params, LATCHED).publish(
-            String(data=json.dumps(run_setup(config)))
+            String(data=json.dumps(config.setup()))
         )
-        self.recorded: dict | None = None  # the recorder's latest report
-        self.node.create_subscription(String, topics.recorded, self._on_recorded, LATCHED)
+        # Every recorder of the run (ours, or one started by hand) reports what its bag holds.
+        self.recorders: dict[str, dict] = {}
+        self.node.create_subscription(String, topics.recorded, self._on_recorded, LATCHED_READER)
+        # Created now, written at the end: recorders subscribe to it while the run goes on.
+        self.result_pub = self.node.create_publisher(String, topics.result, LATCHED)
+        self.rounds_ran: list[dict] = []  # per round written: who finished, who died, refusals
 
     def refuse_a_live_run(self, settle: float = 1.0) -> None:
         """Two launchers of one run id would share its topics: the second refuses to start."""
@@ -84,7 +113,9 @@ class Session:
             self.spin(0.05)
 
     def _on_recorded(self, msg: String) -> None:
-        self.recorded = json.loads(msg.data)
+        report = recorder_report(msg.data)
+        if report is not None:
+            self.recorders[report["recorder"]] = report
 
     def spin(self, seconds: float = 0.1) -> None:
         if self.stop:
@@ -107,28 +138,73 @@ class Session:
 
     def recording_holds(self, round_index: int, group: ProcessGroup, limit: float = 60.0) -> None:
         """Before the robots stop or start a new round: a robot's topics keep one round of
-        history for late subscribers, so the recorder must have taken this round in first."""
+        history for late subscribers, so every recorder must have taken this round in first."""
         finished = int(self.monitor.record(round_index).finished.sum())
 
-        def holds() -> bool:
-            complete = (self.recorded or {}).get("complete", [])
-            return len(complete) > round_index and complete[round_index] >= finished
+        def short() -> list[dict]:
+            """The reports of recorders that do not hold the round yet."""
+            reports = list(self.recorders.values())
+            if len(reports) < self.node.count_publishers(self.topics.recorded):
+                return [{}]  # a recorder not heard from yet
+            return [r for r in reports if not holds(r, round_index, finished)]
 
         deadline = time.monotonic() + limit
-        while not holds():
+        while lacking := short():
             problem = group.failed()
             if problem:
                 raise RunFailed(problem)
             if time.monotonic() > deadline:
-                lacking = (self.recorded or {}).get("lacking", [])
-                short = lacking[round_index] if len(lacking) > round_index else {}
+                kinds = [
+                    r["lacking"][round_index]
+                    for r in lacking
+                    if len(r.get("lacking", [])) > round_index
+                ]
                 print(
-                    f"camo run: the recording lacks round {round_index} of some robots after "
-                    f"{limit:g} s (messages missing, by kind: {short or 'statuses only'})",
+                    f"camo run: {len(lacking)} recordings lack round {round_index} of some "
+                    f"robots after {limit:g} s (messages missing, by kind: "
+                    f"{kinds or 'statuses only'})",
                     file=sys.stderr,
                 )
                 return
             self.spin()
+
+    def recorders_present(self) -> bool:
+        """Whether a recorder records the run. A recorder waiting for a run finds it within
+        about a discovery announcement period (fastdds.xml) of its parameters' appearing: a
+        run shorter than that gives it the time."""
+        settle = RECORDER_SETTLE - (time.monotonic() - self.started)
+        if settle > 0:
+            self.spin_for(settle)
+        return self.node.count_publishers(self.topics.recorded) > 0
+
+    def publish_result(self, ended: str, limit: float = 10.0) -> None:
+        """The run's last word, latched, and waited for: every recorder must hold it (a bag
+        without it is incomplete), and every other reader (a monitor elsewhere) ack it."""
+        result = {"run": self.topics.run, "ended": ended, "rounds": self.rounds_ran}
+        self.result_pub.publish(String(data=json.dumps(result)))
+        deadline = time.monotonic() + limit
+        while time.monotonic() < deadline:
+            reports = list(self.recorders.values())
+            present = self.node.count_publishers(self.topics.recorded)
+            if not present or (len(reports) >= present and all(r["result"] for r in reports)):
+                break  # every recorder has it (one that stopped by itself had it)
+            self.executor.spin_once(timeout_sec=0.1)  # even after Ctrl-C: it is quick
+        self.result_pub.wait_for_all_acked(Duration(seconds=max(0.1, deadline - time.monotonic())))
+
+    def ran(self, index: int, summary: dict) -> None:
+        """What the result will say of round `index`, as written in its summary."""
+        record = self.monitor.record(index)
+        cols = self.config.params.cols
+        dead = [i * cols + j for i, j in summary.get("dead", [])]
+        self.rounds_ran.append(
+            {
+                "finished": [
+                    list(r) for r in contiguous(np.flatnonzero(record.finished).tolist())
+                ],
+                "dead": [list(r) for r in contiguous(dead)],
+                "rejected_messages": summary["rejected_messages"],
+            }
+        )
 
     # ---- rounds -----------------------------------------------------------------
 
@@ -172,18 +248,6 @@ class Session:
             node.destroy_node()
 
 
-def run_setup(config: RunConfig) -> dict:
-    """What /<run>/swarm/params says of the run: all a worker on another machine needs."""
-    return {
-        "run": config.topics.run,
-        "params": config.params.as_dict(),
-        "backgrounds": config.labels,
-        "step_timeout": config.step_timeout,
-        "discovery_timeout": config.discovery_timeout,
-        "remote": [list(r) for r in config.remote],
-    }
-
-
 def missing_remote_cells(config: RunConfig, record) -> str:
     """The --remote-cells whose robots never reported, as FIRST-LAST ranges."""
     cells = [
@@ -201,8 +265,9 @@ def round_folder(config: RunConfig, index: int) -> Path:
     return folder
 
 
-def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dict) -> None:
-    """summary.json, figure.png and timing.json of a finished round, and its result line."""
+def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dict) -> dict:
+    """summary.json, figure.png and timing.json of a finished round, and its result line; the
+    summary."""
     folder = round_folder(config, index)
     summary = monitor.write(index, folder, config.labels[index])
     params = config.params
@@ -231,6 +296,10 @@ def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dic
     missing = missing_remote_cells(config, monitor.record(index))
     if missing:
         notes += f"; remote cells {missing} never joined (no worker hosted them)"
+    refused = summary["rejected_messages"]
+    if refused["total"]:
+        reasons = ", ".join(f"{n} {why}" for why, n in refused["by_reason"].items())
+        notes += f"; WARNING: {refused['total']} received messages refused ({reasons})"
     if missed:
         notes += (
             f"; {missed} step deadlines passed (robots moved on without silent neighbours: "
@@ -240,6 +309,7 @@ def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dic
         f"pattern: {summary['pattern']} ({counts}){notes}; "
         f"wrote {folder}/summary.json and figure.png"
     )
+    return summary
 
 
 def run(config: RunConfig) -> int:
@@ -272,44 +342,49 @@ def run(config: RunConfig) -> int:
         )
         for index, label in enumerate(config.labels):
             if index > 0:
-                if config.record:
+                if session.recorders_present():
                     session.recording_holds(index - 1, group)
                 session.switch_background(label)
             voted = session.run_round(index, group)
             times = {"launched": launched, "voted": voted, "done": time.monotonic()}
             times["launched_wall"] = launched_wall
             if index == config.rounds - 1:
-                if config.record:
+                if session.recorders_present():
                     session.recording_holds(index, group)
                 # The robots tear down while this process writes the results.
                 group.interrupt(keep=lambda proc: proc is group.recorder)
-            report_round(config, session.monitor, index, times)
+            session.ran(index, report_round(config, session.monitor, index, times))
             written += 1
+        ended = "finished"
     except Interrupted:
         print("camo run: interrupted; stopping the swarm and writing what it has", file=sys.stderr)
-        code = 130
+        code, ended = 130, "interrupted"
     except RunFailed as exc:
         print(f"camo run: error: {exc}", file=sys.stderr)
-        code = exc.code
+        code, ended = exc.code, "failed"
     finally:
         group.stop(keep=lambda proc: proc is group.recorder)
         if written < config.rounds and group.cells:
-            write_partial(config, session.monitor, written)
+            summary = write_partial(config, session.monitor, written)
+            if summary is not None:
+                session.ran(written, summary)
+        session.publish_result(ended)
         group.stop()  # the recorder last: it closes the bag on SIGINT
         session.close()
         rclpy.try_shutdown()
     return code
 
 
-def write_partial(config: RunConfig, monitor: MonitorNode, index: int) -> None:
+def write_partial(config: RunConfig, monitor: MonitorNode, index: int) -> dict | None:
     """What the swarm had reported of an unfinished round."""
     folder = round_folder(config, index)
     record = monitor.record(index)
     if not np.any(record.phase >= CONSENSUS):
         print("camo run: nothing to write yet (no robot had voted)", file=sys.stderr)
-        return
-    monitor.write(index, folder, config.labels[index] + " (incomplete)", partial=True)
+        return None
+    summary = monitor.write(index, folder, config.labels[index] + " (incomplete)", partial=True)
     print(f"camo run: wrote what the swarm had reported to {folder}/", file=sys.stderr)
+    return summary
 
 
 def main(argv: list[str] | None = None) -> int:

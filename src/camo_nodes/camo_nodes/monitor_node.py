@@ -24,6 +24,7 @@ import numpy as np
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 
@@ -34,11 +35,15 @@ from camo_core.params import CamoParams
 from camo_core.protocol import CONSENSUS, PHASE_NAMES
 from camo_core.record import Backgrounds, RoundRecord, Rounds
 from camo_core.result import RunResult
+from camo_core.sensing import image_digest
 from camo_core.shutdown import StopFlag
-from camo_msgs.msg import RobotStatus
+from camo_core.validation import report_problem
+from camo_msgs.msg import Host, RobotStatus
 
+from .polled import PolledTopics
 from .topics import (
-    LATCHED,
+    LATCHED_READER,
+    ImageEncodingError,
     RunTopics,
     check_run_id,
     image_from_msg,
@@ -48,10 +53,13 @@ from .topics import (
     wait_for_run,
     wait_for_setup,
 )
+from .trust import BackgroundCheck, Hosts, Rejections, merged
 
 
 class MonitorNode(Node):
-    def __init__(self, params: CamoParams, topics: RunTopics, **kwargs) -> None:
+    def __init__(
+        self, params: CamoParams, topics: RunTopics, setup: dict | None = None, **kwargs
+    ) -> None:
         super().__init__("monitor", namespace=topics.swarm_namespace, **kwargs)
         self.params = params
         self.topics = topics
@@ -60,24 +68,75 @@ class MonitorNode(Node):
         self.lost = np.zeros(params.count, bool)  # robots whose process is known to have died
         self.offline = np.zeros(params.count, bool)
         self.statuses_heard = 0  # a recording of the run must hold at least these
-        self.create_subscription(
-            RobotStatus, topics.status, self._on_status, status_listener_qos()
-        )
-        self.create_subscription(Image, topics.background, self._on_background, LATCHED)
+        # Statuses count only from the process hosting their robot; a background only if it is
+        # the run's next; both polled with their publisher's GID (trust.py).
+        self.rejected = Rejections(self.get_logger())
+        self.trusted = Hosts(params.count, self.rejected, setup)
+        self.backgrounds = BackgroundCheck(setup)
+        self._unplaced: list[tuple[RobotStatus, bytes]] = []  # before their host's announcement
+        context = kwargs.get("context")
+        self.polled = PolledTopics("monitor_listener", topics.swarm_namespace, context)
+        self.polled.listen(Host, topics.hosts, LATCHED_READER, self._on_host)
+        self.polled.listen(RobotStatus, topics.status, status_listener_qos(), self._on_status)
+        self.polled.listen(Image, topics.background, LATCHED_READER, self._on_background)
+        self.create_timer(0.02, self.polled.poll)
         self.pattern_pub = self.create_publisher(Image, topics.pattern, 10)
         self.create_timer(0.2, self._publish_pattern)
 
-    def _on_background(self, msg: Image) -> None:
-        stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
-        self.images.add(stamp, lambda: image_from_msg(msg))
+    def _on_host(self, data: bytes, gid: bytes) -> None:
+        if self.trusted.learn(deserialize_message(data, Host), gid):
+            unplaced, self._unplaced = self._unplaced, []
+            for msg, sender_gid in unplaced:
+                self._take_status(msg, sender_gid)
 
-    def _on_status(self, msg: RobotStatus) -> None:
-        self.statuses_heard += 1
-        if msg.sender_id >= self.params.count:
+    def _on_background(self, data: bytes, gid: bytes) -> None:
+        msg = deserialize_message(data, Image)
+        stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if stamp in self.images.stamps:
             return
-        self.offline[msg.sender_id] = not msg.alive  # a bridged Droplet whose port went away
+        try:
+            image = image_from_msg(msg)
+        except ImageEncodingError:
+            self.rejected.refuse("a background that cannot be decoded", gid)
+            return
+        problem = self.backgrounds.problem(image_digest(image), gid)
+        if problem is not None:
+            if problem != BackgroundCheck.REPEAT:
+                self.rejected.refuse(problem, gid)
+            return
+        self.images.add(stamp, lambda: image)
+
+    def _on_status(self, data: bytes, gid: bytes) -> None:
+        self.statuses_heard += 1
+        self._take_status(deserialize_message(data, RobotStatus), gid)
+
+    def _take_status(self, msg: RobotStatus, gid: bytes) -> None:
+        sender = msg.sender_id
+        if sender not in self.trusted.owner and 0 <= sender < self.params.count:
+            if len(self._unplaced) < 10 * self.params.count + 1000:
+                self._unplaced.append((msg, gid))  # its host has not been heard yet
+            else:
+                self.rejected.refuse(
+                    "status from a robot no process hosts", gid, f"robot {sender}"
+                )
+            return
+        problem = report_problem(msg, self.params)
+        if problem is None and not self.trusted.speaks_for(gid, sender):
+            problem = "not from the process hosting its sender"
+        if problem is not None:
+            self.rejected.refuse(problem, gid, f"robot {sender}")
+            return
+        self.offline[sender] = not msg.alive  # a bridged Droplet whose port went away
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         self.rounds[msg.round].add(msg, stamp)
+
+    def rejected_messages(self) -> dict:
+        """Messages refused in the whole run: by this monitor and by every host."""
+        return merged(self.rejected.as_dict(), *self.trusted.refused.values())
+
+    def destroy_node(self) -> None:
+        self.polled.close()
+        super().destroy_node()
 
     # ---- views ------------------------------------------------------------------
 
@@ -125,6 +184,7 @@ class MonitorNode(Node):
             folder,
             run_title(label, self.params, "robot nodes"),
             self.progress_line(round_index) if partial else None,
+            {"rejected_messages": self.rejected_messages()},
         )
 
     def _publish_pattern(self) -> None:
@@ -165,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
 
         topics = RunTopics(wait_for_run(reader, spin, run_id, args.wait, stop))
         setup = wait_for_setup(reader, spin, topics, args.wait, stop)
-        monitor = MonitorNode(CamoParams(**setup["params"]), topics)
+        monitor = MonitorNode(CamoParams(**setup["params"]), topics, setup)
         nodes.append(monitor)
         executor.add_node(monitor)
         labels = setup.get("backgrounds") or ["background"]

@@ -8,6 +8,7 @@ to stop (SIGTERM) when the launcher dies, however it dies.
 from __future__ import annotations
 
 import ctypes
+import json
 import signal
 import subprocess
 import sys
@@ -16,7 +17,7 @@ from collections.abc import Callable
 
 from camo_core.options import contiguous
 
-from .launch_config import RunConfig
+from .launch_config import RunConfig, worker_groups
 
 PR_SET_PDEATHSIG = 1
 
@@ -54,23 +55,6 @@ def robot_parameters(config: RunConfig, robot: int) -> list[str]:
         for name, value in values.items()
         for x in ("-p", f"{name}:={value!r}" if isinstance(value, float) else f"{name}:={value}")
     ]
-
-
-def split_cells(cells: list[int], procs: int) -> list[list[int]]:
-    """Robot ids in contiguous blocks, one per process, so neighbours mostly share a process."""
-    procs = max(1, min(procs, len(cells)))
-    bounds = [round(k * len(cells) / procs) for k in range(procs + 1)]
-    return [cells[bounds[k] : bounds[k + 1]] for k in range(procs)]
-
-
-def worker_groups(config: RunConfig) -> list[list[int]]:
-    """The robots of each worker process: one each for --own-process, the rest in blocks (none
-    for the bridges' and the remote workers' cells)."""
-    params = config.params
-    taken = set(config.alone) | set(config.bridges)
-    taken |= {c for first, last in config.remote for c in range(first, last + 1)}
-    shared = [i for i in range(params.count) if i not in taken]
-    return [[i] for i in config.alone] + (split_cells(shared, config.procs) if shared else [])
 
 
 class ProcessGroup:
@@ -114,7 +98,13 @@ class ProcessGroup:
         for cells in worker_groups(config):
             ranges = [f"--cells={a}-{b}" for a, b in contiguous(cells)]
             worker = self._start(
-                "camo_nodes.worker", "--launched", "--run-id", config.topics.run, *ranges, *quiet
+                "camo_nodes.worker",
+                "--setup",
+                json.dumps(config.setup()),
+                "--run-id",
+                config.topics.run,
+                *ranges,
+                *quiet,
             )
             self.cells[worker.pid] = cells
 

@@ -157,11 +157,12 @@ def host_robots(
     lean: bool = True,
     sensors: dict[int, Sensor] | None = None,
     displays: dict[int, Display] | None = None,
+    setup: dict | None = None,
 ) -> Host:
     """This process's robots (tiles of robot ids), ready to run: a projected-image sensor
     unless `sensors` names another (a Droplet's); `lean` robots have no services of their own."""
     node = host_node(topics)
-    transport = Transport(node, params, topics, tiles)
+    transport = Transport(node, params, topics, tiles, setup)
     projection = Projection(params.rows, params.cols, params.profile)
     robots = []
     for cell in sorted(transport.hosted):

@@ -23,6 +23,7 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
 from camo_core.exceptions import CamoError
+from camo_core.params import CamoParams
 
 FASTDDS_PROFILE = Path(__file__).with_name("fastdds.xml")
 
@@ -98,6 +99,11 @@ class RunTopics:
         return f"/{self.run}/swarm/recorded"
 
     @property
+    def result(self) -> str:
+        """std_msgs/String, latched: the launcher's last word on the run (JSON, `result_from`)."""
+        return f"/{self.run}/swarm/result"
+
+    @property
     def background(self) -> str:
         return f"/{self.run}/camo/background"
 
@@ -171,35 +177,81 @@ def run_from_parameter(node, stop=None, timeout: float = 60.0) -> RunTopics:
 
 
 def run_ended(node, topics: RunTopics, period: float = 0.5):
-    """A check, cheap to call often: has the run's launcher (the publisher of its parameters)
-    gone, after it was there? A run started without a launcher never ends this way."""
-    state = {"seen": False, "checked": 0.0}
+    """A check, cheap to call often: has the run's launcher (the writer of its parameters when
+    first seen) gone, after it was there? A stranger writing there later does not keep a run
+    alive. A run started without a launcher never ends this way."""
+    state: dict = {"launcher": None, "checked": 0.0}
 
     def ended() -> bool:
         now = time.monotonic()
         if now - state["checked"] < period:
             return False
         state["checked"] = now
-        if node.count_publishers(topics.params):
-            state["seen"] = True
+        writers = {bytes(p.endpoint_gid) for p in node.get_publishers_info_by_topic(topics.params)}
+        if state["launcher"] is None:
+            state["launcher"] = writers or None
             return False
-        return state["seen"]
+        return not state["launcher"] & writers
 
     return ended
+
+
+def setup_from(text: str, run: str) -> dict | None:
+    """Run `run`'s parameters message, or None if it is not one (a stranger's, say)."""
+    try:
+        setup = json.loads(text)
+        CamoParams(**setup["params"])
+        ranges = [*setup.get("tiles", []), *setup.get("remote", [])]
+        valid = (
+            setup["run"] == run
+            and isinstance(setup["backgrounds"], list)
+            and float(setup["step_timeout"]) > 0
+            and float(setup["discovery_timeout"]) > 0
+            and all(len(r) == 2 and all(isinstance(x, int) for x in r) for r in ranges)
+        )
+    except (ValueError, KeyError, TypeError, CamoError):
+        return None
+    return setup if valid else None
+
+
+def result_from(text: str, run: str) -> dict | None:
+    """Run `run`'s result message, or None if it is not one. It says how the run ended and, per
+    round it ran, which robots finished and which died (as [first, last] ranges) and what was
+    refused: {"run", "ended", "rounds": [{"finished", "dead", "rejected_messages"}]}."""
+    try:
+        result = json.loads(text)
+        rounds = result["rounds"]
+        valid = result["run"] == run and all(
+            all(len(r) == 2 and all(isinstance(x, int) for x in r) for r in entry[key])
+            for entry in rounds
+            for key in ("finished", "dead")
+        )
+    except (ValueError, KeyError, TypeError):
+        return None
+    return result if valid else None
 
 
 def wait_for_setup(node, spin, topics: RunTopics, timeout: float, stop=None) -> dict:
     """The run's /swarm/params (latched) as the launcher published it."""
     got: list[dict] = []
-    subscription = node.create_subscription(
-        String, topics.params, lambda m: got.append(json.loads(m.data)), LATCHED
-    )
+
+    def take(msg: String) -> None:
+        setup = setup_from(msg.data, topics.run)
+        if setup is not None:
+            got.append(setup)
+
+    subscription = node.create_subscription(String, topics.params, take, LATCHED_READER)
     deadline = time.monotonic() + timeout
     try:
         while not got and not stop:
             if time.monotonic() > deadline:
                 raise NoRun(f"no parameters on {topics.params} after {timeout:g} s")
             spin()
+        if node.count_publishers(topics.params) > 1:
+            raise NoRun(
+                f"{node.count_publishers(topics.params)} processes publish the parameters of "
+                f"{topics.run}: cannot tell which is its launcher"
+            )
     finally:
         node.destroy_subscription(subscription)
     if stop:
@@ -219,6 +271,15 @@ LEAN_NODE = {
 LATCHED = QoSProfile(
     depth=1,
     history=HistoryPolicy.KEEP_LAST,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+
+# A reader of a latched topic that anyone in the domain can write to: it keeps every sample
+# until taken, so that a stranger's flood cannot push the rightful writer's sample out.
+LATCHED_READER = QoSProfile(
+    depth=1,
+    history=HistoryPolicy.KEEP_ALL,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )

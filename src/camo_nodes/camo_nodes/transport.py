@@ -13,9 +13,10 @@ to all of them. So the DDS endpoints of a run grow with its processes, not
 with robots x neighbours, and a process takes only the messages its robots
 need (a tile's two boundary rows, not the whole band).
 
-The edge subscriptions are not spun by the executor: `poll()` takes their
-messages with their publisher's GID (`rcl_take.py`), so that a message is
-accepted only from the tile's own host.
+The edge subscriptions (and the hosts', and the background's) are not spun by
+the executor: `poll()` takes their messages with their publisher's GID
+(`rcl_take.py`), so that a message is accepted only from its sender's host
+(`trust.py`), and only once it passes camo_core's checks (`validation.py`).
 """
 
 from __future__ import annotations
@@ -30,12 +31,14 @@ from rclpy.serialization import deserialize_message
 
 from camo_core.grid import neighbor_ids
 from camo_core.params import CamoParams
-from camo_core.protocol import CONSENSUS, DISCOVERY, FORMATION, KINDS, SENSING
+from camo_core.protocol import CONSENSUS, DISCOVERY, FORMATION, SENSING
 from camo_core.robot_io import Message, Report
+from camo_core.validation import message_problem, phase_problem
 from camo_msgs.msg import Color, Hello, Host, RobotStatus, State, Vote
 
-from .rcl_take import PREFIX, Taker
-from .topics import LATCHED, LEAN_NODE, RunTopics, history_qos, tile_name
+from .polled import PolledTopics
+from .topics import LATCHED, LATCHED_READER, RunTopics, history_qos, tile_name
+from .trust import Hosts, Rejections
 
 MESSAGE_TYPES = {"hello": Hello, "color": Color, "vote": Vote, "state": State}
 PHASES = {"hello": DISCOVERY, "color": SENSING, "vote": CONSENSUS, "state": FORMATION}
@@ -142,8 +145,17 @@ def edge_of(params: CamoParams, hosted: set[int], robots: Iterable[int]) -> set[
 class Transport:
     """The DDS endpoints of one process's robots, owned by one node (the process's own)."""
 
-    def __init__(self, node: Node, params: CamoParams, topics: RunTopics, tiles: list[Tile]):
+    def __init__(
+        self,
+        node: Node,
+        params: CamoParams,
+        topics: RunTopics,
+        tiles: list[Tile],
+        setup: dict | None = None,
+    ) -> None:
+        """`setup`: the run's parameters message, whose layout says which tiles may be hosted."""
         self.node = node
+        self.setup = setup
         self.params = params
         self.topics = topics
         self.tiles = tiles
@@ -155,24 +167,22 @@ class Transport:
         self.status_pub = node.create_publisher(
             RobotStatus, topics.status, history_qos(status_depth(params) * len(self.hosted))
         )
-        self._reused = {kind: cls() for kind, cls in MESSAGE_TYPES.items()}
+        # One message a kind, filled in for each send (cheaper than a new one each time).
+        self._reused = {kind: cls(phase=PHASES[kind]) for kind, cls in MESSAGE_TYPES.items()}
         for msg in self._reused.values():
             msg.header.frame_id = "camo"
         self.receivers: dict[tuple[int, str], list[Receiver]] = defaultdict(list)
         self.needed: set[int] = set()  # neighbours hosted elsewhere
-        self.remote: dict[str, Tile] = {}  # tiles subscribed to, by name
-        self.takers: list[tuple[Taker, str, Tile]] = []
-        self.rejected: dict[str, int] = defaultdict(int)  # reason -> messages dropped
+        self.remote: set[tuple[int, int]] = set()  # tiles subscribed to
+        self.rejected = Rejections(node.get_logger())
+        self.trusted = Hosts(params.count, self.rejected, setup)
+        self._seen: dict[tuple[str, int, int, int], object] = {}  # each message taken, once
         self._queue: list[tuple[Receiver, Message]] = []
         self._pumping = False
-        self._buffer: list[tuple[bytes, bytes]] = []
+        self._announced_rejections = 0
+        self.polled = PolledTopics(f"{node.get_name()}_edges", node.get_namespace())
         self.host_pub = node.create_publisher(Host, topics.hosts, LATCHED)
-        node.create_subscription(Host, topics.hosts, self._on_host, host_listener_qos())
-        # The edge readers' node: never spun by an executor, which would take their messages
-        # before poll() could (it takes them with their publisher's GID).
-        self.listener = Node(
-            f"{node.get_name()}_edges", namespace=node.get_namespace(), **LEAN_NODE
-        )
+        self.listen(Host, topics.hosts, LATCHED_READER, self._on_host)
 
     def _create_writers(self, first: int, last: int) -> None:
         robots = range(first, last + 1)
@@ -190,6 +200,10 @@ class Transport:
                 for robot in members:
                     self.writers[(robot, kind)] = writer
 
+    def listen(self, msg_type, topic: str, qos: QoSProfile, handle) -> None:
+        """Poll this topic: `handle(CDR bytes, publisher GID)` for each message."""
+        self.polled.listen(msg_type, topic, qos, handle)
+
     def hosts(self, robot: int) -> bool:
         """A robot of this process: alive as long as the process is."""
         return robot in self.hosted
@@ -202,26 +216,57 @@ class Transport:
                 self.needed.add(sender)
 
     def announce(self) -> None:
-        """Say which tiles this process hosts (once every robot is added)."""
+        """Say which tiles this process hosts, and what it has refused (latched)."""
         msg = Host(name=self.node.get_name(), first=[f for f, _ in self.tiles])
         msg.last = [last for _, last in self.tiles]
+        counts = self.rejected.counts
+        msg.rejected_reasons = list(counts)
+        msg.rejected_counts = [counts[r] for r in msg.rejected_reasons]
+        self._announced_rejections = self.rejected.total
         stamp(msg)
         self.host_pub.publish(msg)
 
-    def _on_host(self, msg: Host) -> None:
-        for first, last in zip(msg.first, msg.last, strict=False):
+    def announce_rejections(self) -> None:
+        """Called now and then: a new announcement once more was refused."""
+        if self.rejected.total != self._announced_rejections:
+            self.announce()
+
+    def _on_host(self, data: bytes, gid: bytes) -> None:
+        msg = deserialize_message(data, Host)
+        for first, last in self.trusted.learn(msg, gid):
+            if first in self.hosted or not any(first <= n <= last for n in self.needed):
+                continue  # ours, or nothing there that this process's robots hear
+            self.remote.add((first, last))
             name = tile_name(first, last)
-            if name in self.remote or first in self.hosted:
-                continue
-            if not any(first <= n <= last for n in self.needed):
-                continue  # nothing there that this process's robots hear
-            self.remote[name] = (first, last)
             for kind, msg_type in MESSAGE_TYPES.items():
                 topic = self.topics.tile(name, "edge", kind)
-                subscription = self.listener.create_subscription(
-                    msg_type, topic, lambda m: None, listener_qos(), raw=True
+                self.listen(msg_type, topic, listener_qos(), self._robot_message(kind))
+
+    def _robot_message(self, kind: str):
+        cls = MESSAGE_TYPES[kind]
+
+        def handle(data: bytes, gid: bytes) -> None:
+            msg = deserialize_message(data, cls)
+            sender = msg.sender_id
+            if not self.trusted.speaks_for(gid, sender):
+                self.rejected.refuse(
+                    "not from the process hosting its sender", gid, f"robot {sender}"
                 )
-                self.takers.append((Taker(subscription), kind, (first, last)))
+                return
+            message = from_ros(kind, msg)
+            problem = phase_problem(kind, msg.phase) or message_problem(message, self.params)
+            key = (kind, sender, message.round, message.step)
+            if problem is None and key in self._seen:
+                if self._seen[key] == message.value:
+                    return  # the same message again
+                problem = "a second, different message for the same step"
+            if problem is not None:
+                self.rejected.refuse(problem, gid, f"robot {sender}")
+                return
+            self._seen[key] = message.value
+            self._deliver(message)
+
+        return handle
 
     # ---- out ----------------------------------------------------------------------
 
@@ -240,23 +285,8 @@ class Transport:
     # ---- in -----------------------------------------------------------------------
 
     def poll(self) -> int:
-        """Take what the other processes' tiles sent; hand each message to its listeners."""
-        count = 0
-        buffer = self._buffer
-        for taker, kind, (first, last) in self.takers:
-            if not taker.take_all(buffer):
-                continue
-            cls = MESSAGE_TYPES[kind]
-            for data, gid in buffer:
-                msg = deserialize_message(data, cls)
-                if not first <= msg.sender_id <= last:
-                    self.rejected["sender not in its tile"] += 1
-                    continue
-                del gid  # checked against the tile's host in the trust layer (issue 12)
-                self._deliver(from_ros(kind, msg))
-                count += 1
-            buffer.clear()
-        return count
+        """Take what came from other processes; how many messages."""
+        return self.polled.poll()
 
     def _deliver(self, message: Message) -> None:
         """Hand a message to every hosted robot that listens to its sender. Queued, not called
@@ -276,19 +306,4 @@ class Transport:
 
     def close(self) -> None:
         """Before the node is destroyed: the takers use its subscriptions' handles."""
-        for taker, _, _ in self.takers:
-            taker.close()
-        self.listener.destroy_node()
-
-
-def host_listener_qos() -> QoSProfile:
-    """Every host's latest announcement (each host's writer keeps one, latched)."""
-    return QoSProfile(
-        depth=1,
-        history=HistoryPolicy.KEEP_ALL,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL,
-    )
-
-
-__all__ = ["KINDS", "MESSAGE_TYPES", "PREFIX", "Transport"]
+        self.polled.close()

@@ -11,6 +11,7 @@ left to remote workers (`./camo run --remote-cells FIRST-LAST`).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 
@@ -49,8 +50,9 @@ def build_parser() -> Parser:
         "--wait", type=float, default=120.0, help="seconds to wait for the run (default 120)"
     )
     add_network_options(parser)
-    # The launcher's own workers host cells it keeps for itself.
-    parser.add_argument("--launched", action="store_true", help=argparse.SUPPRESS)
+    # The launcher's own workers: the run's setup from it, not from the network, and cells it
+    # keeps for itself.
+    parser.add_argument("--setup", default=None, help=argparse.SUPPRESS)
     return parser
 
 
@@ -92,16 +94,20 @@ def main(argv: list[str] | None = None) -> int:
     use_camo_dds_settings()
     rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        finder = Node("worker_join", **LEAN_NODE)
-        try:
-            topics, setup = join(finder, args, stop)
-        finally:
-            finder.destroy_node()
+        launched = args.setup is not None
+        if launched:
+            setup = json.loads(args.setup)
+            topics = RunTopics(check_run_id(setup["run"]))
+        else:
+            finder = Node("worker_join", **LEAN_NODE)
+            try:
+                topics, setup = join(finder, args, stop)
+            finally:
+                finder.destroy_node()
         params = CamoParams(**setup["params"])
-        launched = args.launched
         tiles = tiles_for(setup, params, args.cells, launched)
         host = host_robots(
-            params, topics, tiles, setup["step_timeout"], setup["discovery_timeout"]
+            params, topics, tiles, setup["step_timeout"], setup["discovery_timeout"], setup=setup
         )
         if not launched:
             cells = ", ".join(f"{a}-{b}" for a, b in tiles)

@@ -53,7 +53,8 @@ class ProjectorNode(Node):
         try:
             self.image = load("", name) if name in BACKGROUNDS else load(name, "")
         except CamoError as exc:
-            self.get_logger().error(f"cannot project {name!r}: {exc}")
+            # At most once a second: anyone in the domain can send here.
+            self.get_logger().error(f"cannot project {name!r}: {exc}", throttle_duration_sec=1.0)
             return
         self.publish()
 

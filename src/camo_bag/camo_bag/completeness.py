@@ -1,0 +1,136 @@
+"""Whether a bag holds the whole of its run: `bag info` and `render` ask before they trust it.
+
+One pass over the bag fills a ledger (`ledger.py`) with the run's parameters,
+its result, the backgrounds, the robots' done reports and, for every robot
+message, its sender, round and step. Those three fields are read straight from
+the CDR bytes (a bag of a large run holds millions of robot messages, and a
+full decode costs ten times more); statuses, parameters and the result are
+decoded with rclpy's serialization.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
+
+from mcap.records import Schema
+from rclpy.serialization import deserialize_message
+from std_msgs.msg import String
+
+from camo_core.exceptions import CamoError
+from camo_core.params import CamoParams
+from camo_core.protocol import DONE
+from camo_msgs.msg import RobotStatus
+from camo_nodes.topics import PARAMS_SUFFIX, result_from
+
+from .container import BagError, BagSummary, read_messages, read_summary
+from .ledger import Ledger
+from .msgdefs import full_name, message_definition
+
+KINDS = {
+    "camo_msgs/msg/Hello": "hello",
+    "camo_msgs/msg/Color": "color",
+    "camo_msgs/msg/Vote": "vote",
+    "camo_msgs/msg/State": "state",
+}
+
+
+def message_fields(kind: str, data: bytes) -> tuple[int, int, int]:
+    """(sender_id, round, step) of a robot message's CDR bytes (std_msgs/Header first, then
+    sender_id; a hello has row and col before its phase)."""
+    order = "<" if data[1] == 1 else ">"
+    (length,) = struct.unpack_from(order + "I", data, 12)  # the frame_id, NUL included
+    at = 16 + length
+    at += -(at - 4) % 4  # CDR aligns from the end of the 4-byte encapsulation header
+    if kind == "hello":
+        sender, _row, _col, _phase, step, round_index = struct.unpack_from(
+            order + "IIIB3xII", data, at
+        )
+    else:
+        sender, _phase, step, round_index = struct.unpack_from(order + "IB3xII", data, at)
+    return sender, round_index, step
+
+
+def run_topics_of(summary: BagSummary) -> tuple[str, str, str, str]:
+    """The bag's run: its parameters, status, background and result topics. A bag recorded
+    before runs had identities holds them at the root (/swarm/params, ...)."""
+    params = sorted(t.name for t in summary.topics if t.name.endswith(PARAMS_SUFFIX))
+    if not params:
+        raise BagError(
+            f"{summary.path} has no {PARAMS_SUFFIX} topic: it was not recorded from `./camo run`"
+        )
+    if len(params) > 1:
+        raise BagError(f"{summary.path} holds several runs ({', '.join(params)}): not rendered")
+    root = params[0][: -len(PARAMS_SUFFIX)]  # "/<run>", or "" in the older layout
+    return (
+        params[0],
+        f"{root}/swarm/status",
+        f"{root}/camo/background",
+        f"{root}/swarm/result",
+    )
+
+
+def status_decoder(summary: BagSummary, topic: str):
+    """Statuses decode with the installed RobotStatus when the bag's schema is its, else (a bag
+    of an older camo) with the schema the bag holds; fields it lacks read as empty."""
+    info = next((t for t in summary.topics if t.name == topic), None)
+    if info is None or info.definition == message_definition("camo_msgs/msg/RobotStatus"):
+        return lambda data: deserialize_message(data, RobotStatus)
+    from mcap_ros2.decoder import DecoderFactory
+
+    schema = Schema(id=1, name=info.type, encoding="ros2msg", data=info.definition.encode())
+    return DecoderFactory().decoder_for("cdr", schema)
+
+
+def setup_in(data: bytes) -> dict | None:
+    """A parameters message of the bag's run (of any camo version), or None."""
+    try:
+        setup = json.loads(deserialize_message(data, String).data)
+        CamoParams(**setup["params"])
+        if not isinstance(setup.get("backgrounds", []), list):
+            return None
+    except (ValueError, KeyError, TypeError, CamoError):
+        return None
+    return setup
+
+
+def examine(path: str | Path) -> Ledger:
+    """What the bag holds of its run (BagError if it holds no run, or cannot be read)."""
+    summary = read_summary(path)
+    params, status, background, result = run_topics_of(summary)
+    run = params[1 : -len(PARAMS_SUFFIX)]
+    kinds = {
+        t.name: KINDS[full_name(t.type)] for t in summary.topics if full_name(t.type) in KINDS
+    }
+    decode_status = status_decoder(summary, status)
+    ledger = Ledger()
+    try:
+        for message in read_messages(path, [params, status, background, result, *kinds]):
+            topic, data = message.topic, message.data
+            kind = kinds.get(topic)
+            if kind is not None:
+                sender, round_index, step = message_fields(kind, data)
+                if ledger.params is None or sender < ledger.params.count:
+                    ledger.message(kind, sender, round_index, step)
+            elif topic == status:
+                msg = decode_status(data)
+                if msg.phase == DONE:
+                    ledger.reported_done(msg.sender_id, msg.round)
+            elif topic == background:
+                ledger.backgrounds += 1
+            elif topic == params and ledger.params is None:
+                setup = setup_in(data)
+                if setup is not None:
+                    backgrounds = len(setup.get("backgrounds", [])) or 1
+                    ledger.set_run(CamoParams(**setup["params"]), backgrounds)
+            elif topic == result:
+                found = result_from(deserialize_message(data, String).data, run)
+                if found is not None:
+                    ledger.set_result(found)
+    except BagError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - bytes that do not decode as their recorded type
+        raise BagError(f"{path}: a message does not decode as its recorded type ({exc})") from None
+    ledger.results_expected = bool(run)  # a bag of the older layout (no run id) never had one
+    return ledger

@@ -1,0 +1,96 @@
+"""What a message must look like before a robot or the monitor uses it. No ROS here.
+
+A robot's neighbours are other processes, possibly on other machines, and any
+process in the same domain can publish on a run's topics: every message that
+arrives from outside is checked against what the run's parameters allow
+(values finite and in range, steps within their phase, a sender that is a
+robot of the grid) before it reaches the rules. Each check returns the reason
+a message is refused, or None; the transport counts the reasons.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from .params import CamoParams
+from .protocol import CONSENSUS, DONE, FORMATION, NO_PATTERN, PHASE_OF, SENSING
+from .robot_io import Message
+from .rules import MOTTLED
+
+TOLERANCE = 1e-9  # a consensus p sums to 1 up to rounding
+REPORT_TOLERANCE = 1e-3  # a Droplet's own firmware prints p with 4 decimals
+
+
+def _grey(value: float) -> bool:
+    return isinstance(value, float | int) and math.isfinite(value) and 0.0 <= value <= 255.0
+
+
+def probability_vector(p: Sequence[float], tolerance: float = TOLERANCE) -> bool:
+    return (
+        len(p) == 3
+        and all(math.isfinite(x) and -tolerance <= x <= 1.0 + tolerance for x in p)
+        and abs(sum(p) - 1.0) <= tolerance
+    )
+
+
+def message_problem(message: Message, params: CamoParams) -> str | None:
+    """Why a robot must not use this message, or None."""
+    if not 0 <= message.sender < params.count:
+        return "sender is not a robot of the grid"
+    if message.round < 0:
+        return "round out of range"
+    kind, value, step = message.kind, message.value, message.step
+    if kind == "hello":
+        if step != 0 or tuple(value) != divmod(message.sender, params.cols):
+            return "hello from the wrong cell"
+    elif kind == "color":
+        if step != 0 or not _grey(value):
+            return "colour out of range"
+    elif kind == "vote":
+        p, degree = value
+        if not 0 <= step < params.consensus_steps:
+            return "step out of range"
+        if not probability_vector(p) or not 0 <= degree <= 8:
+            return "vote out of range"
+    elif kind == "state":
+        if not 0 <= step < params.formation_steps:
+            return "step out of range"
+        if value not in (0, 1):
+            return "state out of range"
+    else:
+        return "unknown kind"
+    return None
+
+
+def phase_problem(kind: str, phase: int) -> str | None:
+    """A message's phase field must be its kind's."""
+    return None if PHASE_OF.get(kind) == phase else "phase does not match the kind"
+
+
+def report_problem(status, params: CamoParams) -> str | None:
+    """Why the monitor must not use this status (a RobotStatus or a Report), or None."""
+    i = status.sender_id
+    if not 0 <= i < params.count:
+        return "sender is not a robot of the grid"
+    if (status.row, status.col) != divmod(i, params.cols):
+        return "status from the wrong cell"
+    phase, step = status.phase, status.step
+    limit = {CONSENSUS: params.consensus_steps, FORMATION: params.formation_steps}
+    if not SENSING <= phase <= DONE or step < 0 or step > limit.get(phase, step):
+        return "phase or step out of range"
+    if phase >= CONSENSUS:
+        if not _grey(status.sensed) or not probability_vector(list(status.p), REPORT_TOLERANCE):
+            return "status values out of range"
+        if status.state not in (0, 1) or status.pattern not in (*range(MOTTLED + 1), NO_PATTERN):
+            return "status values out of range"
+    p_trace = list(getattr(status, "p_trace", ()))
+    if len(p_trace) % 3 or not all(
+        probability_vector(p_trace[k : k + 3], REPORT_TOLERANCE) for k in range(0, len(p_trace), 3)
+    ):
+        return "status trace out of range"
+    if any(s not in (0, 1) for s in getattr(status, "state_trace", ())):
+        return "status trace out of range"
+    if any(not 0 <= n < params.count for n in getattr(status, "silent", ())):
+        return "status names a robot not of the grid"
+    return None

@@ -1,0 +1,147 @@
+"""Who may speak for which robots, and the count of what was refused.
+
+Any process in a run's domain can publish on its topics. DDS tells a message's
+writer by its GID, whose first 12 bytes name the writer's process (its
+participant): so a robot message is accepted only from the process that hosts
+its sender, and a process hosts the tiles it announced first (trust on first
+use: the run's own processes announce as they start, and only tiles of the
+run's layout count). A background is taken only if its pixels are one of the
+run's backgrounds (their digests are in the run's setup); without a setup that
+lists them (a robot alone, a background replayed from a bag) the first writer
+of the background is trusted. Everything refused is counted by reason and
+logged once per sender.
+
+What this cannot stop: a stranger that announces a tile before its real host
+does, or that forges DDS packets with another process's GUID (DDS Security
+does that; see docs/security.md).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from camo_msgs.msg import Host
+
+from .rcl_take import PREFIX
+
+
+class Rejections:
+    """Messages refused, by reason; the first from each writing process is logged."""
+
+    def __init__(self, logger) -> None:
+        self.logger = logger
+        self.counts: Counter = Counter()
+        self._logged: set[bytes] = set()
+
+    def refuse(self, reason: str, gid: bytes, about: str = "") -> None:
+        """`gid`: the writer's; `about`: what the message claimed to be (`robot 7`, say)."""
+        self.counts[reason] += 1
+        process = gid[:PREFIX]
+        if process not in self._logged:
+            self._logged.add(process)
+            claimed = f" ({about})" if about else ""
+            self.logger.warning(
+                f"refused a message{claimed} from the process with GUID prefix {process.hex()}: "
+                f"{reason}; further ones from it are only counted"
+            )
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+    def as_dict(self) -> dict:
+        return {"total": self.total, "by_reason": dict(sorted(self.counts.items()))}
+
+
+def merged(*reports: dict) -> dict:
+    """The sum of several as_dict() reports."""
+    counts: Counter = Counter()
+    for report in reports:
+        counts.update(report.get("by_reason", {}))
+    return {"total": sum(counts.values()), "by_reason": dict(sorted(counts.items()))}
+
+
+class Hosts:
+    """Which process (by GID prefix) hosts which robots: the first to announce a tile. With the
+    run's layout (its setup's `tiles` and `remote` ranges), only a tile of the layout, or one
+    inside the cells left to remote workers, can be announced at all."""
+
+    def __init__(self, count: int, rejections: Rejections, setup: dict | None = None) -> None:
+        self.count = count
+        self.rejections = rejections
+        self.layout = None
+        if setup is not None and "tiles" in setup:
+            self.layout = {tuple(t) for t in setup["tiles"]}
+            self.remote = [tuple(r) for r in setup.get("remote", [])]
+        self.owner: dict[int, bytes] = {}  # robot -> the prefix of its host
+        self.tiles: dict[tuple[int, int], bytes] = {}
+        self.refused: dict[bytes, dict] = {}  # host prefix -> what it reported refusing
+
+    def learn(self, msg: Host, gid: bytes) -> list[tuple[int, int]]:
+        """An announcement: the tiles it gives its writer's process for the first time."""
+        prefix = gid[:PREFIX]
+        self.refused[prefix] = {
+            "by_reason": dict(zip(msg.rejected_reasons, msg.rejected_counts, strict=False))
+        }
+        new = []
+        for first, last in zip(msg.first, msg.last, strict=False):
+            if not 0 <= first <= last < self.count or len(msg.first) != len(msg.last):
+                self.rejections.refuse("host announcement out of range", gid, msg.name)
+                continue
+            if self.layout is not None and not self._planned(first, last):
+                self.rejections.refuse("host announcement of a tile not in the run", gid, msg.name)
+                continue
+            claimed = {self.owner.get(r) for r in range(first, last + 1)} - {None}
+            if claimed - {prefix}:
+                self.rejections.refuse("tile already hosted by another process", gid, msg.name)
+                continue
+            if (first, last) not in self.tiles:
+                self.tiles[(first, last)] = prefix
+                for robot in range(first, last + 1):
+                    self.owner[robot] = prefix
+                new.append((first, last))
+        return new
+
+    def _planned(self, first: int, last: int) -> bool:
+        return (first, last) in self.layout or any(
+            a <= first and last <= b for a, b in self.remote
+        )
+
+    def speaks_for(self, gid: bytes, robot: int) -> bool:
+        return self.owner.get(robot) == gid[:PREFIX]
+
+
+class FirstWriter:
+    """A topic with one rightful writer: the first one heard."""
+
+    def __init__(self) -> None:
+        self.gid: bytes | None = None
+
+    def allows(self, gid: bytes) -> bool:
+        if self.gid is None:
+            self.gid = gid
+        return gid == self.gid
+
+
+class BackgroundCheck:
+    """Whether a background may be used. With the run's digests: only the next of the run's
+    backgrounds, in order (the current one again is a repeat, not a new round). Without them:
+    whatever its first writer sends."""
+
+    REPEAT = ""  # problem() for the background in use, heard again: ignore it quietly
+
+    def __init__(self, setup: dict | None) -> None:
+        self.digests = list((setup or {}).get("background_digests") or ())
+        self.taken = 0
+        self.first = FirstWriter()
+
+    def problem(self, digest: str, gid: bytes) -> str | None:
+        """None to take it, REPEAT to ignore it, else why it is refused."""
+        if not self.digests:
+            return None if self.first.allows(gid) else "a background from a second writer"
+        if self.taken < len(self.digests) and digest == self.digests[self.taken]:
+            self.taken += 1
+            return None
+        if self.taken and digest == self.digests[self.taken - 1]:
+            return self.REPEAT
+        return "a background that is not the run's next one"

@@ -1,0 +1,114 @@
+"""A stranger in a run's domain (for tests/camo_nodes/test_trust.py): it finds the run's topics on
+the graph and publishes on every one of them copies of the robots' messages with plausible ids,
+rounds and steps, some with NaN and out-of-range values, some well-formed but wrong, plus a fake
+host announcement, a fake background and fake parameters.
+
+    python tests/attacker.py RUN_ID SECONDS [FIRST-LAST ...]
+
+With tiles given it also publishes at once on the topics they would have (the names are no
+secret), as soon as the run's launcher has started. It prints "ready" (stderr) once its
+publishers exist, stops after SECONDS or on SIGTERM, and prints how many topics it attacked
+and messages it sent.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import signal
+import sys
+import time
+
+import numpy as np
+import rclpy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Image
+from std_msgs.msg import String
+
+from camo_msgs.msg import Color, Hello, Host, RobotStatus, State, Vote
+
+TYPES = {
+    "camo_msgs/msg/Hello": Hello,
+    "camo_msgs/msg/Color": Color,
+    "camo_msgs/msg/Vote": Vote,
+    "camo_msgs/msg/State": State,
+    "camo_msgs/msg/RobotStatus": RobotStatus,
+    "camo_msgs/msg/Host": Host,
+    "sensor_msgs/msg/Image": Image,
+    "std_msgs/msg/String": String,
+}
+NAN = math.nan
+KINDS = ("hello", "color", "vote", "state")
+
+
+def forged(cls, k: int, count: int, cols: int):
+    """The k-th forgery of a message type: NaN, out of range, or plausible and wrong."""
+    robot, step, bad = k % count, k % 30, k % 3
+    if cls is Hello:
+        return Hello(sender_id=robot, row=robot // cols, col=robot % cols, phase=0)
+    if cls is Color:
+        return Color(sender_id=robot, phase=1, value=(NAN, 300.0, 3.0)[bad])
+    if cls is Vote:
+        p = ([NAN, NAN, NAN], [2.0, -1.0, 0.0], [1.0, 0.0, 0.0])[bad]
+        return Vote(sender_id=robot, phase=2, step=step, p=p, degree=(8, 99, 4)[bad])
+    if cls is State:
+        return State(sender_id=robot, phase=3, step=step % 10, state=(7, 1, 0)[bad])
+    if cls is RobotStatus:
+        return RobotStatus(
+            sender_id=robot, row=robot // cols, col=robot % cols, phase=(2, 4, 4)[bad],
+            step=(0, 10, 10)[bad], sensed=(NAN, 100.0, 100.0)[bad],
+            p=([NAN, NAN, NAN], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])[bad], state=1, pattern=0,
+        )  # fmt: skip
+    if cls is Host:
+        return Host(name="impostor", first=[0], last=[count - 1])
+    if cls is Image:
+        image = Image(height=8, width=8, encoding="mono8", step=8)
+        image.data = bytes(np.full(64, 255, np.uint8))
+        return image
+    return String(data=json.dumps({"params": {"rows": 2, "cols": 2}, "backgrounds": ["x"]}))
+
+
+def main() -> int:
+    run, seconds, tiles = sys.argv[1], float(sys.argv[2]), sys.argv[3:]
+    rclpy.init()
+    node = rclpy.create_node("stranger")
+    qos = QoSProfile(
+        depth=1000,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+    publishers: dict[str, tuple] = {}
+    guessed = {f"/{run}/camo/hosts": Host, f"/{run}/camo/background": Image}
+    guessed |= {f"/{run}/swarm/status": RobotStatus, f"/{run}/swarm/params": String}
+    for tile in tiles:
+        for part in ("edge", "core"):
+            for kind, cls in zip(KINDS, (Hello, Color, Vote, State), strict=True):
+                guessed[f"/{run}/camo/tile_{tile.replace('-', '_')}/{part}/{kind}"] = cls
+    for name, cls in guessed.items():
+        publishers[name] = (node.create_publisher(cls, name, qos), cls)
+    print("ready", file=sys.stderr, flush=True)
+    count, cols = 36, 6
+    random.seed(1)
+    deadline = time.monotonic() + seconds
+    stop = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
+    sent = 0
+    while time.monotonic() < deadline and not stop:
+        for name, types in node.get_topic_names_and_types():
+            if name.startswith(f"/{run}/") and name not in publishers and types[0] in TYPES:
+                cls = TYPES[types[0]]
+                publishers[name] = (node.create_publisher(cls, name, qos), cls)
+        for publisher, cls in publishers.values():
+            for _ in range(5):
+                publisher.publish(forged(cls, sent, count, cols))
+                sent += 1
+        rclpy.spin_once(node, timeout_sec=0.01)
+    print(json.dumps({"topics": len(publishers), "sent": sent}))
+    node.destroy_node()
+    rclpy.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

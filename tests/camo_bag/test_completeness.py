@@ -1,0 +1,144 @@
+"""A bag is judged against its run: a complete recording passes, and a bag that lost robots'
+votes, done reports or the run's result is named incomplete (which robots, which kinds) by the
+ledger, by `bag info` and by `render`, which refuses it unless --partial and then writes no NaN."""
+
+import json
+import math
+
+import pytest
+from support import BAG_COLS, BAG_ROWS, BAG_RUN, bag_tool
+
+from camo_bag.completeness import examine, message_fields
+from camo_bag.container import BagWriter, TopicInfo, read_messages, read_summary
+
+
+def copy_bag(source, target, drop) -> None:
+    """A copy of a bag without the messages `drop(topic, data)` picks."""
+    summary = read_summary(source)
+    writer = BagWriter(target, library="test")
+    for topic in summary.topics:
+        writer.add_topic(
+            TopicInfo(topic.name, topic.type, topic.qos, topic.type_hash), topic.definition
+        )
+    for message in read_messages(source):
+        if not drop(message.topic, message.data):
+            writer.write(message.topic, message.data, message.log_time, message.publish_time)
+    writer.close()
+
+
+def strict_json(path) -> dict:
+    """summary.json, refusing NaN and Infinity."""
+
+    def refuse(constant):
+        raise AssertionError(f"{path} holds {constant}")
+
+    return json.loads(path.read_text(), parse_constant=refuse)
+
+
+def test_robot_message_fields_are_read_from_cdr_as_rclpy_would_decode_them():
+    from rclpy.serialization import serialize_message
+
+    from camo_msgs.msg import Color, Hello, State, Vote
+
+    messages = {
+        "hello": Hello(sender_id=70000, row=3, col=9, phase=0, step=0, round=2),
+        "color": Color(sender_id=5, phase=1, step=0, round=1, value=12.5),
+        "vote": Vote(sender_id=7, phase=2, step=1234, round=3, p=[0.2, 0.3, 0.5], degree=4),
+        "state": State(sender_id=8, phase=3, step=9, round=0, state=1),
+    }
+    for frame in ("", "camo", "a longer frame"):
+        for kind, msg in messages.items():
+            msg.header.frame_id = frame
+            expected = (msg.sender_id, msg.round, msg.step)
+            assert message_fields(kind, serialize_message(msg)) == expected, (kind, frame)
+
+
+def test_a_whole_recording_is_complete(recorded):
+    bag, _ = recorded
+    ledger = examine(bag)
+    assert ledger.gaps() == [] and ledger.result["ended"] == "finished"
+    info = bag_tool("cli", "info", str(bag))
+    assert info.returncode == 0 and "Run:               complete" in info.stdout
+
+
+def test_a_bag_that_lost_robots_votes_is_incomplete_and_render_refuses_it(recorded, tmp_path):
+    bag, live = recorded
+    lost = {3, 4, 5, 11}
+    copy_bag(
+        bag,
+        tmp_path / "cut",
+        lambda topic, data: topic.endswith("/vote") and message_fields("vote", data)[0] in lost,
+    )
+    gaps = examine(tmp_path / "cut").gaps()
+    assert gaps == ["round 0: 4 robots lack votes: 3-5, 11"]
+    info = bag_tool("cli", "info", str(tmp_path / "cut"))
+    assert "INCOMPLETE" in info.stdout and "3-5, 11" in info.stdout
+    refused = bag_tool("render", str(tmp_path / "cut"), "--out", str(tmp_path / "r"))
+    assert refused.returncode == 1 and "Traceback" not in refused.stderr
+    assert refused.stderr.count("\n") == 1 and "is incomplete" in refused.stderr
+    partial = bag_tool("render", str(tmp_path / "cut"), "--out", str(tmp_path / "p"), "--partial")
+    assert partial.returncode == 0, partial.stderr
+    summary = strict_json(tmp_path / "p" / "summary.json")
+    assert summary["incomplete"] == gaps[0]
+    assert summary["final"] == live["final"]  # the statuses are all there
+
+
+def test_a_bag_without_statuses_or_result_names_every_robot_and_writes_null_not_nan(
+    recorded, tmp_path
+):
+    bag, _ = recorded
+    done_of = set(range(0, BAG_ROWS * BAG_COLS, 2))  # half the robots' statuses are gone
+
+    def drop(topic, data):
+        if topic.endswith("/swarm/result"):
+            return True
+        if topic.endswith("/swarm/status"):
+            from rclpy.serialization import deserialize_message
+
+            from camo_msgs.msg import RobotStatus
+
+            return deserialize_message(data, RobotStatus).sender_id in done_of
+        return False
+
+    copy_bag(bag, tmp_path / "cut", drop)
+    gaps = examine(tmp_path / "cut").gaps()
+    assert gaps[0].startswith("the run's result is not in the bag")
+    count = BAG_ROWS * BAG_COLS
+    assert gaps[1].startswith(f"round 0: {count // 2} robots lack done reports: 0, 2, 4")
+    partial = bag_tool("render", str(tmp_path / "cut"), "--out", str(tmp_path / "p"), "--partial")
+    assert partial.returncode == 0, partial.stderr
+    summary = strict_json(tmp_path / "p" / "summary.json")
+    assert summary["final"][0][0] is None and summary["final"][0][1] is not None
+    assert all(v is None or math.isfinite(v) for row in summary["sensed"] for v in row)
+
+
+@pytest.mark.parametrize("ended", ["interrupted", "failed"])
+def test_a_run_that_ended_early_makes_an_incomplete_bag(recorded, tmp_path, ended):
+    from camo_bag.ledger import Ledger
+
+    ledger = Ledger()
+    ledger.set_run(examine(recorded[0]).params, 1)
+    ledger.set_result({"run": BAG_RUN, "ended": ended, "rounds": []})
+    assert ledger.gaps() == [f"the run ended early ({ended}): not every round ran"]
+
+
+def test_the_ledger_counts_each_step_once_and_ignores_steps_no_robot_sends():
+    from camo_bag.ledger import Ledger
+    from camo_core.params import CamoParams
+
+    ledger = Ledger()
+    ledger.set_run(CamoParams(rows=1, cols=2, consensus_steps=3, formation_steps=2), 1)
+    ledger.backgrounds = 1
+    for robot in (0, 1):
+        ledger.message("hello", robot, 0)
+        ledger.message("color", robot, 0)
+        ledger.reported_done(robot, 0)
+        for step in (0, 1, 1, 1, 7, 10**9, -1):  # the same step thrice, steps out of range
+            ledger.message("vote", robot, 0, step)
+        ledger.message("state", robot, 0, 0)
+        ledger.message("state", robot, 0, 1)
+    ledger.message("vote", 1, 0, 2)
+    ledger.set_result({"run": "r", "ended": "finished", "rounds": [{"finished": [[0, 1]]}]})
+    assert ledger.complete(0) == {1}
+    assert ledger.gaps() == ["round 0: 1 robot lacks votes: 0"]
+    assert ledger.lacking(0) == {"vote": 1}

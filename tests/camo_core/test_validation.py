@@ -1,0 +1,56 @@
+"""What a received message must look like: each malformed kind is refused with its reason, and
+every message a real robot sends passes."""
+
+import math
+
+import pytest
+
+from camo_core.params import CamoParams
+from camo_core.protocol import CONSENSUS, DISCOVERY, FORMATION, SENSING
+from camo_core.robot_io import Message
+from camo_core.validation import message_problem, phase_problem
+
+PARAMS = CamoParams(rows=4, cols=5, consensus_steps=20, formation_steps=6)
+
+
+@pytest.mark.parametrize(
+    "message",
+    [
+        Message("hello", 7, 0, 0, (1, 2)),
+        Message("color", 0, 3, 0, 255.0),
+        Message("vote", 19, 0, 19, ((0.2, 0.3, 0.5), 8)),
+        Message("state", 4, 1, 5, 1),
+    ],
+)
+def test_well_formed_messages_pass(message):
+    assert message_problem(message, PARAMS) is None
+
+
+@pytest.mark.parametrize(
+    ("message", "reason"),
+    [
+        (Message("vote", 20, 0, 0, ((1.0, 0.0, 0.0), 1)), "sender is not a robot of the grid"),
+        (Message("vote", -1, 0, 0, ((1.0, 0.0, 0.0), 1)), "sender is not a robot of the grid"),
+        (Message("hello", 7, 0, 0, (0, 7)), "hello from the wrong cell"),
+        (Message("color", 3, 0, 0, math.nan), "colour out of range"),
+        (Message("color", 3, 0, 0, 300.0), "colour out of range"),
+        (Message("color", 3, -1, 0, 10.0), "round out of range"),
+        (Message("vote", 3, 0, 20, ((1.0, 0.0, 0.0), 1)), "step out of range"),
+        (Message("vote", 3, 0, 0, ((math.nan, 0.5, 0.5), 1)), "vote out of range"),
+        (Message("vote", 3, 0, 0, ((2.0, -1.0, 0.0), 1)), "vote out of range"),
+        (Message("vote", 3, 0, 0, ((0.5, 0.5, 0.5), 1)), "vote out of range"),
+        (Message("vote", 3, 0, 0, ((1.0, 0.0, 0.0), 9)), "vote out of range"),
+        (Message("state", 3, 0, 6, 1), "step out of range"),
+        (Message("state", 3, 0, 0, 2), "state out of range"),
+        (Message("shout", 3, 0, 0, 2), "unknown kind"),
+    ],
+)
+def test_malformed_messages_are_refused_with_their_reason(message, reason):
+    assert message_problem(message, PARAMS) == reason
+
+
+def test_a_message_must_carry_its_kinds_phase():
+    phases = {"hello": DISCOVERY, "color": SENSING, "vote": CONSENSUS, "state": FORMATION}
+    for kind, phase in phases.items():
+        assert phase_problem(kind, phase) is None
+        assert phase_problem(kind, phase + 1) == "phase does not match the kind"

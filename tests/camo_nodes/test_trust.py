@@ -1,0 +1,151 @@
+"""A run under attack: a stranger in its domain publishes malformed and forged copies of the
+robots' messages, statuses, hosts, background and parameters on the run's own topics. The run
+refuses them, counts them, says so, and still computes what the simulator does."""
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+from support import ROOT, assert_like_sim, domain, run_camo, wait_for_line
+
+from camo_msgs.msg import Host
+from camo_nodes.topics import setup_from
+from camo_nodes.trust import BackgroundCheck, Hosts, Rejections, merged
+
+OPTIONS = ["--pattern", "forest", "--rows", "6", "--cols", "6", "--seed", "2"]
+OPTIONS += ["--rho-comm", "0.1", "--consensus-steps", "1500"]
+SETUP = {
+    "run": "r",
+    "params": {"rows": 6, "cols": 6},
+    "backgrounds": ["built-in forest"],
+    "step_timeout": 30.0,
+    "discovery_timeout": 60.0,
+    "tiles": [[0, 17], [18, 35]],
+}
+
+
+def test_a_run_under_attack_equals_the_simulator_and_reports_what_it_refused(tmp_path):
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain())}
+    run = subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.launcher", *OPTIONS, "--procs", "2"]
+        + ["--run-id", "attacked", "--out", str(tmp_path / "run")],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    wait_for_line(run, "topics under")
+    attacker = subprocess.Popen(
+        [sys.executable, str(ROOT / "tests" / "attacker.py"), "attacked", "60", "0-17", "18-35"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        wait_for_line(attacker, "ready")
+        out, err = run.communicate(timeout=240)
+    finally:
+        attacker.terminate()
+        stranger, _ = attacker.communicate(timeout=30)
+    assert run.returncode == 0, err[-3000:]
+    attack = json.loads(stranger)
+    assert attack["topics"] >= 20 and attack["sent"] > 1000, attack
+    sim = run_camo("sim", *OPTIONS, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    ran = assert_like_sim(tmp_path / "run", tmp_path / "sim", attacked=True)
+    refused = ran["rejected_messages"]
+    assert refused["total"] > 0 and sum(refused["by_reason"].values()) == refused["total"]
+    assert "received messages refused" in out
+    assert "not from the process hosting its sender" in refused["by_reason"]
+    assert "a background that is not the run's next one" in refused["by_reason"]
+
+
+# ---- the pieces, alone ----------------------------------------------------------------------
+
+
+class Log:
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def warning(self, line: str) -> None:
+        self.lines.append(line)
+
+
+A, B = bytes(range(16)), bytes(range(1, 17))  # two writers in two processes
+
+
+def test_rejections_count_every_message_and_log_each_process_once():
+    log = Log()
+    rejections = Rejections(log)
+    for _ in range(3):
+        rejections.refuse("vote out of range", A, "robot 4")
+    rejections.refuse("step out of range", A[:12] + b"\x00\x00\x00\x09", "robot 5")
+    rejections.refuse("vote out of range", B)
+    assert rejections.as_dict() == {
+        "total": 5,
+        "by_reason": {"step out of range": 1, "vote out of range": 4},
+    }
+    assert len(log.lines) == 2 and "robot 4" in log.lines[0] and A[:12].hex() in log.lines[0]
+    assert merged(rejections.as_dict(), {"by_reason": {"step out of range": 2}})["total"] == 7
+
+
+def test_a_tile_belongs_to_the_process_that_announced_it_first_and_only_tiles_of_the_run():
+    rejections = Rejections(Log())
+    hosts = Hosts(36, rejections, {"tiles": [[0, 17], [18, 35]], "remote": []})
+    assert hosts.learn(Host(name="w1", first=[0], last=[17]), A) == [(0, 17)]
+    assert hosts.learn(Host(name="x", first=[0], last=[17]), B) == []
+    assert hosts.learn(Host(name="x", first=[0], last=[35]), B) == []
+    assert hosts.learn(Host(name="x", first=[30], last=[40]), B) == []
+    assert hosts.speaks_for(A[:12] + b"\xff" * 4, 17) and not hosts.speaks_for(B, 17)
+    assert not hosts.speaks_for(A, 18)  # nobody hosts 18-35 yet
+    assert rejections.counts == {
+        "tile already hosted by another process": 1,
+        "host announcement of a tile not in the run": 1,
+        "host announcement out of range": 1,
+    }
+
+
+def test_cells_left_to_remote_workers_may_be_announced_in_any_tiling():
+    hosts = Hosts(36, Rejections(Log()), {"tiles": [[0, 17]], "remote": [[18, 35]]})
+    assert hosts.learn(Host(name="far", first=[18, 27], last=[26, 35]), B) == [(18, 26), (27, 35)]
+
+
+def test_a_background_is_taken_only_as_the_runs_next_one():
+    check = BackgroundCheck({"background_digests": ["d0", "d1"]})
+    assert check.problem("dx", A) == "a background that is not the run's next one"
+    assert check.problem("d1", A) == "a background that is not the run's next one"
+    assert check.problem("d0", B) is None
+    assert check.problem("d0", A) == BackgroundCheck.REPEAT
+    assert check.problem("d1", B) is None
+    assert check.problem("d0", B) == "a background that is not the run's next one"
+
+
+def test_without_the_runs_digests_the_first_writer_of_the_background_is_trusted():
+    check = BackgroundCheck(None)
+    assert check.problem("anything", A) is None
+    assert check.problem("else", A) is None
+    assert check.problem("anything", B) == "a background from a second writer"
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "not json",
+        "[]",
+        json.dumps({"run": "other", "params": {}, "backgrounds": []}),
+        json.dumps({"run": "r", "params": {"rows": -1}, "backgrounds": []}),
+        json.dumps({**SETUP, "step_timeout": "soon"}),
+        json.dumps({**SETUP, "tiles": [[0]]}),
+        json.dumps({**SETUP, "backgrounds": "forest"}),
+    ],
+)
+def test_a_strangers_parameters_message_is_not_taken_for_the_runs(text):
+    assert setup_from(text, "r") is None
+
+
+def test_the_launchers_parameters_message_is_taken():
+    assert setup_from(json.dumps(SETUP), "r") == SETUP
