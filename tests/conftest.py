@@ -3,9 +3,27 @@
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
+from hypothesis import HealthCheck, settings
 from support import BAG_OPTIONS, camo_run
+
+# Fuzz tests: the same inputs on every run (a failure in CI is one a developer can replay), no
+# example database written into the clone, and a bounded number of examples each.
+settings.register_profile(
+    "camo",
+    derandomize=True,
+    database=None,
+    deadline=None,
+    max_examples=150,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
+)
+# CAMO_FUZZ=explore searches further, with new inputs each time (for a developer, not CI).
+settings.register_profile(
+    "explore", settings.get_profile("camo"), derandomize=False, max_examples=1500
+)
+settings.load_profile("explore" if os.environ.get("CAMO_FUZZ") == "explore" else "camo")
 
 
 @pytest.fixture

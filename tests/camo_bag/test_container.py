@@ -1,6 +1,8 @@
 """Bags as rosbag2 writes them with MCAP: read back by two independent readers; bad files
 refused in one line; a cut file repaired."""
 
+from hypothesis import given
+from hypothesis import strategies as st
 from support import BAG_COLS, BAG_FORMATION, BAG_ROWS, BAG_RUN, BAG_STEPS, bag_tool, tile_range
 
 
@@ -148,3 +150,60 @@ def test_repair_keeps_every_complete_chunk_of_a_cut_file(tmp_path):
     assert "cut short" in out.stdout and "wrote 150 messages" in out.stdout
     texts = [deserialize(m.data) for m in read_messages(tmp_path / "fixed")]
     assert texts == [f"{c}-{k}" for c in range(3) for k in range(50)]
+
+
+# ---- fuzzed: bags damaged in any way -----------------------------------------------------
+
+
+def mutations():
+    """A bag's bytes cut short, with bytes flipped or overwritten, or with bytes inserted."""
+    spot = st.floats(0, 1, exclude_max=True)  # where, as a fraction of the file
+    return st.one_of(
+        st.tuples(st.just("cut"), spot, st.just(b"")),
+        st.tuples(st.just("flip"), spot, st.binary(min_size=1, max_size=8)),
+        st.tuples(st.just("insert"), spot, st.binary(min_size=1, max_size=64)),
+    )
+
+
+def mutated(data: bytes, changes) -> bytes:
+    for how, where, payload in changes:
+        at = int(where * len(data))
+        if how == "cut":
+            data = data[:at]
+        elif how == "flip":
+            data = (
+                data[:at]
+                + bytes(a ^ b | 1 for a, b in zip(data[at:], payload, strict=False))
+                + data[at + len(payload) :]
+            )
+        else:
+            data = data[:at] + payload + data[at:]
+    return data
+
+
+@given(changes=st.lists(mutations(), min_size=1, max_size=3))
+def test_a_damaged_bag_gives_a_one_line_error_or_what_it_holds(
+    recorded, tmp_path_factory, changes
+):
+    """Every reader of bags (info, the completeness check, render, repair) either works or
+    raises the project's own error; never anything else."""
+    from camo_bag.completeness import examine
+    from camo_bag.container import read_messages, read_summary, repair
+    from camo_bag.render import load_run
+    from camo_core.exceptions import CamoError
+
+    bag, _ = recorded
+    folder = tmp_path_factory.mktemp("damaged")
+    (folder / "damaged_0.mcap").write_bytes(mutated((bag / "bag_0.mcap").read_bytes(), changes))
+    readers = [
+        read_summary,
+        lambda path: list(read_messages(path)),
+        examine,
+        load_run,
+        lambda path: repair(path, folder.parent / f"{folder.name}_repaired"),
+    ]
+    for read in readers:
+        try:
+            read(folder)
+        except CamoError as exc:
+            assert "\n" not in str(exc), exc

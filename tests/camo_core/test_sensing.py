@@ -3,6 +3,9 @@
 import cv2
 import numpy as np
 import pytest
+import yaml
+from hypothesis import given
+from hypothesis import strategies as st
 
 from camo_core import sensing
 from camo_core.params import ParameterError
@@ -90,3 +93,26 @@ def test_calibration_is_identity_by_default_and_reads_yaml(tmp_path):
     path.write_text("gain: 0\n")
     with pytest.raises(ParameterError, match="positive"):
         Calibration.from_yaml(path)
+
+
+@given(
+    content=st.one_of(
+        st.binary(max_size=64),
+        st.dictionaries(
+            st.sampled_from(["gain", "offset", "other"]),
+            st.one_of(
+                st.none(), st.booleans(), st.floats(), st.text(max_size=5), st.lists(st.integers())
+            ),
+            max_size=3,
+        ).map(lambda d: yaml.safe_dump(d).encode()),
+    )
+)
+def test_any_calibration_file_reads_or_is_refused_in_one_line(tmp_path_factory, content):
+    path = tmp_path_factory.mktemp("cal") / "calibration.yaml"
+    path.write_bytes(content)
+    try:
+        cal = Calibration.from_yaml(path)
+    except ParameterError as exc:
+        assert "\n" not in str(exc)
+    else:
+        assert 0.0 <= cal.apply(128.0) <= 255.0

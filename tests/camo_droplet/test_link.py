@@ -4,6 +4,8 @@ import json
 import time
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from camo_droplet.emulator import Faults
 from camo_droplet.link import (
@@ -78,3 +80,47 @@ def test_a_port_that_disappears_raises_and_can_be_reopened(emulator):
             assert time.monotonic() < deadline
             time.sleep(0.1)
     assert link.get_rgb() == (10, 20, 30)
+
+
+# ---- fuzzed: whatever a serial port sends -----------------------------------------------------
+
+
+class ScriptedPort:
+    """A port that answers every read with the next chunk of a script, then silence."""
+
+    def __init__(self, chunks: list[bytes]) -> None:
+        self.chunks = list(chunks)
+
+    def read(self, size: int) -> bytes:
+        return self.chunks.pop(0)[:size] if self.chunks else b""
+
+    def write(self, data: bytes) -> int:
+        return len(data)
+
+    def close(self) -> None:
+        pass
+
+
+@given(st.lists(st.binary(max_size=300), max_size=20))
+def test_any_bytes_split_into_printable_bounded_lines(chunks):
+    reader = LineReader()
+    lines = [line for chunk in chunks for line in reader.feed(chunk)]
+    assert all(len(line) <= 200 for line in lines)
+    assert all(32 <= ord(c) < 127 or c == "\t" for line in lines for c in line)
+
+
+REPLIES = [b"get_rgb\r\n", b"r: 1, g: 2, b: 3\r\n", b"r: 999, g: 0, b: 0\r\n", b"get_id\r\n"]
+REPLIES += [b"My ID is: 00C3\r\n", b"\tCommand ( get_rgb ) not recognized.\r\n", b"\xff\x00"]
+
+
+@given(st.lists(st.one_of(st.sampled_from(REPLIES), st.binary(max_size=80)), max_size=12))
+def test_a_command_answered_with_anything_returns_or_raises_a_droplet_error(chunks):
+    link = DropletLink("/dev/fuzz", opener=lambda path: ScriptedPort(chunks), timeout=0.01)
+    link.open()
+    for command in (link.get_rgb, link.get_id):
+        try:
+            value = command()
+        except DropletError as exc:
+            assert "\n" not in str(exc)
+        else:
+            assert value == (1, 2, 3) or value == 0x00C3

@@ -24,7 +24,7 @@ from camo_core.protocol import DONE
 from camo_msgs.msg import RobotStatus
 from camo_nodes.topics import PARAMS_SUFFIX, result_from
 
-from .container import BagError, BagSummary, read_messages, read_summary
+from .container import BagError, BagSummary, damaged, read_messages, read_summary
 from .ledger import Ledger
 from .msgdefs import full_name, message_definition
 
@@ -80,7 +80,10 @@ def status_decoder(summary: BagSummary, topic: str):
     from mcap_ros2.decoder import DecoderFactory
 
     schema = Schema(id=1, name=info.type, encoding="ros2msg", data=info.definition.encode())
-    return DecoderFactory().decoder_for("cdr", schema)
+    try:
+        return DecoderFactory().decoder_for("cdr", schema)
+    except Exception as exc:  # noqa: BLE001 - a damaged schema: its parser raises anything
+        raise damaged(summary.path, exc, f"holds an unreadable schema for {topic}") from None
 
 
 def setup_in(data: bytes) -> dict | None:
@@ -131,6 +134,6 @@ def examine(path: str | Path) -> Ledger:
     except BagError:
         raise
     except Exception as exc:  # noqa: BLE001 - bytes that do not decode as their recorded type
-        raise BagError(f"{path}: a message does not decode as its recorded type ({exc})") from None
+        raise damaged(path, exc, "holds a message that does not decode as its type") from None
     ledger.results_expected = bool(run)  # a bag of the older layout (no run id) never had one
     return ledger

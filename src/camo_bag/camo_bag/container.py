@@ -10,12 +10,14 @@ container is the `mcap` library's; this module only decides what goes in.
 from __future__ import annotations
 
 import os
+import struct
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
+import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
@@ -32,6 +34,28 @@ CHUNK_SIZE = 256 * 1024  # small chunks: a killed recorder loses at most one
 
 class BagError(CamoError):
     """A bag that cannot be used: missing, not MCAP, truncated, or unwritable."""
+
+
+# What the mcap, zstd and ros2msg parsers raise on damaged bytes. They check little, so a
+# corrupt length or id surfaces as any of these (found by tests/camo_bag fuzzing).
+DAMAGE = (
+    McapError,
+    EOFError,
+    ValueError,  # UnicodeDecodeError included
+    TypeError,
+    LookupError,  # KeyError, IndexError
+    AttributeError,
+    ArithmeticError,
+    MemoryError,
+    struct.error,
+    zstandard.ZstdError,
+)
+
+
+def damaged(path: str | Path, exc: BaseException, what: str = "is corrupt") -> BagError:
+    """A one-line error for a bag whose bytes did not parse."""
+    reason = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else ""
+    return BagError(f"{path} {what} ({type(exc).__name__}{': ' + reason if reason else ''})")
 
 
 @dataclass
@@ -228,7 +252,13 @@ def _truncated(path: Path) -> BagError:
 
 
 def _qos_of(channel: Channel) -> str:
-    return channel.metadata.get("offered_qos_profiles", "")
+    """The channel's offered QoS profiles as YAML text; "" when damaged beyond parsing."""
+    text = channel.metadata.get("offered_qos_profiles", "")
+    try:
+        yaml.safe_load(text)
+    except (yaml.YAMLError, *DAMAGE):
+        return ""
+    return text
 
 
 def read_summary(path: str | Path) -> BagSummary:
@@ -236,7 +266,7 @@ def read_summary(path: str | Path) -> BagSummary:
     with open(file, "rb") as stream:
         try:
             summary = make_reader(stream).get_summary()
-        except (McapError, EOFError, ValueError, OSError):
+        except (*DAMAGE, OSError):
             raise _truncated(file) from None
     if summary is None or summary.statistics is None:
         raise _truncated(file)
@@ -273,8 +303,8 @@ def read_messages(path: str | Path, topics: list[str] | None = None) -> Iterator
                     message.publish_time,
                     message.data,
                 )
-        except (McapError, EOFError, ValueError) as exc:
-            raise BagError(f"{file} is corrupt: {exc}") from None
+        except DAMAGE as exc:
+            raise damaged(file, exc) from None
 
 
 def salvage(path: str | Path) -> tuple[list[Schema], list[Channel], list[Message], str]:
@@ -313,7 +343,8 @@ def repair(src: str | Path, dst: str | Path) -> tuple[int, str]:
             if schema is None:
                 continue
             writer.add_topic(
-                TopicInfo(channel.topic, schema.name, _qos_of(channel)), schema.data.decode()
+                TopicInfo(channel.topic, schema.name, _qos_of(channel)),
+                schema.data.decode(errors="replace"),
             )
         topic_of = {c.id: c.topic for c in channels}
         for message in sorted(messages, key=lambda m: m.log_time):

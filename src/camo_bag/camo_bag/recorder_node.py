@@ -48,7 +48,7 @@ from camo_nodes.topics import (
     result_from,
     run_ended,
     setup_from,
-    use_camo_dds_settings,
+    start_ros,
     wait_for_run,
 )
 
@@ -271,8 +271,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"recorder_node: error: {exc}", file=sys.stderr)
         return 2
     stop = StopFlag()
-    use_camo_dds_settings()  # readers with room for a fast swarm's bursts, quick discovery
-    rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
+    start_ros("recorder_node", ros_args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     executor = EventsExecutor()
     try:

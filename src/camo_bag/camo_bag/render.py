@@ -17,14 +17,12 @@ lacks; `--partial` renders what it holds, with the gaps named in summary.json
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
-from std_msgs.msg import String
 
 from camo_core import figures
 from camo_core.exceptions import CamoError
@@ -35,8 +33,8 @@ from camo_core.record import Backgrounds, Rounds
 from camo_msgs.msg import RobotStatus
 from camo_nodes.topics import image_from_msg
 
-from .completeness import examine, run_topics_of, status_decoder
-from .container import BagError, read_messages, read_summary
+from .completeness import examine, run_topics_of, setup_in, status_decoder
+from .container import DAMAGE, BagError, damaged, read_messages, read_summary
 from .ledger import gaps_of_round
 
 
@@ -62,7 +60,7 @@ def load_run(path: str | Path) -> RecordedRun:
     try:
         for message in read_messages(path, [params_topic, status_topic, background_topic]):
             if message.topic == params_topic and setup is None:
-                setup = json.loads(deserialize_message(message.data, String).data)
+                setup = setup_in(message.data) or {}
             elif message.topic == background_topic:
                 msg = deserialize_message(message.data, Image)
                 stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
@@ -72,19 +70,21 @@ def load_run(path: str | Path) -> RecordedRun:
     except CamoError:
         raise
     except Exception as exc:  # noqa: BLE001 - bytes that do not decode as their recorded type
-        raise BagError(f"{path}: a message does not decode as its recorded type ({exc})") from None
+        raise damaged(path, exc, "holds a message that does not decode as its type") from None
     if setup is None:
         raise BagError(f"{path} has no message on {params_topic}")
-    try:
-        params = CamoParams(**setup["params"])
-    except (TypeError, KeyError):
-        raise BagError(f"{path}: {params_topic} does not hold a run's parameters") from None
+    if not setup:
+        raise BagError(f"{path}: {params_topic} does not hold a run's parameters")
+    params = CamoParams(**setup["params"])
     rounds = Rounds(params)
     times: dict[int, list[int]] = {}
-    for status, log_time in pending:
-        if status.sender_id < params.count:
-            rounds[status.round].add(status)
-            times.setdefault(status.round, []).append(log_time)
+    try:
+        for status, log_time in pending:
+            if status.sender_id < params.count:
+                rounds[status.round].add(status)
+                times.setdefault(status.round, []).append(log_time)
+    except DAMAGE as exc:  # decoded with a damaged schema of the bag's own
+        raise damaged(path, exc, "holds a status that does not read as one") from None
     if not rounds:
         raise BagError(f"{path} holds no robot status: nothing to render")
     elapsed = {index: (max(t) - min(t)) / 1e9 for index, t in times.items()}

@@ -21,7 +21,7 @@ from camo_core.exceptions import CamoError, UsageError
 from camo_core.options import Parser, add_network_options, network_env
 from camo_core.progress import ProgressBar
 from camo_core.shutdown import StopFlag
-from camo_nodes.topics import LEAN_NODE, check_run_id, use_camo_dds_settings
+from camo_nodes.topics import LEAN_NODE, check_run_id, start_ros
 
 from . import msgdefs, qos_yaml
 from .container import BagSummary, read_messages, read_summary
@@ -136,8 +136,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     os.environ.update(env)
     stop = StopFlag()
-    use_camo_dds_settings()
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    start_ros("camo replay", None, signal_handler_options=SignalHandlerOptions.NO)
     try:
         return replay(args, summary, stop)
     except CamoError as exc:

@@ -96,8 +96,8 @@ class Calibration:
             data = yaml.safe_load(Path(path).read_text()) or {}
         except OSError as exc:
             raise ParameterError(f"cannot read calibration {path}: {exc.strerror}") from None
-        except yaml.YAMLError:
-            raise ParameterError(f"calibration {path} is not YAML") from None
+        except (yaml.YAMLError, UnicodeDecodeError, RecursionError):
+            raise ParameterError(f"calibration {path} is not YAML text") from None
         if not isinstance(data, dict) or set(data) - {"gain", "offset"}:
             raise ParameterError(f"calibration {path} may hold only `gain` and `offset`")
         try:

@@ -39,7 +39,7 @@ from camo_nodes.topics import (
     history_qos,
     run_ended,
     run_from_parameter,
-    use_camo_dds_settings,
+    start_ros,
 )
 
 from .firmware import FirmwareState
@@ -212,8 +212,7 @@ def main(args=None) -> int:
         print(node_help("droplet_bridge", about, {**ROBOT_PARAMETERS, **BRIDGE_PARAMETERS}))
         return 0
     stop = StopFlag()
-    use_camo_dds_settings()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    start_ros("droplet_bridge", args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         reader = Node("droplet_parameters", **LEAN_NODE)
         try:

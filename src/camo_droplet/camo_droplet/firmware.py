@@ -19,6 +19,7 @@ import re
 from dataclasses import dataclass, field
 
 from camo_core.rules import select_pattern
+from camo_core.validation import REPORT_TOLERANCE, probability_vector
 
 PX_PY = re.compile(r"^Px:\s*(-?[\d.]+)\s+Py:\s*(-?[\d.]+)$")
 PATTERNS = re.compile(r"^Pre-pattern:\s*\[([^\]]*)\]\s*Cur-pattern:\s*\[([^\]]*)\]$")
@@ -42,29 +43,38 @@ class FirmwareState:
         return None if self.p is None else select_pattern(self.p)
 
     def feed(self, line: str) -> bool:
-        """Take one line; True when it changed what the robot reports."""
+        """Take one line; True when it changed what the robot reports. A line that does not
+        parse, or says what no robot can (p that is not a probability vector, a colour above
+        255), is ignored and counted."""
         line = line.strip()
+        p = None
         if match := PX_PY.match(line):
-            px, py = float(match.group(1)), float(match.group(2))
-            self.p = (px, py, max(0.0, 1.0 - px - py))
-            return True
-        if match := PATTERNS.match(line):
-            try:
-                current = tuple(float(x) for x in match.group(2).replace(",", " ").split())
-            except ValueError:
-                current = ()
-            if len(current) != 3:
+            xy = numbers(f"{match.group(1)} {match.group(2)}")
+            p = (xy[0], xy[1], max(0.0, 1.0 - xy[0] - xy[1])) if xy and len(xy) == 2 else None
+        elif match := PATTERNS.match(line):
+            p = numbers(match.group(2))
+        elif match := COLOR.match(line):
+            owner, value = int(match.group(2), 16), int(match.group(3))
+            if value > 255:
                 self.ignored += 1
                 return False
-            self.p = current
-            self.steps += 1
-            return True
-        if match := COLOR.match(line):
-            owner, value = int(match.group(2), 16), int(match.group(3))
             if owner == self.droplet_id:
                 self.sensed = float(value)
                 return True
             self.neighbour_colors[owner] = value
             return False
-        self.ignored += 1
-        return False
+        if p is None or not probability_vector(p, REPORT_TOLERANCE):
+            self.ignored += 1
+            return False
+        self.p = p
+        if match.re is PATTERNS:
+            self.steps += 1  # each Pre/Cur-pattern line is one consensus step
+        return True
+
+
+def numbers(text: str) -> tuple[float, ...] | None:
+    """Numbers separated by spaces or commas; None if one is not a number."""
+    try:
+        return tuple(float(x) for x in text.replace(",", " ").split())
+    except ValueError:
+        return None

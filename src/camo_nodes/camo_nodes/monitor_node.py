@@ -48,8 +48,8 @@ from .topics import (
     check_run_id,
     image_from_msg,
     image_to_msg,
+    start_ros,
     status_listener_qos,
-    use_camo_dds_settings,
     wait_for_run,
     wait_for_setup,
 )
@@ -211,8 +211,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"monitor_node: error: {exc}", file=sys.stderr)
         return 2
     stop = StopFlag()
-    use_camo_dds_settings()
-    rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
+    start_ros("monitor_node", ros_args, signal_handler_options=SignalHandlerOptions.NO)
     executor = EventsExecutor()
     nodes: list[Node] = []
     try:

@@ -30,7 +30,7 @@ from camo_core.sensing import ProjectedSensor, Projection
 from camo_core.shutdown import StopFlag
 
 from .host import Host, host_node
-from .topics import LEAN_NODE, RunTopics, run_ended, run_from_parameter, use_camo_dds_settings
+from .topics import LEAN_NODE, RunTopics, run_ended, run_from_parameter, start_ros
 from .transport import Transport
 
 
@@ -191,8 +191,7 @@ def main(args=None) -> int:
         print(node_help("robot_node", "One robot of the camouflage swarm.", ROBOT_PARAMETERS))
         return 0
     stop = StopFlag()
-    use_camo_dds_settings()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    start_ros("robot_node", args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         reader = Node("robot_parameters", **LEAN_NODE)
         try:

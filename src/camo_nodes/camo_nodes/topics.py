@@ -11,19 +11,22 @@ import json
 import os
 import re
 import secrets
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import rclpy
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
-from camo_core.exceptions import CamoError
+from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
 from camo_core.params import CamoParams
+from camo_core.params_file import check_ros_args
 
 FASTDDS_PROFILE = Path(__file__).with_name("fastdds.xml")
 
@@ -33,6 +36,25 @@ def use_camo_dds_settings(environ=os.environ) -> None:
     starts): camo's Fast DDS settings (fastdds.xml: quicker discovery, roomier readers), unless
     the user has a profiles file of their own."""
     environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(FASTDDS_PROFILE))
+
+
+def start_ros(prog: str, args: list[str] | None = None, **options) -> None:
+    """rclpy.init for a process of ours, with camo's DDS settings. Parameters files are checked
+    first and what rcl refuses is said in one line (rcl's text without its source locations):
+    `prog: error: ...` and exit code 2, as for any bad command line."""
+    use_camo_dds_settings()
+    try:
+        check_ros_args(sys.argv if args is None else args)
+        try:
+            rclpy.init(args=args, **options)
+        except _rclpy.RCLError as exc:
+            text = re.sub(r", at /\S+:\d+", "", str(exc)).removeprefix(
+                "failed to initialize rcl: "
+            )
+            raise UsageError(f"ROS arguments refused: {' '.join(text.split())}") from None
+    except UsageError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        raise SystemExit(EXIT_USAGE) from None
 
 
 RUN_ID = re.compile(r"^[a-z][a-z0-9_]{0,39}$")

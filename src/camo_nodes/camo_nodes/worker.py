@@ -30,7 +30,7 @@ from .topics import (
     RunTopics,
     check_run_id,
     run_ended,
-    use_camo_dds_settings,
+    start_ros,
     wait_for_run,
     wait_for_setup,
 )
@@ -91,8 +91,7 @@ def main(argv: list[str] | None = None) -> int:
     except CamoError as exc:
         print(f"camo worker: error: {exc}", file=sys.stderr)
         return 2
-    use_camo_dds_settings()
-    rclpy.init(args=ros_args, signal_handler_options=SignalHandlerOptions.NO)
+    start_ros("camo worker", ros_args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         launched = args.setup is not None
         if launched:

@@ -27,7 +27,7 @@ from camo_nodes.topics import (
     RunTopics,
     image_to_msg,
     run_from_parameter,
-    use_camo_dds_settings,
+    start_ros,
 )
 
 
@@ -84,8 +84,7 @@ def main(args=None) -> int:
         parameters = {"image": "", "pattern": "forest", "run_id": ""}
         print(node_help("projector_node", about, parameters))
         return 0
-    use_camo_dds_settings()
-    rclpy.init(args=args)
+    start_ros("projector_node", args)
     node = None
     try:
         reader = Node("projector_run", **LEAN_NODE)

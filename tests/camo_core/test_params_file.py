@@ -1,0 +1,140 @@
+"""Parameters files (--params-file): the usual mistakes named in one line, good files let through,
+and anything at all fed to the reader (and then to rcl) ends in a one-line error or a start."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+import yaml
+from hypothesis import event, given
+from hypothesis import strategies as st
+
+from camo_core.params_file import ParamsFileError, check_params_file, check_ros_args
+
+GOOD = """\
+/**:
+  ros__parameters:
+    rows: 8
+    cols: 8
+robot_parameters:
+  ros__parameters:
+    row: 2
+    profile: desert
+    rho: [0.1, 0.2]
+    nested:
+      deeper: true
+"""
+
+
+def write(tmp_path, text: str | bytes):
+    path = tmp_path / "params.yaml"
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    return path
+
+
+def test_a_good_file_and_an_empty_one_pass(tmp_path):
+    check_params_file(write(tmp_path, GOOD))
+    check_params_file(write(tmp_path, ""))
+
+
+@pytest.mark.parametrize(
+    "text, said",
+    [
+        ("robot: [1,\n", "is not YAML (line 2)"),
+        ("ros__parameters:\n  rows: 8\n", "must be under a node name"),
+        ("robot:\n  rows: 8\n", "robot/rows is a value outside ros__parameters"),
+        ("robot:\n  ros__parameters: 8\n", "must map names to values"),
+        ("robot:\n  ros__parameters:\n    rho: [1, 0.5]\n", "rho mixes kinds of values"),
+        ("robot:\n  ros__parameters:\n    rho: [[1]]\n", "rho is a list of lists"),
+        ("- robot\n", "a parameters file maps NODE"),
+    ],
+)
+def test_the_usual_mistakes_are_named(tmp_path, text, said):
+    with pytest.raises(ParamsFileError, match=re.escape(said)):
+        check_params_file(write(tmp_path, text))
+
+
+def test_a_missing_or_binary_file_is_named(tmp_path):
+    with pytest.raises(ParamsFileError, match="cannot read parameters file"):
+        check_params_file(tmp_path / "nope.yaml")
+    with pytest.raises(ParamsFileError, match="UTF-8"):
+        check_params_file(write(tmp_path, bytes(range(256))))
+
+
+def test_every_params_file_of_a_command_line_is_checked(tmp_path):
+    good = write(tmp_path, GOOD)
+    check_ros_args(["x", "--ros-args", "--params-file", str(good), "-p", "a:=1"])
+    check_ros_args(["--params-file", "not-ros-args.yaml"])  # before --ros-args: not ROS's
+    with pytest.raises(ParamsFileError, match="cannot read"):
+        check_ros_args(["--ros-args", "--params-file", str(good), "--params-file", "gone.yaml"])
+    with pytest.raises(ParamsFileError, match="needs a FILE"):
+        check_ros_args(["--ros-args", "--params-file"])
+
+
+# ---- fuzzed ------------------------------------------------------------------------------
+
+keys = st.sampled_from(["ros__parameters", "robot", "/**", "ns", "rows", "rho", "1", ""])
+scalars = st.one_of(
+    st.none(), st.booleans(), st.integers(), st.floats(), st.text(max_size=8), st.dates()
+)
+values = st.recursive(
+    scalars,
+    lambda inner: st.one_of(st.lists(inner, max_size=3), st.dictionaries(keys, inner, max_size=3)),
+    max_leaves=12,
+)
+
+
+def spliced(parts: tuple[str, bytes, float]) -> bytes:
+    text, garbage, where = parts
+    at = int(where * len(text))
+    return text.encode()[:at] + garbage + text.encode()[at:]
+
+
+def texts():
+    """Parameters-file-shaped YAML, as text, sometimes cut or with bytes of garbage."""
+    trees = st.one_of(
+        st.dictionaries(keys, values, max_size=3),
+        st.dictionaries(keys, values, max_size=4).map(lambda p: {"robot": {"ros__parameters": p}}),
+    )
+    shaped = trees.map(lambda tree: yaml.safe_dump(tree, allow_unicode=True))
+    return st.one_of(
+        shaped,
+        st.tuples(shaped, st.floats(0, 1)).map(lambda t: t[0][: int(t[1] * len(t[0]))]),
+        st.tuples(shaped, st.binary(max_size=6), st.floats(0, 1)).map(
+            lambda t: (
+                t[0].encode()[: int(t[2] * len(t[0]))]
+                + t[1]
+                + t[0].encode()[int(t[2] * len(t[0])) :]
+            )
+        ),
+        st.text(max_size=40),
+    )
+
+
+@given(text=texts())
+def test_anything_in_a_params_file_ends_in_one_line_or_a_start(tmp_path_factory, capsys, text):
+    """Whatever the reader lets through, rcl accepts, or start_ros says why not in one line
+    and exits 2: never a traceback."""
+    import rclpy
+
+    from camo_nodes.topics import start_ros
+
+    path = write(tmp_path_factory.mktemp("params"), text)
+    try:
+        check_params_file(path)
+    except ParamsFileError as exc:
+        assert "\n" not in str(exc)
+        event("refused by the reader")
+        return
+    try:
+        start_ros("robot_node", ["robot_node", "--ros-args", "--params-file", str(path)])
+    except SystemExit as exc:
+        event("refused by rcl")
+        assert exc.code == 2
+        said = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+        ours = [line for line in said if line.startswith("robot_node: error: ")]
+        assert len(ours) == 1 and "Traceback" not in "".join(said), said
+    else:
+        event("started")
+        rclpy.shutdown()
