@@ -1,5 +1,6 @@
 """`camo run`: robot nodes in several processes agree with the reference simulator, survive
-killed robots and Ctrl-C, switch backgrounds, and refuse bad options in one line."""
+killed robots and Ctrl-C, leave nothing behind a killed launcher, switch backgrounds, and refuse
+bad options in one line."""
 
 import json
 import os
@@ -8,7 +9,7 @@ import sys
 import time
 
 import pytest
-from support import ROOT, camo_run, domain, ros_context, run_camo, wait_for_line
+from support import ROOT, bag_tool, camo_run, domain, ros_context, run_camo, wait_for_line
 
 
 def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:
@@ -378,3 +379,52 @@ def test_a_worker_with_no_run_to_join_says_so_in_one_line():
     )
     assert out.returncode == 2 and "no run found in 2 s" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
+
+
+def children_of(pid: int) -> list[int]:
+    """The processes whose parent is `pid` (from /proc)."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                stat = open(f"/proc/{entry}/stat").read()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                found.append(int(entry))
+    return found
+
+
+def running(pid: int) -> bool:
+    try:
+        return "zombie" not in open(f"/proc/{pid}/status").read().lower()
+    except OSError:
+        return False
+
+
+def test_nothing_the_launcher_started_outlives_its_sigkill(tmp_path):
+    """Workers, a robot of its own process, the projector and the recorder all exit within
+    10 s of the launcher's SIGKILL, and the bag they leave is readable and named incomplete."""
+    out_dir = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.launcher", "--pattern", "forest", "--procs", "2"]
+        + ["--own-process", "2,3", "--consensus-steps", "5000", "--domain-id", str(domain())]
+        + ["--record", str(tmp_path / "bag"), "--out", str(out_dir)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    wait_for_line(proc, "consensus 64")
+    started = children_of(proc.pid)
+    # two workers, the robot of its own, the projector and the recorder
+    assert len(started) == 5, started
+    proc.kill()
+    proc.communicate(timeout=30)
+    deadline = time.monotonic() + 10.0
+    while any(running(pid) for pid in started) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not [pid for pid in started if running(pid)]
+    info = bag_tool("cli", "info", str(tmp_path / "bag"))
+    assert info.returncode == 0, info.stderr
+    assert "INCOMPLETE" in info.stdout

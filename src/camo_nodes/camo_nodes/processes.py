@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ctypes
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -22,12 +23,19 @@ from .launch_config import RunConfig, worker_groups
 PR_SET_PDEATHSIG = 1
 
 
-def _die_with_parent() -> None:
-    """In the child, before exec: SIGTERM when the parent exits (Linux prctl)."""
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
-    except (OSError, AttributeError):
-        pass
+def _dying_with(parent: int) -> Callable[[], None]:
+    """In the child, before exec: SIGTERM when the launcher exits, however it dies (SIGKILL,
+    the OOM killer), so that no robot of a dead run lingers in the domain (Linux prctl)."""
+
+    def die_with_parent() -> None:
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+        except (OSError, AttributeError):
+            return
+        if os.getppid() != parent:  # it died between fork and prctl: nobody will signal
+            os._exit(1)
+
+    return die_with_parent
 
 
 def robot_parameters(config: RunConfig, robot: int) -> list[str]:
@@ -68,7 +76,7 @@ class ProcessGroup:
     def _start(self, module: str, *args: str) -> subprocess.Popen:
         command = [sys.executable, "-m", module, *args]
         proc = subprocess.Popen(
-            command, env=self.env, start_new_session=True, preexec_fn=_die_with_parent
+            command, env=self.env, start_new_session=True, preexec_fn=_dying_with(os.getpid())
         )
         self.procs.append(proc)
         return proc
