@@ -4,12 +4,22 @@ bad options in one line."""
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
 
 import pytest
-from support import ROOT, bag_tool, camo_run, domain, ros_context, run_camo, wait_for_line
+from support import (
+    ROOT,
+    assert_like_sim,
+    bag_tool,
+    camo_run,
+    domain,
+    ros_context,
+    run_camo,
+    wait_for_line,
+)
 
 
 def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:
@@ -428,3 +438,33 @@ def test_nothing_the_launcher_started_outlives_its_sigkill(tmp_path):
     info = bag_tool("cli", "info", str(tmp_path / "bag"))
     assert info.returncode == 0, info.stderr
     assert "INCOMPLETE" in info.stdout
+
+
+def test_a_robot_stopped_for_seconds_is_waited_for_not_marked_dead(tmp_path):
+    """SIGSTOP a robot's process for 5 s mid-consensus, then SIGCONT: its neighbours wait (their
+    deadline is longer), nobody reports it silent, and the run equals the simulator."""
+    options = ["--pattern", "forest", "--seed", "3", "--consensus-steps", "3000"]
+    out_dir = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.launcher", *options, "--procs", "1"]
+        + ["--own-process", "4,4", "--step-timeout", "20", "--domain-id", str(domain())]
+        + ["--out", str(out_dir)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    wait_for_line(proc, "consensus 64")
+    processes = json.loads((out_dir / "processes.json").read_text())
+    (slow,) = [int(pid) for pid, cells in processes.items() if cells == [36]]
+    os.kill(slow, signal.SIGSTOP)
+    time.sleep(5.0)
+    os.kill(slow, signal.SIGCONT)
+    _, err = proc.communicate(timeout=240)
+    assert proc.returncode == 0, err[-2000:]
+    assert "dead" not in err and "deadlines passed" not in err
+    sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    ran = assert_like_sim(out_dir, tmp_path / "sim")
+    assert "dead" not in ran
+    assert ran["elapsed_s"] > 5.0  # the swarm did wait for it
