@@ -71,3 +71,11 @@ def emulator(tmp_path):
     yield make
     for em in made:
         em.stop()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """Tests kill robots, workers and launchers: remove the shared-memory files Fast DDS leaves
+    of processes killed (those whose lock nobody holds, as `fastdds shm clean` does)."""
+    from camo_nodes.shm import remove_stale
+
+    remove_stale()

@@ -1,0 +1,185 @@
+"""`./camo bench soak --runs N`: N small runs one after another in one domain, and what they leave.
+
+After each run it looks for what a run must not leave behind: camo processes
+still running, Fast DDS shared-memory files of dead processes (/dev/shm), and a
+result that differs from the first run's (same parameters, same seed: a
+leftover in the domain would show here). Over the runs it compares the last
+tenth with the first: the peak memory of a run's processes, the machine's available
+memory, and launch-to-exit time. Exit code 1 if anything leaked.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from .shm import stale_files
+
+MODULES = ("camo_nodes.", "camo_projector.", "camo_bag.", "camo_droplet.")
+RESULT_KEYS = ("pattern", "votes", "mean_p", "final")
+
+
+def camo_processes(exclude: set[int]) -> dict[int, str]:
+    """Running camo processes (python -m camo_...), but those in `exclude`: pid -> command."""
+    found = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit() or int(entry) in exclude:
+            continue
+        try:
+            argv = Path(f"/proc/{entry}/cmdline").read_bytes().split(b"\0")
+            status = Path(f"/proc/{entry}/status").read_text()
+        except OSError:
+            continue
+        words = [a.decode(errors="replace") for a in argv if a]
+        if "State:\tZ" in status:
+            continue
+        if any(os.path.basename(w).startswith(MODULES) for w in words[1:3]):  # -m camo_...
+            found[int(entry)] = " ".join(words[:4])
+    return found
+
+
+def available_mib() -> float:
+    for line in Path("/proc/meminfo").read_text().splitlines():
+        if line.startswith("MemAvailable:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def one_run(index: int, args: argparse.Namespace, domain: int) -> dict:
+    """One `./camo run`: its exit code, launch-to-exit time, and the peak RSS of its largest
+    process (wait4 reports the most of the launcher and the processes it waited for)."""
+    out = args.out / f"run_{index:03d}"
+    out.mkdir(parents=True, exist_ok=True)
+    command = [sys.executable, "-m", "camo_nodes.launcher", "--rows", str(args.side)]
+    command += ["--cols", str(args.side), "--procs", str(args.procs), "--seed", "1"]
+    command += ["--consensus-steps", str(args.steps), "--domain-id", str(domain)]
+    command += ["--out", str(out / "result")]
+    started = time.monotonic()
+    with open(out / "stderr.txt", "w") as errors:
+        proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=errors)
+        _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    summary = out / "result" / "summary.json"
+    result = None
+    if summary.exists():
+        data = json.loads(summary.read_text())
+        result = {key: data.get(key) for key in RESULT_KEYS}
+    return {
+        "exit": proc.returncode,
+        "wall_s": time.monotonic() - started,
+        "peak_mib": usage.ru_maxrss / 1024,
+        "result": result,
+    }
+
+
+def tenth(values: list[float], last: bool) -> float:
+    k = max(1, len(values) // 10)
+    return statistics.median(values[-k:] if last else values[:k])
+
+
+def soak(args: argparse.Namespace) -> dict:
+    before = set(camo_processes(exclude=set())) | {os.getpid()}
+    stale_before = {p.name for p in stale_files()}
+    domain = 150 + os.getpid() % 30
+    available = [available_mib()]
+    runs, leaked, stale_new, differing = [], {}, set(), []
+    for index in range(args.runs):
+        run = one_run(index, args, domain)
+        time.sleep(args.settle)
+        for pid, command in camo_processes(exclude=before).items():
+            leaked[pid] = command
+            try:
+                os.kill(pid, signal.SIGKILL)  # so that the next run does not meet it
+            except OSError:
+                pass
+        stale_new |= {p.name for p in stale_files()} - stale_before
+        if runs and run["result"] != runs[0]["result"]:
+            differing.append(index)
+        runs.append(run)
+        available.append(available_mib())
+        print(
+            f"soak {index + 1}/{args.runs}: exit {run['exit']}, {run['wall_s']:.1f} s, "
+            f"peak {run['peak_mib']:.0f} MiB; leaked processes {len(leaked)}, "
+            f"stale shm files {len(stale_new)}",
+            file=sys.stderr,
+        )
+    walls = [r["wall_s"] for r in runs]
+    peaks = [r["peak_mib"] for r in runs]
+    return {
+        "runs": args.runs,
+        "robots": f"{args.side}x{args.side}",
+        "procs": args.procs,
+        "failed_runs": [k for k, r in enumerate(runs) if r["exit"] != 0],
+        "results_differing_from_the_first": differing,
+        "leaked_processes": sorted(leaked.values()),
+        "stale_shm_files": sorted(stale_new),
+        "peak_mib_first_last": [tenth(peaks, False), tenth(peaks, True)],
+        "peak_ratio": tenth(peaks, True) / tenth(peaks, False),
+        "wall_s_first_last": [tenth(walls, False), tenth(walls, True)],
+        "wall_ratio": tenth(walls, True) / tenth(walls, False),
+        "available_mib_change": available[-1] - available[0],
+    }
+
+
+def format_report(report: dict) -> str:
+    first, last = report["peak_mib_first_last"]
+    wall_first, wall_last = report["wall_s_first_last"]
+    return "\n".join(
+        [
+            f"{report['runs']} runs of {report['robots']} robots in {report['procs']} processes",
+            f"  failed runs:                    {len(report['failed_runs'])}",
+            f"  results unlike the first run's: {len(report['results_differing_from_the_first'])}",
+            f"  leaked processes:               {len(report['leaked_processes'])}",
+            f"  stale shared-memory files:      {len(report['stale_shm_files'])}",
+            f"  peak memory of a process, first/last tenth: {first:.0f} / {last:.0f} MiB "
+            f"(ratio {report['peak_ratio']:.2f})",
+            f"  launch to exit, first/last tenth:           {wall_first:.1f} / {wall_last:.1f} s "
+            f"(ratio {report['wall_ratio']:.2f})",
+            f"  machine's available memory change:      {report['available_mib_change']:+.0f} MiB",
+        ]
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="camo bench soak", description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=50, help="consecutive runs (default 50)")
+    parser.add_argument("--side", type=int, default=4, help="grid side of each run (default 4)")
+    parser.add_argument("--procs", type=int, default=2, help="worker processes (default 2)")
+    parser.add_argument("--steps", type=int, default=200, help="consensus steps (default 200)")
+    parser.add_argument(
+        "--settle", type=float, default=0.5, help="seconds between a run and its check"
+    )
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument(
+        "--out", type=Path, default=Path("results") / time.strftime("soak-%Y%m%d-%H%M%S")
+    )
+    args = parser.parse_args(argv)
+    if not (1 <= args.runs <= 10_000 and 1 <= args.side <= 64 and 1 <= args.procs <= 64):
+        parser.error("--runs must be in 1..10000, --side in 1..64 and --procs in 1..64")
+    if not (10 <= args.steps <= 100_000 and 0 <= args.settle <= 60):
+        parser.error("--steps must be in 10..100000 and --settle in 0..60")
+    try:
+        report = soak(args)
+    except KeyboardInterrupt:
+        print("camo bench soak: interrupted", file=sys.stderr)
+        return 130
+    (args.out / "soak.json").write_text(json.dumps(report, indent=1))
+    print(json.dumps(report) if args.json else format_report(report))
+    clean = not (
+        report["leaked_processes"]
+        or report["stale_shm_files"]
+        or report["failed_runs"]
+        or report["results_differing_from_the_first"]
+    )
+    return 0 if clean else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,70 @@
+"""The soak benchmark: consecutive runs leave nothing behind, and what would be left is seen."""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import subprocess
+import sys
+import time
+
+from support import ROOT
+
+from camo_nodes.shm import remove_stale, stale_files
+from camo_nodes.soak import camo_processes
+
+
+def test_consecutive_runs_leave_no_process_no_shared_memory_and_the_same_result(tmp_path):
+    out = subprocess.run(
+        [sys.executable, "-m", "camo_nodes.soak", "--runs", "3", "--side", "3", "--json"]
+        + ["--steps", "100", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    report = json.loads(out.stdout)
+    assert report["runs"] == 3 and report["failed_runs"] == []
+    assert report["leaked_processes"] == [] and report["stale_shm_files"] == []
+    assert report["results_differing_from_the_first"] == []
+    assert report["peak_mib_first_last"][0] > 10
+    assert "soak 3/3" in out.stderr
+    assert json.loads((tmp_path / "soak.json").read_text()) == report
+
+
+def test_a_camo_process_left_running_is_found(tmp_path):
+    script = tmp_path / "camo_nodes.stray.py"
+    script.write_text("import time\ntime.sleep(60)\n")
+    stray = subprocess.Popen([sys.executable, str(script)])
+    try:
+        deadline = time.monotonic() + 10
+        while stray.pid not in camo_processes(exclude=set()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert stray.pid in camo_processes(exclude=set())
+        assert stray.pid not in camo_processes(exclude={stray.pid})
+    finally:
+        stray.kill()
+        stray.wait()
+    assert stray.pid not in camo_processes(exclude=set())
+
+
+def test_shared_memory_of_a_dead_owner_is_stale_and_of_a_live_one_is_not(tmp_path):
+    for name in ("fastrtps_dead", "fastrtps_dead_el", "fastrtps_live", "fastrtps_live_el"):
+        (tmp_path / name).write_bytes(b"")
+    (tmp_path / "sem.fastrtps_dead_mutex").write_bytes(b"")
+    (tmp_path / "unrelated").write_bytes(b"")
+    holder = os.open(tmp_path / "fastrtps_live_el", os.O_RDONLY)
+    fcntl.flock(holder, fcntl.LOCK_EX)  # as a live Fast DDS process holds its lock file
+    try:
+        stale = sorted(p.name for p in stale_files(tmp_path))
+        assert stale == ["fastrtps_dead", "fastrtps_dead_el", "sem.fastrtps_dead_mutex"]
+        assert remove_stale(tmp_path) == 3
+    finally:
+        os.close(holder)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "fastrtps_live",
+        "fastrtps_live_el",
+        "unrelated",
+    ]
