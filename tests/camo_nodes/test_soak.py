@@ -28,6 +28,7 @@ def test_consecutive_runs_leave_no_process_no_shared_memory_and_the_same_result(
     report = json.loads(out.stdout)
     assert report["runs"] == 3 and report["failed_runs"] == []
     assert report["leaked_processes"] == [] and report["stale_shm_files"] == []
+    assert report["killed_at_stop"] == 0
     assert report["results_differing_from_the_first"] == []
     assert report["peak_mib_first_last"][0] > 10
     assert "soak 3/3" in out.stderr
@@ -37,13 +38,17 @@ def test_consecutive_runs_leave_no_process_no_shared_memory_and_the_same_result(
 def test_a_camo_process_left_running_is_found(tmp_path):
     script = tmp_path / "camo_nodes.stray.py"
     script.write_text("import time\ntime.sleep(60)\n")
-    stray = subprocess.Popen([sys.executable, str(script)])
+    stray = subprocess.Popen(
+        [sys.executable, str(script)], env={**os.environ, "ROS_DOMAIN_ID": "7"}
+    )
     try:
         deadline = time.monotonic() + 10
         while stray.pid not in camo_processes(exclude=set()) and time.monotonic() < deadline:
             time.sleep(0.05)
         assert stray.pid in camo_processes(exclude=set())
         assert stray.pid not in camo_processes(exclude={stray.pid})
+        assert stray.pid in camo_processes(exclude=set(), domain=7)
+        assert stray.pid not in camo_processes(exclude=set(), domain=8)
     finally:
         stray.kill()
         stray.wait()

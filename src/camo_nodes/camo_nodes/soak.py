@@ -26,8 +26,10 @@ MODULES = ("camo_nodes.", "camo_projector.", "camo_bag.", "camo_droplet.")
 RESULT_KEYS = ("pattern", "votes", "mean_p", "final")
 
 
-def camo_processes(exclude: set[int]) -> dict[int, str]:
-    """Running camo processes (python -m camo_...), but those in `exclude`: pid -> command."""
+def camo_processes(exclude: set[int], domain: int | None = None) -> dict[int, str]:
+    """Running camo processes (python -m camo_...), but those in `exclude`, and with `domain`
+    only those in that ROS domain (camo's other runs on this machine are not the soak's):
+    pid -> command."""
     found = {}
     for entry in os.listdir("/proc"):
         if not entry.isdigit() or int(entry) in exclude:
@@ -35,7 +37,10 @@ def camo_processes(exclude: set[int]) -> dict[int, str]:
         try:
             argv = Path(f"/proc/{entry}/cmdline").read_bytes().split(b"\0")
             status = Path(f"/proc/{entry}/status").read_text()
+            environ = Path(f"/proc/{entry}/environ").read_bytes().split(b"\0")
         except OSError:
+            continue
+        if domain is not None and f"ROS_DOMAIN_ID={domain}".encode() not in environ:
             continue
         words = [a.decode(errors="replace") for a in argv if a]
         if "State:\tZ" in status:
@@ -63,7 +68,8 @@ def one_run(index: int, args: argparse.Namespace, domain: int) -> dict:
     command += ["--out", str(out / "result")]
     started = time.monotonic()
     with open(out / "stderr.txt", "w") as errors:
-        proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=errors)
+        env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}  # marks the run's processes
+        proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=errors)
         _, status, usage = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
     summary = out / "result" / "summary.json"
@@ -71,8 +77,10 @@ def one_run(index: int, args: argparse.Namespace, domain: int) -> dict:
     if summary.exists():
         data = json.loads(summary.read_text())
         result = {key: data.get(key) for key in RESULT_KEYS}
+    said = (out / "stderr.txt").read_text()
     return {
         "exit": proc.returncode,
+        "killed_at_stop": said.count("did not stop within"),
         "wall_s": time.monotonic() - started,
         "peak_mib": usage.ru_maxrss / 1024,
         "result": result,
@@ -85,7 +93,7 @@ def tenth(values: list[float], last: bool) -> float:
 
 
 def soak(args: argparse.Namespace) -> dict:
-    before = set(camo_processes(exclude=set())) | {os.getpid()}
+    before = {os.getpid()}
     stale_before = {p.name for p in stale_files()}
     domain = 150 + os.getpid() % 30
     available = [available_mib()]
@@ -93,7 +101,7 @@ def soak(args: argparse.Namespace) -> dict:
     for index in range(args.runs):
         run = one_run(index, args, domain)
         time.sleep(args.settle)
-        for pid, command in camo_processes(exclude=before).items():
+        for pid, command in camo_processes(exclude=before, domain=domain).items():
             leaked[pid] = command
             try:
                 os.kill(pid, signal.SIGKILL)  # so that the next run does not meet it
@@ -119,6 +127,7 @@ def soak(args: argparse.Namespace) -> dict:
         "failed_runs": [k for k, r in enumerate(runs) if r["exit"] != 0],
         "results_differing_from_the_first": differing,
         "leaked_processes": sorted(leaked.values()),
+        "killed_at_stop": sum(r["killed_at_stop"] for r in runs),
         "stale_shm_files": sorted(stale_new),
         "peak_mib_first_last": [tenth(peaks, False), tenth(peaks, True)],
         "peak_ratio": tenth(peaks, True) / tenth(peaks, False),
@@ -137,6 +146,7 @@ def format_report(report: dict) -> str:
             f"  failed runs:                    {len(report['failed_runs'])}",
             f"  results unlike the first run's: {len(report['results_differing_from_the_first'])}",
             f"  leaked processes:               {len(report['leaked_processes'])}",
+            f"  processes killed at the end:    {report['killed_at_stop']}",
             f"  stale shared-memory files:      {len(report['stale_shm_files'])}",
             f"  peak memory of a process, first/last tenth: {first:.0f} / {last:.0f} MiB "
             f"(ratio {report['peak_ratio']:.2f})",
@@ -177,6 +187,7 @@ def main(argv: list[str] | None = None) -> int:
         or report["stale_shm_files"]
         or report["failed_runs"]
         or report["results_differing_from_the_first"]
+        or report["killed_at_stop"]
     )
     return 0 if clean else 1
 
