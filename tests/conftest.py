@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import subprocess
 
 import pytest
 from hypothesis import HealthCheck, settings
-from support import BAG_OPTIONS, camo_run
+from support import BAG_OPTIONS, FOXGLOVE_CLIENT, camo_run
 
 # Fuzz tests: the same inputs on every run (a failure in CI is one a developer can replay), no
 # example database written into the clone, and a bounded number of examples each.
@@ -71,6 +73,25 @@ def emulator(tmp_path):
     yield make
     for em in made:
         em.stop()
+
+
+@pytest.fixture(scope="session")
+def foxglove_client():
+    """node and the client's npm packages, exactly as package-lock.json pins them."""
+    node, npm = shutil.which("node"), shutil.which("npm")
+    assert node and npm, "the Foxglove client test needs Node 20 and npm"
+    marker = FOXGLOVE_CLIENT / "node_modules" / ".package-lock.json"
+    lock = FOXGLOVE_CLIENT / "package-lock.json"
+    if not marker.exists() or marker.stat().st_mtime < lock.stat().st_mtime:
+        done = subprocess.run(
+            [npm, "ci", "--no-audit", "--no-fund"],
+            cwd=FOXGLOVE_CLIENT,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert done.returncode == 0, done.stderr[-2000:]
+    return node
 
 
 def pytest_sessionfinish(session, exitstatus):

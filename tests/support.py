@@ -21,6 +21,7 @@ from camo_core.robot_io import Message
 from camo_core.sensing import Reading
 
 ROOT = Path(__file__).resolve().parents[1]
+FOXGLOVE_CLIENT = ROOT / "tests" / "foxglove_client"  # Foxglove's libraries, pinned (npm ci)
 
 
 def run_camo(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:

@@ -22,6 +22,7 @@ setup(
             "camo_replay = camo_bag.replay:main",
             "camo_render = camo_bag.render:main",
             "camo_bag = camo_bag.cli:main",
+            "camo_view = camo_bag.view_node:main",
         ],
     },
 )

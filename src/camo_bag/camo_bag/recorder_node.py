@@ -30,7 +30,7 @@ import rclpy
 from rclpy.duration import Duration
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
@@ -54,9 +54,9 @@ from camo_nodes.topics import (
 
 from . import msgdefs, qos_yaml
 from .container import BagWriter, TopicInfo
+from .graph_topics import new_topics, taking_qos
 from .ledger import Ledger
 
-SKIPPED = {"/rosout", "/parameter_events"}
 RESULT_GRACE = 10.0  # s a recorder waits, after the run's result, for what the result names
 ROBOT_KINDS = {
     "camo_msgs/msg/Hello": "hello",
@@ -114,17 +114,8 @@ class RecorderNode(Node):
         return 0 if info is None else info.count
 
     def discover(self) -> None:
-        for name, types in self.get_topic_names_and_types():
-            if name in self._recorded or name in SKIPPED or not self._wants(name):
-                continue
-            if len(types) != 1:
-                self.get_logger().warning(f"{name} carries several types {types}; not recorded")
-                self._recorded[name] = None
-                continue
-            publishers = self.get_publishers_info_by_topic(name)
-            if not publishers:
-                continue  # only subscribers so far: wait for a publisher's QoS
-            self._subscribe(name, msgdefs.full_name(types[0]), [p.qos_profile for p in publishers])
+        for name, type_name, offered in new_topics(self, self._recorded, self._wants):
+            self._subscribe(name, type_name, offered)
 
     def _wants(self, name: str) -> bool:
         if self.wanted is not None:
@@ -151,15 +142,7 @@ class RecorderNode(Node):
             type_name in ROBOT_KINDS or name in (run.status, run.params, run.result)
         ):
             self._decoders[name] = cls
-        # As rosbag2 adapts: reliable and transient-local only when every publisher offers it.
-        reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
-        latched = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
-        qos = QoSProfile(
-            history=HistoryPolicy.KEEP_ALL,
-            depth=1,
-            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
-        )
+        qos = taking_qos(offered)
         self._recorded[name] = self.create_subscription(
             cls, name, lambda data, topic=name: self._on_message(topic, data), qos, raw=True
         )

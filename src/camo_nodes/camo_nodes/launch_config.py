@@ -106,6 +106,16 @@ def build_parser() -> Parser:
         help="record every topic of the run into this MCAP bag folder (as rosbag2 does)",
     )
     add(
+        "--foxglove",
+        metavar="PORT",
+        type=int,
+        nargs="?",
+        const=8765,
+        default=None,
+        help="serve the run live to Foxglove on ws://127.0.0.1:PORT (default 8765), as "
+        "./camo view does",
+    )
+    add(
         "--no-projector",
         action="store_true",
         help="start no projector: the background comes from elsewhere, e.g. "
@@ -132,6 +142,7 @@ class RunConfig:
     bridges: dict[int, str] = field(default_factory=dict)  # robot -> serial port
     calibration: Path | None = None
     record: Path | None = None
+    foxglove: int | None = None  # the live view's port
     digests: list[str] = field(default_factory=list)  # of the backgrounds our projector shows
 
     @property
@@ -149,6 +160,7 @@ class RunConfig:
             "remote": [list(r) for r in self.remote],
             "tiles": [list(t) for t in self.tiles()],
             "background_digests": self.digests,
+            "bridged": sorted(self.bridges),
         }
 
     def tiles(self) -> list[tuple[int, int]]:
@@ -204,6 +216,8 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
     if args.calibration:
         calibration = Path(args.calibration).resolve()
         Calibration.from_yaml(calibration)  # a bad file fails here, in one line
+    if args.foxglove is not None and not 0 <= args.foxglove <= 65535:
+        raise UsageError(f"--foxglove PORT must be in 0..65535 (got {args.foxglove})")
     record = Path(args.record) if args.record else None
     if record is not None:
         problem = new_folder_problem(record, "the bag")
@@ -238,6 +252,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         bridges=bridges,
         calibration=calibration,
         record=record,
+        foxglove=args.foxglove,
         topics=topics,
         remote=remote,
         named=args.run_id is not None,

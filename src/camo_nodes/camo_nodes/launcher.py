@@ -237,6 +237,7 @@ class Session:
             for robot in group.lost_cells():
                 monitor.lost[robot] = True
         print(f"camo run: {monitor.progress_line(index)}", file=sys.stderr)
+        monitor.publish_views()  # the round's final scene, however short the round was
         return all_voted or time.monotonic()
 
     def close(self) -> None:
@@ -333,6 +334,8 @@ def run(config: RunConfig) -> int:
             # It starts with the swarm: the robots' topics keep their history for it.
             group.start_recorder(str(config.record), config.topics.run)
             print(f"camo run: recording every topic to {config.record}/", file=sys.stderr)
+        if config.foxglove is not None:
+            group.start_view(config.topics.run, config.foxglove)  # it says where it serves
         print(
             f"camo run: {config.topics.run}: topics under /{config.topics.run}/", file=sys.stderr
         )
@@ -370,6 +373,8 @@ def run(config: RunConfig) -> int:
                 session.ran(written, summary)
         session.publish_result(ended)
         group.stop()  # the recorder last: it closes the bag on SIGINT
+        for module in group.killed:
+            print(f"camo run: warning: {module} did not stop within 5 s; killed", file=sys.stderr)
         session.close()
         rclpy.try_shutdown()
     return code

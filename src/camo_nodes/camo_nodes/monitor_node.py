@@ -22,11 +22,13 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
+from visualization_msgs.msg import MarkerArray
 
 from camo_core.exceptions import CamoError
 from camo_core.options import Parser, add_network_options, network_env, out_dir
@@ -40,6 +42,7 @@ from camo_core.shutdown import StopFlag
 from camo_core.validation import report_problem
 from camo_msgs.msg import Host, RobotStatus
 
+from . import scene
 from .polled import PolledTopics
 from .topics import (
     LATCHED_READER,
@@ -82,6 +85,10 @@ class MonitorNode(Node):
         self.create_timer(0.02, self.polled.poll)
         self.pattern_pub = self.create_publisher(Image, topics.pattern, 10)
         self.create_timer(0.2, self._publish_pattern)
+        self.bridged = set((setup or {}).get("bridged", []))
+        self.markers_pub = self.create_publisher(MarkerArray, topics.markers, 1)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.diagnostics, 1)
+        self.create_timer(0.5, self.publish_views)
 
     def _on_host(self, data: bytes, gid: bytes) -> None:
         if self.trusted.learn(deserialize_message(data, Host), gid):
@@ -194,6 +201,22 @@ class MonitorNode(Node):
         msg = image_to_msg(pixels.astype(np.uint8).reshape(shape), frame_id="swarm")
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pattern_pub.publish(msg)
+
+    def _latest(self) -> int:
+        return max(self.rounds, default=0)
+
+    def publish_views(self) -> None:
+        """The 3D scene and the diagnostics of the latest round, to those who listen (thousands
+        of cubes and statuses are not built for nobody)."""
+        index = self._latest()
+        stamp = self.get_clock().now().to_msg()
+        record, dead = self.rounds[index], self.dead(index)
+        if self.markers_pub.get_subscription_count():
+            self.markers_pub.publish(scene.markers(record, dead, self.bridged, stamp))
+        if self.diagnostics_pub.get_subscription_count():
+            self.diagnostics_pub.publish(
+                scene.diagnostics(record, dead, self.bridged, self.offline, stamp)
+            )
 
 
 def main(argv: list[str] | None = None) -> int:

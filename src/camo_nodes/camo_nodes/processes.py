@@ -72,6 +72,7 @@ class ProcessGroup:
         self.cells: dict[int, list[int]] = {}  # pid -> robot ids
         self.recorder: subprocess.Popen | None = None
         self._interrupted: list[subprocess.Popen] = []
+        self.killed: list[str] = []  # modules that did not stop in time (their shm is left)
 
     def _start(self, module: str, *args: str) -> subprocess.Popen:
         command = [sys.executable, "-m", module, *args]
@@ -86,6 +87,18 @@ class ProcessGroup:
             "camo_bag.recorder_node", bag, "--run-id", run, "--ros-args", "--log-level", "warn"
         )
         return self.recorder
+
+    def start_view(self, run: str, port: int) -> subprocess.Popen:
+        return self._start(
+            "camo_bag.view_node",
+            "--run-id",
+            run,
+            "--port",
+            str(port),
+            "--ros-args",
+            "--log-level",
+            "warn",
+        )
 
     def start_swarm(self, config: RunConfig) -> None:
         quiet = ("--ros-args", "--log-level", "warn")
@@ -146,3 +159,4 @@ class ProcessGroup:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
+                self.killed.append(proc.args[2])

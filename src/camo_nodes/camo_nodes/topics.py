@@ -116,6 +116,14 @@ class RunTopics:
         return f"/{self.run}/swarm/pattern"
 
     @property
+    def markers(self) -> str:
+        return f"/{self.run}/swarm/markers"
+
+    @property
+    def diagnostics(self) -> str:
+        return f"/{self.run}/diagnostics"
+
+    @property
     def recorded(self) -> str:
         """std_msgs/String, latched: what a recorder holds of the run, per round (JSON)."""
         return f"/{self.run}/swarm/recorded"
@@ -230,6 +238,7 @@ def setup_from(text: str, run: str) -> dict | None:
             and float(setup["step_timeout"]) > 0
             and float(setup["discovery_timeout"]) > 0
             and all(len(r) == 2 and all(isinstance(x, int) for x in r) for r in ranges)
+            and all(isinstance(x, int) for x in setup.get("bridged", []))
         )
     except (ValueError, KeyError, TypeError, CamoError):
         return None

@@ -1,0 +1,124 @@
+"""The swarm as ROS tools draw robots: a 3D scene (visualization_msgs) and a health report per
+robot (diagnostic_msgs), both built from what the monitor has heard.
+
+The scene is two markers in the frame `map` (RViz's default fixed frame; Foxglove's 3D panel
+follows it): a cube per robot at its grid position (column along x, row down along -y, one
+`SPACING` apart), coloured by the grey it shows (its state once it draws the pattern, its
+sensed grey before, mid-grey and faint until it reports), and a red outline around each dead
+robot and a blue one around each robot that is a real Droplet. A cube list and a line list
+keep it two markers at any swarm size.
+
+Diagnostics follow rqt_robot_monitor's and Foxglove's conventions: one DiagnosticStatus per
+robot, named `camo/robot_<row>_<col>`, OK, WARN when it let a step deadline pass, ERROR when it
+is dead (silent) or its Droplet is offline; its values say phase, step, deadlines and whether
+it is bridged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+from camo_core.protocol import PHASE_NAMES
+from camo_core.record import RoundRecord
+
+FRAME = "map"
+SPACING = 0.1  # m between robot centres (a Droplet is 4.4 cm across)
+SIZE = 0.08  # m, a robot's cube
+HEIGHT = 0.02  # m
+DEAD = ColorRGBA(r=0.9, g=0.1, b=0.1, a=1.0)
+BRIDGED = ColorRGBA(r=0.1, g=0.4, b=1.0, a=1.0)
+
+
+def position(robot: int, cols: int, z: float = 0.0) -> Point:
+    row, col = divmod(robot, cols)
+    return Point(x=col * SPACING, y=-row * SPACING, z=z)
+
+
+def shown_grey(record: RoundRecord) -> tuple[np.ndarray, np.ndarray]:
+    """Each robot's grey (0..1) and opacity: its state's colour once it has one (on = dark), its
+    sensed grey before, a faint mid-grey until it reports."""
+    sensed = np.nan_to_num(record.sensed, nan=128.0) / 255.0
+    grey = np.where(record.state == 1, 0.0, np.where(record.state == 0, 1.0, sensed))
+    alpha = np.where(np.isnan(record.sensed) & (record.state < 0), 0.3, 1.0)
+    return grey, alpha
+
+
+def _outline(robot: int, cols: int) -> list[Point]:
+    """The four edges of a robot's square, as line-list point pairs."""
+    centre = position(robot, cols, HEIGHT)
+    half = SPACING * 0.48
+    corners = [(-half, -half), (half, -half), (half, half), (-half, half)]
+    points = [Point(x=centre.x + dx, y=centre.y + dy, z=centre.z) for dx, dy in corners]
+    return [p for k in range(4) for p in (points[k], points[(k + 1) % 4])]
+
+
+def markers(record: RoundRecord, dead: np.ndarray, bridged: set[int], stamp: Time) -> MarkerArray:
+    cols = record.params.cols
+    grey, alpha = shown_grey(record)
+    cubes = Marker(ns="camo/robots", id=0, type=Marker.CUBE_LIST, action=Marker.ADD)
+    cubes.header.frame_id, cubes.header.stamp = FRAME, stamp
+    cubes.pose.orientation.w = 1.0
+    cubes.scale.x = cubes.scale.y = SIZE
+    cubes.scale.z = HEIGHT
+    cubes.points = [position(i, cols, HEIGHT / 2) for i in range(record.params.count)]
+    cubes.colors = [
+        ColorRGBA(r=float(g), g=float(g), b=float(g), a=float(a))
+        for g, a in zip(grey, alpha, strict=True)
+    ]
+    outlines = Marker(ns="camo/outlines", id=1, type=Marker.LINE_LIST, action=Marker.ADD)
+    outlines.header.frame_id, outlines.header.stamp = FRAME, stamp
+    outlines.pose.orientation.w = 1.0
+    outlines.scale.x = SPACING * 0.06  # line width
+    for robot in sorted(set(np.flatnonzero(dead)) | bridged):
+        colour = DEAD if dead[robot] else BRIDGED
+        edges = _outline(int(robot), cols)
+        outlines.points += edges
+        outlines.colors += [colour] * len(edges)
+    if not outlines.points:
+        outlines.action = Marker.DELETE  # an empty line list is not drawable
+    return MarkerArray(markers=[cubes, outlines])
+
+
+def diagnostics(
+    record: RoundRecord,
+    dead: np.ndarray,
+    bridged: set[int],
+    offline: np.ndarray,
+    stamp: Time,
+) -> DiagnosticArray:
+    cols = record.params.cols
+    array = DiagnosticArray()
+    array.header.stamp = stamp
+    for robot in range(record.params.count):
+        row, col = divmod(robot, cols)
+        deadlines = int(record.deadlines[robot])
+        if dead[robot]:
+            level, message = DiagnosticStatus.ERROR, "silent: its neighbours gave up on it"
+        elif offline[robot]:
+            level, message = DiagnosticStatus.ERROR, "its Droplet is offline"
+        elif deadlines:
+            level, message = DiagnosticStatus.WARN, f"let {deadlines} step deadlines pass"
+        elif record.finished[robot]:
+            level, message = DiagnosticStatus.OK, "done"
+        else:
+            level, message = DiagnosticStatus.OK, PHASE_NAMES[int(record.phase[robot])]
+        array.status.append(
+            DiagnosticStatus(
+                level=level,
+                name=f"camo/robot_{row}_{col}",
+                message=message,
+                hardware_id="droplet" if robot in bridged else "simulated",
+                values=[
+                    KeyValue(key="phase", value=PHASE_NAMES[int(record.phase[robot])]),
+                    KeyValue(key="step", value=str(int(record.step[robot]))),
+                    KeyValue(key="deadlines", value=str(deadlines)),
+                    KeyValue(key="bridged", value=str(robot in bridged).lower()),
+                ],
+            )
+        )
+    return array

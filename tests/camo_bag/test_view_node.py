@@ -1,0 +1,91 @@
+"""The live view: a run served to Foxglove, read by a client built from Foxglove's own libraries
+(@foxglove/ws-protocol and @foxglove/rosmsg2-serialization, installed pinned with `npm ci`)."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+
+from support import FOXGLOVE_CLIENT as CLIENT
+from support import ROOT, assert_like_sim, domain, run_camo, wait_for_line
+
+OPTIONS = ["--pattern", "forest", "--rows", "6", "--cols", "6", "--consensus-steps", "3000"]
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def test_foxglove_client_lists_subscribes_and_decodes_a_live_run(tmp_path, foxglove_client):
+    port = free_port()
+    run = subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.launcher", *OPTIONS, "--procs", "2"]
+        + ["--foxglove", str(port), "--domain-id", str(domain()), "--out", str(tmp_path / "run")],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        wait_for_line(run, f"ws://127.0.0.1:{port}")
+        wanted = ["/camo/background", "/swarm/status", "/swarm/params", "/edge/vote"]
+        client = subprocess.run(
+            [foxglove_client, "client.mjs", f"ws://127.0.0.1:{port}", "60", *wanted],
+            cwd=CLIENT,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        _, err = run.communicate(timeout=240)
+    finally:
+        run.kill()
+    assert client.returncode == 0, client.stdout[-3000:] + client.stderr[-2000:]
+    seen = json.loads(client.stdout)
+    assert seen["errors"] == []
+    channels = {c["topic"]: c for c in seen["channels"]}
+    assert all(
+        c["encoding"] == "cdr" and c["schemaEncoding"] == "ros2msg" for c in channels.values()
+    )
+    (background,) = [t for t in channels if t.endswith("/camo/background")]
+    assert channels[background]["schemaName"] == "sensor_msgs/msg/Image"
+    assert any(c["schemaName"] == "camo_msgs/msg/Vote" for c in channels.values())
+    decoded = {topic.split("/", 2)[2]: value for topic, value in seen["decoded"].items()}
+    image = decoded["camo/background"]
+    assert image["encoding"] in ("mono8", "bgr8") and image["width"] > 0
+    assert image["data"]["length"] == image["step"] * image["height"]
+    assert 0 <= decoded["swarm/status"]["sender_id"] < 36
+    assert json.loads(decoded["swarm/params"]["data"])["params"]["rows"] == 6
+    (vote,) = [v for topic, v in decoded.items() if topic.endswith("/edge/vote")]
+    assert vote["p"] == {"length": 3}
+    # Watching changed nothing: the run is the simulator's.
+    assert run.returncode == 0, err[-2000:]
+    assert "camo view: forwarded" in err
+    sim = run_camo("sim", *OPTIONS, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    assert_like_sim(tmp_path / "run", tmp_path / "sim")
+
+
+def test_a_port_in_use_is_one_line(tmp_path):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        env = {**os.environ, "ROS_DOMAIN_ID": str(domain())}
+        run = subprocess.Popen(
+            [sys.executable, "-m", "camo_nodes.launcher", *OPTIONS, "--procs", "1"]
+            + ["--foxglove", str(port), "--out", str(tmp_path / "run")],
+            cwd=ROOT,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        _, err = run.communicate(timeout=240)
+    assert run.returncode != 0
+    assert "Traceback" not in err
+    assert f"camo view: error: cannot serve Foxglove on 127.0.0.1:{port}" in err

@@ -1,0 +1,90 @@
+"""The 3D scene and diagnostics: built right from what the monitor heard, and, recorded in a bag,
+read by Foxglove's own libraries (@mcap/core, @foxglove/rosmsg2-serialization)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticStatus
+from support import BAG_COLS, BAG_ROWS, FOXGLOVE_CLIENT
+from visualization_msgs.msg import Marker
+
+from camo_core.params import CamoParams
+from camo_core.record import RoundRecord
+from camo_nodes import scene
+
+PARAMS = CamoParams(rows=2, cols=3)
+
+
+def record() -> RoundRecord:
+    rec = RoundRecord(PARAMS)
+    rec.sensed[:] = [0.0, 255.0, 51.0, np.nan, 10.0, 20.0]
+    rec.state[:] = [1, 0, -1, -1, -1, -1]
+    rec.phase[:] = [4, 4, 2, 0, 3, 3]
+    rec.finished[:2] = True
+    rec.deadlines[4] = 2
+    return rec
+
+
+def test_each_robot_is_a_cube_at_its_cell_in_the_grey_it_shows():
+    dead = np.zeros(6, bool)
+    array = scene.markers(record(), dead, set(), Time(sec=5))
+    cubes, outlines = array.markers
+    assert cubes.type == Marker.CUBE_LIST and cubes.header.frame_id == "map"
+    assert len(cubes.points) == len(cubes.colors) == 6
+    right_below = cubes.points[4]  # row 1, col 1
+    assert right_below.x > cubes.points[0].x and right_below.y < cubes.points[0].y
+    greys = [round(c.r, 3) for c in cubes.colors]
+    assert greys[:3] == [0.0, 1.0, 0.2]  # on: dark, off: light, else the sensed grey
+    assert cubes.colors[3].a < 1.0  # not reported yet: faint
+    assert outlines.action == Marker.DELETE  # nobody dead or bridged: nothing to outline
+
+
+def test_dead_and_bridged_robots_are_outlined_in_their_colours():
+    dead = np.zeros(6, bool)
+    dead[3] = True
+    outlines = scene.markers(record(), dead, {5}, Time()).markers[1]
+    assert outlines.type == Marker.LINE_LIST and outlines.action == Marker.ADD
+    assert len(outlines.points) == 16  # four edges of two squares
+    assert outlines.colors[0] == scene.DEAD and outlines.colors[-1] == scene.BRIDGED
+
+
+def test_diagnostics_say_ok_warn_or_error_per_robot():
+    dead = np.zeros(6, bool)
+    dead[3] = True
+    offline = np.zeros(6, bool)
+    offline[5] = True
+    array = scene.diagnostics(record(), dead, {5}, offline, Time())
+    levels = [s.level for s in array.status]
+    ok, warn, error = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+    assert levels == [ok, ok, ok, error, warn, error]
+    assert array.status[4].name == "camo/robot_1_1"
+    values = {v.key: v.value for v in array.status[5].values}
+    assert values == {"phase": "formation", "step": "0", "deadlines": "0", "bridged": "true"}
+    assert array.status[5].hardware_id == "droplet"
+
+
+def test_a_recorded_scene_and_diagnostics_decode_in_foxglove_libraries(recorded, foxglove_client):
+    bag, _ = recorded
+    out = subprocess.run(
+        [foxglove_client, "bag.mjs", str(bag / "bag_0.mcap"), "/swarm/markers", "/diagnostics"],
+        cwd=FOXGLOVE_CLIENT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    topics = {name.split("/", 2)[2]: seen for name, seen in json.loads(out.stdout).items()}
+    markers, health = topics["swarm/markers"], topics["diagnostics"]
+    assert markers["schema"] == "visualization_msgs/msg/MarkerArray" and markers["count"] >= 1
+    cubes = markers["last"]["markers"]["first"][0]
+    assert cubes["type"] == Marker.CUBE_LIST and cubes["points"]["length"] == BAG_ROWS * BAG_COLS
+    assert cubes["header"]["frame_id"] == "map"
+    assert health["schema"] == "diagnostic_msgs/msg/DiagnosticArray"
+    assert health["last"]["status"]["length"] == BAG_ROWS * BAG_COLS
+    first = health["last"]["status"]["first"][0]
+    assert first["name"] == "camo/robot_0_0"
+    assert first["values"]["first"][0]["key"] == "phase"
