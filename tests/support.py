@@ -97,7 +97,8 @@ class StatusListener:
         from rclpy.executors import SingleThreadedExecutor
 
         from camo_msgs.msg import RobotStatus
-        from camo_nodes.topics import RunTopics, status_listener_qos
+        from camo_nodes.monitor_node import status_listener_qos
+        from camo_nodes.topics import RunTopics
 
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)

@@ -89,3 +89,39 @@ def test_a_port_in_use_is_one_line(tmp_path):
     assert run.returncode != 0
     assert "Traceback" not in err
     assert f"camo view: error: cannot serve Foxglove on 127.0.0.1:{port}" in err
+
+
+def test_the_foxglove_layout_opens_topics_a_run_called_demo_has():
+    import re
+
+    from camo_nodes.topics import RunTopics
+
+    layout = json.loads((ROOT / "docs" / "foxglove" / "camo_layout.json").read_text())
+    run = RunTopics("demo")
+    published = {run.background, run.pattern, run.markers, run.status, run.diagnostics}
+    named = set()
+
+    def walk(value):
+        if isinstance(value, dict):
+            for key, inner in value.items():
+                walk(key)
+                walk(inner)
+        elif isinstance(value, list):
+            for inner in value:
+                walk(inner)
+        elif isinstance(value, str) and value.startswith("/demo/"):
+            named.add(re.split(r"[{.]", value)[0])  # a message path's topic
+
+    walk(layout["configById"])
+    assert named == published
+    panels = set()
+
+    def tiles(node):
+        if isinstance(node, str):
+            panels.add(node)
+        else:
+            tiles(node["first"])
+            tiles(node["second"])
+
+    tiles(layout["layout"])
+    assert panels == set(layout["configById"])

@@ -3,6 +3,7 @@ and anything at all fed to the reader (and then to rcl) ends in a one-line error
 
 from __future__ import annotations
 
+import json
 import re
 
 import pytest
@@ -138,3 +139,81 @@ def test_anything_in_a_params_file_ends_in_one_line_or_a_start(tmp_path_factory,
     else:
         event("started")
         rclpy.shutdown()
+
+
+# ---- options from a parameters file -------------------------------------------------------
+
+
+def test_a_node_takes_its_own_keys_over_the_general_ones(tmp_path):
+    from camo_core.params_file import parameters_for
+
+    path = write(
+        tmp_path,
+        "/**:\n  ros__parameters:\n    rows: 4\n    cols: 4\n"
+        "/lab/camo_sim:\n  ros__parameters:\n    rows: 6\n    nested: {a: 1}\n"
+        "camo_run:\n  ros__parameters:\n    rows: 9\n",
+    )
+    assert parameters_for(path, "camo_sim") == {"rows": 6, "cols": 4, "nested.a": 1}
+    assert parameters_for(path, "camo_run") == {"rows": 9, "cols": 4}
+    assert parameters_for(path, "other") == {"rows": 4, "cols": 4}
+
+
+def test_sim_writes_params_yaml_that_repeats_it_and_the_command_line_wins(tmp_path):
+    from support import run_camo
+
+    first = run_camo(
+        "sim",
+        "--pattern",
+        "desert",
+        "--rows",
+        "6",
+        "--cols",
+        "5",
+        "--seed",
+        "3",
+        "--rho-comm",
+        "0.1",
+        "--out",
+        str(tmp_path / "a"),
+    )
+    assert first.returncode == 0, first.stderr
+    params = tmp_path / "a" / "params.yaml"
+    again = run_camo("sim", "--params-file", str(params), "--out", str(tmp_path / "b"))
+    assert again.returncode == 0, again.stderr
+    summary = lambda run: {  # noqa: E731
+        k: v
+        for k, v in json.loads((tmp_path / run / "summary.json").read_text()).items()
+        if k != "elapsed_s"
+    }
+    assert summary("a") == summary("b")
+    assert yaml.safe_load(params.read_text()) == yaml.safe_load(
+        (tmp_path / "b" / "params.yaml").read_text()
+    )
+    over = run_camo(
+        "sim", "--params-file", str(params), "--rows", "4", "--out", str(tmp_path / "c")
+    )
+    assert over.returncode == 0, over.stderr
+    written = yaml.safe_load((tmp_path / "c" / "params.yaml").read_text())["/**"]
+    assert written["ros__parameters"]["rows"] == 4 and written["ros__parameters"]["cols"] == 5
+
+
+@pytest.mark.parametrize(
+    "text, said",
+    [
+        ("/**:\n  ros__parameters:\n    rows: eight\n", "rows must be an integer (got 'eight')"),
+        ("camo_sim:\n  ros__parameters:\n    rowz: 8\n", "camo sim has no parameter rowz"),
+        (
+            "/**:\n  ros__parameters:\n    profile: fancy\n",
+            "profile must be one of paper, droplet",
+        ),
+        ("/**:\n  ros__parameters:\n    rho_comm: [0.1]\n", "rho_comm must be a number or text"),
+    ],
+)
+def test_a_wrong_parameter_in_the_file_is_one_line(tmp_path, text, said):
+    from support import run_camo
+
+    out = run_camo(
+        "sim", "--params-file", str(write(tmp_path, text)), "--out", str(tmp_path / "x")
+    )
+    assert out.returncode == 2 and said in out.stderr, out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1

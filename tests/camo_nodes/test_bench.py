@@ -25,3 +25,12 @@ def test_bench_runs_are_longer_on_small_grids_and_reject_absurd_step_counts():
         timeout=60,
     )
     assert out.returncode == 2 and "--steps must be in 20..100000" in out.stderr
+
+
+def test_the_cost_of_a_live_view_with_no_client_is_measured_against_plain_runs(tmp_path):
+    from camo_nodes.bench import added_cost
+
+    row = added_cost(3, 1, domain(), tmp_path, 1, lambda folder: ["--foxglove", "0"])
+    assert row["robots"] == "3x3" and row["plain_s"] > 0 and row["added_s"] > 0
+    assert row["ratio"] == row["added_s"] / row["plain_s"]
+    assert (tmp_path / "added_0" / "summary.json").exists()

@@ -468,3 +468,37 @@ def test_a_robot_stopped_for_seconds_is_waited_for_not_marked_dead(tmp_path):
     ran = assert_like_sim(out_dir, tmp_path / "sim")
     assert "dead" not in ran
     assert ran["elapsed_s"] > 5.0  # the swarm did wait for it
+
+
+def test_a_runs_params_yaml_repeats_it_bit_for_bit(tmp_path):
+    import yaml
+
+    first = camo_run(
+        "--pattern",
+        "desert",
+        "--rows",
+        "4",
+        "--cols",
+        "5",
+        "--seed",
+        "7",
+        "--rho-comm",
+        "0.2",
+        "--out",
+        str(tmp_path / "a"),
+    )
+    assert first.returncode == 0, first.stderr[-2000:]
+    params = tmp_path / "a" / "params.yaml"
+    written = yaml.safe_load(params.read_text())["/**"]["ros__parameters"]
+    assert written["rows"] == 4 and written["rho_comm"] == 0.2 and "out" not in written
+    again = camo_run("--params-file", str(params), "--out", str(tmp_path / "b"))
+    assert again.returncode == 0, again.stderr[-2000:]
+    load = lambda run: json.loads((tmp_path / run / "summary.json").read_text())  # noqa: E731
+    a, b = load("a"), load("b")
+    assert {k: v for k, v in a.items() if k != "elapsed_s"} == {
+        k: v for k, v in b.items() if k != "elapsed_s"
+    }
+    rewritten = yaml.safe_load((tmp_path / "b" / "params.yaml").read_text())["/**"]
+    written.pop("domain_id")  # each test run has a domain of its own, given on the command line
+    assert rewritten["ros__parameters"].pop("domain_id") != first
+    assert rewritten["ros__parameters"] == written

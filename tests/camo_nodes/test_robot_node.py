@@ -94,3 +94,41 @@ def test_robots_started_alone_and_a_remote_worker_join_a_run_and_equal_the_simul
     sim = run_camo(*["sim", *options], "--out", str(tmp_path / "sim"))
     assert sim.returncode == 0, sim.stderr
     assert_like_sim(tmp_path / "run", tmp_path / "sim")
+
+
+def robot_node(*ros_args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "camo_nodes.robot_node", "--ros-args", *ros_args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
+    )
+
+
+def test_wrong_kinds_and_unknown_parameters_are_one_line_not_a_traceback():
+    wrong = robot_node("-p", "rows:=eight", "-p", "run_id:=x")
+    assert wrong.returncode == 2 and "rows must be an integer (got 'eight')" in wrong.stderr
+    unknown = robot_node("-p", "rowz:=8", "-p", "run_id:=x")
+    assert unknown.returncode == 2 and "robot_parameters has no parameter rowz" in unknown.stderr
+    for out in (wrong, unknown):
+        assert "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_an_integer_where_a_number_is_declared_is_that_number():
+    # rho_comm:=0 is an integer to ROS; the robot takes it as 0.0 and goes on to its checks.
+    out = robot_node("-p", "rho_comm:=0", "-p", "row:=9", "-p", "run_id:=x")
+    assert out.returncode == 2 and "outside the 8x8 grid" in out.stderr, out.stderr
+
+
+def test_a_params_file_key_naming_the_robot_applies_to_it(tmp_path):
+    params = tmp_path / "params.yaml"
+    params.write_text(
+        "/**:\n  ros__parameters:\n    rows: 4\n    cols: 4\n    row: 1\n    col: 2\n"
+        "    run_id: lab\n"
+        "/**/robot_1_2:\n  ros__parameters:\n    rho_comm: 2.0\n"
+        "/**/robot_0_0:\n  ros__parameters:\n    rho_comm: 3.0\n"
+    )
+    out = robot_node("--params-file", str(params))
+    # Its own key's value (not robot_0_0's) reaches the checks.
+    assert out.returncode == 2 and "rho_comm must be" in out.stderr and "2.0" in out.stderr

@@ -15,7 +15,14 @@ import numpy as np
 
 from . import bench, errors, figures
 from .exceptions import EXIT_USAGE, CamoError, UsageError
-from .options import Parser, add_run_options, image_from, out_dir, params_from
+from .options import (
+    Parser,
+    add_run_options,
+    image_from,
+    out_dir,
+    params_from,
+    write_params_file,
+)
 from .progress import ProgressBar
 from .result import write_summary
 from .sensing import sense_image
@@ -60,6 +67,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     progress = (lambda phase, step, total: bar.update(note=phase)) if bar else None
     result = simulate(params, raw, exempt=exempt, progress=progress)
     write_summary(result.summary(arrays=True), folder)
+    write_params_file(args.options_parser, args, folder)
     figures.run_figure(
         result,
         image,
@@ -115,7 +123,8 @@ def build_parser() -> Parser:
         help="this cell's sensed grey value is a real reading (e.g. a bridged Droplet's): it "
         "replaces the image's and gets no measurement noise (repeatable)",
     )
-    sim.set_defaults(func=cmd_sim)
+    sim.add_params_file_option("camo_sim")
+    sim.set_defaults(func=cmd_sim, options_parser=sim)
     err = sub.add_parser("errors", help="the paper's error analysis")
     add_run_options(err)
     err.add_argument("--trials", type=int, default=10, help="trials per point (default 10)")

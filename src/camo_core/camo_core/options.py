@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import copy
 import itertools
+import os
 import sys
 import time
 from pathlib import Path
@@ -17,7 +19,8 @@ from .sensing import load_image
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors, and no abbreviations: `--row` is not `--rows`."""
+    """argparse with one-line errors, and no abbreviations: `--row` is not `--rows`. With
+    `add_params_file_option()`, options can come from a ROS 2 parameters file too."""
 
     def __init__(self, *args, **kwargs) -> None:
         kwargs.setdefault("allow_abbrev", False)
@@ -25,6 +28,114 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> None:  # one line, not usage + message
         raise UsageError(message)
+
+    def add_params_file_option(self, node: str) -> None:
+        """--params-file FILE: a ROS 2 parameters file whose `/**` and `<node>` keys set options
+        (`rho_comm: 0.1` is --rho-comm 0.1); options on the command line override it."""
+        self.add_argument(
+            "--params-file",
+            metavar="FILE",
+            type=Path,
+            default=None,
+            help=f"ROS 2 parameters YAML (keys /** and {node}); the command line overrides it",
+        )
+        self.set_defaults(params_node=node)
+
+    def parse_known_args(self, args=None, namespace=None):
+        if not any(a.dest == "params_file" for a in self._actions):  # (a subcommand's, say)
+            return super().parse_known_args(args, namespace)
+        first, _ = super().parse_known_args(args, copy.copy(namespace))
+        path = getattr(first, "params_file", None)
+        if path is None:
+            return super().parse_known_args(args, namespace)
+        # The file's values as defaults, so that what the command line gives wins.
+        self.set_defaults(**options_from_file(self, path, first.params_node))
+        return super().parse_known_args(args, namespace)
+
+
+# Options that name where a run writes, or that a parameters file must not repeat.
+NOT_PARAMETERS = {
+    *("help", "params_file", "params_node", "options_parser", "func", "command"),
+    *("out", "record", "default_pattern"),
+}
+
+
+def _option_value(action: argparse.Action, name: str, value, path: Path):
+    """A parameters-file value as the option would have parsed it, or UsageError."""
+
+    def wrong(expected: str) -> UsageError:
+        return UsageError(f"{path}: {name} must be {expected} (got {value!r})")
+
+    if action.nargs == 0:  # a flag
+        if not isinstance(value, bool):
+            raise wrong("true or false")
+        return value
+    many = isinstance(action, argparse._AppendAction) or action.nargs in ("+", "*")
+    items = value if many else [value]
+    if not isinstance(items, list) or (many and not isinstance(value, list)):
+        raise wrong("a list")
+    parsed = []
+    for item in items:
+        if isinstance(item, bool | list | dict) or item is None:
+            raise wrong("a number or text")
+        if action.type is int and not isinstance(item, int):
+            raise wrong("an integer")
+        if action.type is float and not isinstance(item, int | float):
+            raise wrong("a number")
+        try:
+            item = action.type(item) if action.type else str(item)
+        except (TypeError, ValueError, UsageError):
+            raise wrong("a valid value") from None
+        if action.choices is not None and item not in action.choices:
+            raise wrong(f"one of {', '.join(map(str, action.choices))}")
+        parsed.append(item)
+    return parsed if many else parsed[0]
+
+
+def options_from_file(parser: argparse.ArgumentParser, path: Path, node: str) -> dict:
+    """The options a parameters file sets for `node`: dest -> value (UsageError if it names an
+    option the command does not have, or a value of the wrong kind)."""
+    from .params_file import parameters_for  # the YAML reader, only when a file is given
+
+    actions = {a.dest: a for a in parser._actions if a.dest not in NOT_PARAMETERS}
+    values = {}
+    for name, value in parameters_for(path, node).items():
+        action = actions.get(name)
+        if action is None:
+            raise UsageError(
+                f"{path}: {parser.prog} has no parameter {name} (it has: {', '.join(actions)})"
+            )
+        values[name] = _option_value(action, name, value, path)
+    return values
+
+
+def write_params_file(
+    parser: argparse.ArgumentParser, args: argparse.Namespace, folder: Path
+) -> Path:
+    """The options a command ran with, as a ROS 2 parameters file (folder/params.yaml) that
+    `--params-file` takes back: the run repeated."""
+    import yaml
+
+    values = {}
+    for action in parser._actions:
+        value = getattr(args, action.dest, None)
+        if action.dest in NOT_PARAMETERS or value is None or action.dest == "func":
+            continue
+        if isinstance(value, Path):
+            value = str(value)
+        elif isinstance(value, list | tuple):
+            value = [str(v) if isinstance(v, Path) else v for v in value]
+        values[action.dest] = value
+    if "pattern" in values or "image" in values or not getattr(args, "default_pattern", None):
+        pass
+    else:  # the built-in background it ran on, named: a later default cannot change it
+        values = {"pattern": args.default_pattern, **values}
+    path = folder / "params.yaml"
+    path.write_text(
+        f"# {parser.prog}: repeat with --params-file {path}\n"
+        + yaml.safe_dump({"/**": {"ros__parameters": values}}, sort_keys=False)
+    )
+    return path
 
 
 def add_run_options(
@@ -113,12 +224,36 @@ def wants_help(argv: list[str] | None) -> bool:
 
 def node_help(prog: str, description: str, parameters: dict[str, object]) -> str:
     """The --help text of a node configured by ROS parameters (ros2 run's conventions)."""
-    lines = [f"usage: {prog} [--ros-args [-p NAME:=VALUE ...] [--params-file FILE] ...]", ""]
+    lines = [
+        f"usage: {prog} [--domain-id D] [--network localhost|subnet] [--discovery-server "
+        "HOST:PORT] [--ros-args [-p NAME:=VALUE ...] [--params-file FILE] ...]",
+        "",
+    ]
     lines.append(description)
     if parameters:
         lines += ["", "parameters (default):"]
         lines += [f"  {name} ({value!r})" for name, value in parameters.items()]
     return "\n".join(lines)
+
+
+def node_command_line(prog: str, args: list[str] | None) -> list[str]:
+    """A ROS node's command line (argv, program first): the domain and network options before
+    --ros-args set its environment (UsageError if bad); what rclpy takes is returned."""
+    argv = list(sys.argv if args is None else args)
+    ours, ros = argv, []
+    if "--ros-args" in argv:
+        at = argv.index("--ros-args")
+        ours, ros = argv[:at], argv[at:]
+    parser = Parser(prog=prog)
+    add_network_options(parser)
+    options, unknown = parser.parse_known_args(ours[1:])
+    if unknown:
+        raise UsageError(
+            f"unrecognized arguments: {' '.join(unknown)} (parameters go after --ros-args: "
+            "-p NAME:=VALUE or --params-file FILE)"
+        )
+    os.environ.update(network_env(options, os.environ))
+    return [ours[0] if ours else prog, *ros]
 
 
 # ---- how a process finds the others: DDS discovery ----------------------------------------

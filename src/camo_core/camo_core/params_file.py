@@ -62,9 +62,9 @@ def _check_nodes(path: Path, entries: dict, prefix: str) -> None:
             )
 
 
-def check_params_file(path: str | Path) -> None:
-    """The mistakes people make in a parameters file, named in one line (ParamsFileError).
-    Whatever else rcl refuses, it says itself when the node starts."""
+def check_params_file(path: str | Path) -> list[dict]:
+    """The file's documents, or the mistakes people make in a parameters file named in one
+    line (ParamsFileError). Whatever else rcl refuses, it says itself when the node starts."""
     path = Path(path)
     try:
         if path.stat().st_size > MAX_BYTES:
@@ -90,6 +90,39 @@ def check_params_file(path: str | Path) -> None:
                 f"{path}: a parameters file maps NODE: {{{PARAMETERS_KEY}: {{NAME: VALUE}}}}"
             )
         _check_nodes(path, document, "")
+    return [d for d in documents if d]
+
+
+def _flat(values: dict, prefix: str = "") -> dict:
+    flat = {}
+    for name, value in values.items():
+        if isinstance(value, dict):
+            flat.update(_flat(value, f"{prefix}{name}."))
+        else:
+            flat[f"{prefix}{name}"] = value
+    return flat
+
+
+def _sections(entries: dict, prefix: str = ""):
+    """(node path, its parameters) of every ros__parameters in a document."""
+    for key, value in entries.items():
+        if key == PARAMETERS_KEY:
+            yield prefix, value
+        elif isinstance(value, dict):
+            yield from _sections(value, f"{prefix}/{key}".replace("//", "/"))
+
+
+def parameters_for(path: str | Path, node: str) -> dict:
+    """The parameters a file gives a node named `node` (in any namespace): those under `/**`
+    first, then those under its own name, `/**/node` or `/ns/node`."""
+    general, own = {}, {}
+    for document in check_params_file(path):
+        for where, values in _sections(document):
+            if where == "/**":
+                general.update(_flat(values))
+            elif where.split("/")[-1] == node:
+                own.update(_flat(values))
+    return {**general, **own}
 
 
 def check_ros_args(args: list[str] | None) -> None:

@@ -25,20 +25,18 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from camo_core.exceptions import CamoError
-from camo_core.options import node_help, wants_help
+from camo_core.options import node_command_line, node_help, wants_help
 from camo_core.params import CamoParams, ParameterError
 from camo_core.protocol import CONSENSUS, NO_PATTERN, SENSING
 from camo_core.sensing import Calibration
 from camo_core.shutdown import StopFlag
 from camo_msgs.msg import Host, RobotStatus
-from camo_nodes.robot_node import ROBOT_PARAMETERS, host_robots, params_from_node
+from camo_nodes.robot_node import ROBOT_PARAMETERS, host_robots, robot_parameters
 from camo_nodes.topics import (
     LATCHED,
-    LEAN_NODE,
     RunTopics,
     history_qos,
     run_ended,
-    run_from_parameter,
     start_ros,
 )
 
@@ -205,6 +203,13 @@ def run_monitor(
     return 0
 
 
+def check_bridge_values(values: dict) -> None:
+    if not values["port"] and not values["transcript"]:
+        raise ParameterError("give the Droplet's serial port: -p port:=/dev/ttyUSB0")
+    if not (values["serial_timeout"] > 0 and values["retries"] >= 0):
+        raise ParameterError("serial_timeout must be positive and retries not negative")
+
+
 def main(args=None) -> int:
     """droplet_bridge --ros-args -p rows:=8 -p cols:=8 -p row:=R -p col:=C -p port:=/dev/ttyUSB0"""
     if wants_help(args):
@@ -212,21 +217,16 @@ def main(args=None) -> int:
         print(node_help("droplet_bridge", about, {**ROBOT_PARAMETERS, **BRIDGE_PARAMETERS}))
         return 0
     stop = StopFlag()
+    try:
+        args = node_command_line("droplet_bridge", args)
+    except CamoError as exc:
+        print(f"droplet_bridge: error: {exc}", file=sys.stderr)
+        return 2
     start_ros("droplet_bridge", args, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        reader = Node("droplet_parameters", **LEAN_NODE)
-        try:
-            params, row, col, *timeouts = params_from_node(reader)
-            values = {
-                n: reader.declare_parameter(n, v).value for n, v in BRIDGE_PARAMETERS.items()
-            }
-            if not values["port"] and not values["transcript"]:
-                raise ParameterError("give the Droplet's serial port: -p port:=/dev/ttyUSB0")
-            if not (values["serial_timeout"] > 0 and values["retries"] >= 0):
-                raise ParameterError("serial_timeout must be positive and retries not negative")
-            topics = run_from_parameter(reader, stop)
-        finally:
-            reader.destroy_node()
+        params, row, col, *timeouts, topics, values = robot_parameters(
+            {**ROBOT_PARAMETERS, **BRIDGE_PARAMETERS}, stop, check_bridge_values
+        )
         if values["monitor"] or values["transcript"]:
             return run_monitor(params, topics, row, col, values, stop)
         return run_bridge(params, topics, row, col, values, timeouts, stop)

@@ -35,6 +35,7 @@ from .topics import RunTopics, check_run_id, new_run_id, use_camo_dds_settings
 
 def build_parser() -> Parser:
     parser = Parser(prog="camo run", description="run the camouflage as a swarm of ROS 2 nodes")
+    parser.add_params_file_option("camo_run")
     add_run_options(parser)
     add = parser.add_argument
     add(

@@ -15,7 +15,6 @@ import json
 import os
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import rclpy
@@ -26,13 +25,13 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
 from camo_core.exceptions import EXIT_USAGE, CamoError
-from camo_core.options import contiguous
-from camo_core.protocol import CONSENSUS
+from camo_core.options import contiguous, write_params_file
 from camo_core.shutdown import StopFlag
 
 from .launch_config import RunConfig, build_parser, config_from
 from .monitor_node import MonitorNode
 from .processes import ProcessGroup
+from .round_report import report_round, write_partial
 from .topics import LATCHED, LATCHED_READER
 
 
@@ -249,70 +248,6 @@ class Session:
             node.destroy_node()
 
 
-def missing_remote_cells(config: RunConfig, record) -> str:
-    """The --remote-cells whose robots never reported, as FIRST-LAST ranges."""
-    cells = [
-        c
-        for first, last in config.remote
-        for c in range(first, last + 1)
-        if record.phase[c] < CONSENSUS and not record.finished[c]
-    ]
-    return ", ".join(f"{a}-{b}" if a != b else str(a) for a, b in contiguous(cells))
-
-
-def round_folder(config: RunConfig, index: int) -> Path:
-    folder = config.folder if config.rounds == 1 else config.folder / f"round_{index}"
-    folder.mkdir(exist_ok=True)
-    return folder
-
-
-def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dict) -> dict:
-    """summary.json, figure.png and timing.json of a finished round, and its result line; the
-    summary."""
-    folder = round_folder(config, index)
-    summary = monitor.write(index, folder, config.labels[index])
-    params = config.params
-    steps = params.consensus_steps + params.formation_steps
-    missed = int(monitor.record(index).deadlines.sum())
-    clocks = monitor.record(index).timing()  # the robots' own, robust to a late monitor
-    if clocks is not None:
-        voted, done = clocks
-        launched = times["launched_wall"]
-    else:
-        voted, done, launched = times["voted"], times["done"], times["launched"]
-    timing = {
-        "startup_s": voted - launched,
-        "steps": steps,
-        "steps_s": done - voted,
-        "steps_per_s": steps / max(done - voted, 1e-9),
-        "launch_to_done_s": done - launched,
-        "deadlines": missed,
-    }
-    (folder / "timing.json").write_text(json.dumps(timing) + "\n")
-    counts = ", ".join(f"{k} {v}" for k, v in summary["votes"].items())
-    notes = ""
-    dead = summary.get("dead", [])
-    if dead:
-        notes += f"; {len(dead)} dead robots {dead[:8]}{' ...' if len(dead) > 8 else ''}"
-    missing = missing_remote_cells(config, monitor.record(index))
-    if missing:
-        notes += f"; remote cells {missing} never joined (no worker hosted them)"
-    refused = summary["rejected_messages"]
-    if refused["total"]:
-        reasons = ", ".join(f"{n} {why}" for why, n in refused["by_reason"].items())
-        notes += f"; WARNING: {refused['total']} received messages refused ({reasons})"
-    if missed:
-        notes += (
-            f"; {missed} step deadlines passed (robots moved on without silent neighbours: "
-            f"the result can differ from ./camo sim)"
-        )
-    print(
-        f"pattern: {summary['pattern']} ({counts}){notes}; "
-        f"wrote {folder}/summary.json and figure.png"
-    )
-    return summary
-
-
 def run(config: RunConfig) -> int:
     launched, launched_wall = time.monotonic(), time.time()
     os.environ.update(config.env)
@@ -380,21 +315,12 @@ def run(config: RunConfig) -> int:
     return code
 
 
-def write_partial(config: RunConfig, monitor: MonitorNode, index: int) -> dict | None:
-    """What the swarm had reported of an unfinished round."""
-    folder = round_folder(config, index)
-    record = monitor.record(index)
-    if not np.any(record.phase >= CONSENSUS):
-        print("camo run: nothing to write yet (no robot had voted)", file=sys.stderr)
-        return None
-    summary = monitor.write(index, folder, config.labels[index] + " (incomplete)", partial=True)
-    print(f"camo run: wrote what the swarm had reported to {folder}/", file=sys.stderr)
-    return summary
-
-
 def main(argv: list[str] | None = None) -> int:
     try:
-        config = config_from(build_parser().parse_args(argv))
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        config = config_from(args)
+        write_params_file(parser, args, config.folder)  # the run, repeatable with --params-file
     except CamoError as exc:
         print(f"camo: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -25,6 +25,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
@@ -43,6 +44,7 @@ from camo_core.validation import report_problem
 from camo_msgs.msg import Host, RobotStatus
 
 from . import scene
+from .joining import wait_for_setup
 from .polled import PolledTopics
 from .topics import (
     LATCHED_READER,
@@ -52,11 +54,20 @@ from .topics import (
     image_from_msg,
     image_to_msg,
     start_ros,
-    status_listener_qos,
     wait_for_run,
-    wait_for_setup,
 )
 from .trust import BackgroundCheck, Hosts, Rejections, merged
+
+
+def status_listener_qos() -> QoSProfile:
+    """Every robot writes to one status topic: a listener keeps all, or bursts would push samples
+    out."""
+    return QoSProfile(
+        depth=1,
+        history=HistoryPolicy.KEEP_ALL,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
 
 
 class MonitorNode(Node):

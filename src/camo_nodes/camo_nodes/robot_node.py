@@ -22,7 +22,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from camo_core.exceptions import CamoError
-from camo_core.options import node_help, wants_help
+from camo_core.options import node_command_line, node_help, wants_help
 from camo_core.params import CamoParams, ParameterError
 from camo_core.protocol import StepProtocol
 from camo_core.robot_io import NOTHING, Display, Message, Output, Sensor
@@ -30,7 +30,14 @@ from camo_core.sensing import ProjectedSensor, Projection
 from camo_core.shutdown import StopFlag
 
 from .host import Host, host_node
-from .topics import LEAN_NODE, RunTopics, run_ended, run_from_parameter, start_ros
+from .topics import (
+    LEAN_NODE,
+    RunTopics,
+    node_parameters,
+    run_ended,
+    run_from_parameter,
+    start_ros,
+)
 from .transport import Transport
 
 
@@ -116,10 +123,9 @@ ROBOT_PARAMETERS = {
 }
 
 
-def params_from_node(node: Node) -> tuple[CamoParams, int, int, float, float]:
+def params_from_values(values: dict) -> tuple[CamoParams, int, int, float, float]:
     """A standalone robot's ROS parameters as (params, row, col, step timeout, discovery timeout);
     raises ParameterError."""
-    values = {name: node.declare_parameter(name, v).value for name, v in ROBOT_PARAMETERS.items()}
     params = CamoParams(
         profile=values["profile"],
         rows=values["rows"],
@@ -146,6 +152,32 @@ def params_from_node(node: Node) -> tuple[CamoParams, int, int, float, float]:
         values["step_timeout"],
         values["discovery_timeout"],
     )
+
+
+def robot_parameters(defaults: dict, stop, check=None) -> tuple:
+    """A standalone robot's parameters: (params, row, col, step timeout, discovery timeout, run
+    topics, every value). They are read twice: first as `robot_parameters` (`/**` keys), which
+    says the cell and the run, then as the robot's own node /<run>/camo/robot_<row>_<col>, so
+    that keys naming it in a parameters file apply too. `check(values)` raises ParameterError
+    for what the caller cannot use."""
+    reader = Node("robot_parameters", **LEAN_NODE)
+    try:
+        values = node_parameters(reader, defaults)
+        _, row, col, *_ = params_from_values(values)
+        if check is not None:
+            check(values)  # before waiting for a run: a bad value is said at once
+        topics = run_from_parameter(reader, stop)
+    finally:
+        reader.destroy_node()
+    named = Node(f"robot_{row}_{col}", namespace=topics.robot_namespace, **LEAN_NODE)
+    try:
+        values = node_parameters(named, defaults)
+    finally:
+        named.destroy_node()
+    params, *cell_and_timeouts = params_from_values(values)
+    if tuple(cell_and_timeouts[:2]) != (row, col):
+        raise ParameterError(f"robot_{row}_{col}'s parameters give it another cell")
+    return (params, *cell_and_timeouts, topics, values)
 
 
 def host_robots(
@@ -191,14 +223,16 @@ def main(args=None) -> int:
         print(node_help("robot_node", "One robot of the camouflage swarm.", ROBOT_PARAMETERS))
         return 0
     stop = StopFlag()
+    try:
+        args = node_command_line("robot_node", args)
+    except CamoError as exc:
+        print(f"robot_node: error: {exc}", file=sys.stderr)
+        return 2
     start_ros("robot_node", args, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        reader = Node("robot_parameters", **LEAN_NODE)
-        try:
-            params, row, col, step_timeout, discovery_timeout = params_from_node(reader)
-            topics = run_from_parameter(reader, stop)
-        finally:
-            reader.destroy_node()
+        params, row, col, step_timeout, discovery_timeout, topics = robot_parameters(
+            ROBOT_PARAMETERS, stop
+        )[:6]
         cell = row * params.cols + col
         host = host_robots(params, topics, [(cell, cell)], step_timeout, discovery_timeout, False)
         return host.run(stop, until=run_ended(host.node, topics))

@@ -18,14 +18,14 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
-from std_msgs.msg import String
 
 from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
-from camo_core.params import CamoParams
+from camo_core.params import CamoParams, ParameterError
 from camo_core.params_file import check_ros_args
 
 FASTDDS_PROFILE = Path(__file__).with_name("fastdds.xml")
@@ -191,6 +191,40 @@ def wait_for_run(node, spin, run_id: str | None, timeout: float, stop=None) -> s
     raise KeyboardInterrupt
 
 
+# Parameters every rclpy node has, which no node of ours declares.
+ROS_OWN_PARAMETERS = {"use_sim_time", "start_type_description_service"}
+
+
+def _kind(value) -> str:
+    return {bool: "a bool", int: "an integer", float: "a number", str: "text"}.get(
+        type(value), type(value).__name__
+    )
+
+
+def node_parameters(node, defaults: dict) -> dict:
+    """A node's ROS parameters (-p, --params-file), each declared with its default. An integer
+    where a number is expected is taken as that number; any other value of the wrong kind, or a
+    parameter given to this node that it does not have, is a ParameterError in one line (rclpy
+    would raise a traceback, or ignore it)."""
+    values = {}
+    for name, default in defaults.items():
+        descriptor = ParameterDescriptor(dynamic_typing=True)
+        value = node.declare_parameter(name, default, descriptor).value
+        if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if type(value) is not type(default):
+            raise ParameterError(f"{name} must be {_kind(default)} (got {value!r})")
+        values[name] = value
+    # rclpy keeps the overrides meant for this node here (no public accessor in Jazzy).
+    given = set(getattr(node, "_parameter_overrides", {}))
+    unknown = sorted(given - set(defaults) - ROS_OWN_PARAMETERS)
+    if unknown:
+        raise ParameterError(
+            f"{node.get_name()} has no parameter {unknown[0]} (it has: {', '.join(defaults)})"
+        )
+    return values
+
+
 def run_from_parameter(node, stop=None, timeout: float = 60.0) -> RunTopics:
     """The run a standalone node joins: its `run_id` parameter (declared here if it is not), or
     without one the only run in its domain."""
@@ -262,34 +296,6 @@ def result_from(text: str, run: str) -> dict | None:
     return result if valid else None
 
 
-def wait_for_setup(node, spin, topics: RunTopics, timeout: float, stop=None) -> dict:
-    """The run's /swarm/params (latched) as the launcher published it."""
-    got: list[dict] = []
-
-    def take(msg: String) -> None:
-        setup = setup_from(msg.data, topics.run)
-        if setup is not None:
-            got.append(setup)
-
-    subscription = node.create_subscription(String, topics.params, take, LATCHED_READER)
-    deadline = time.monotonic() + timeout
-    try:
-        while not got and not stop:
-            if time.monotonic() > deadline:
-                raise NoRun(f"no parameters on {topics.params} after {timeout:g} s")
-            spin()
-        if node.count_publishers(topics.params) > 1:
-            raise NoRun(
-                f"{node.count_publishers(topics.params)} processes publish the parameters of "
-                f"{topics.run}: cannot tell which is its launcher"
-            )
-    finally:
-        node.destroy_subscription(subscription)
-    if stop:
-        raise KeyboardInterrupt
-    return got[0]
-
-
 # Nodes with no parameter, rosout or type-description services: no DDS entities of their own
 # (hosted robots, and short-lived helper nodes).
 LEAN_NODE = {
@@ -322,17 +328,6 @@ def history_qos(depth: int) -> QoSProfile:
     return QoSProfile(
         depth=depth,
         history=HistoryPolicy.KEEP_LAST,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL,
-    )
-
-
-def status_listener_qos() -> QoSProfile:
-    """Every robot writes to one status topic: a listener keeps all, or bursts would push samples
-    out."""
-    return QoSProfile(
-        depth=1,
-        history=HistoryPolicy.KEEP_ALL,
         reliability=ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.TRANSIENT_LOCAL,
     )

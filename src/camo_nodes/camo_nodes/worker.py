@@ -24,6 +24,7 @@ from camo_core.options import Parser, add_network_options, network_env, parse_ra
 from camo_core.params import CamoParams
 from camo_core.shutdown import StopFlag
 
+from .joining import wait_for_setup
 from .robot_node import host_robots
 from .topics import (
     LEAN_NODE,
@@ -32,12 +33,12 @@ from .topics import (
     run_ended,
     start_ros,
     wait_for_run,
-    wait_for_setup,
 )
 
 
 def build_parser() -> Parser:
     parser = Parser(prog="camo worker", description="host robots of a running swarm")
+    parser.add_params_file_option("camo_worker")
     parser.add_argument(
         "--cells",
         action="append",

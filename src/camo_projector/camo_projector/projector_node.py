@@ -19,13 +19,14 @@ from std_msgs.msg import String
 
 from camo_core.backgrounds import BACKGROUNDS, background
 from camo_core.exceptions import CamoError
-from camo_core.options import node_help, wants_help
+from camo_core.options import node_command_line, node_help, wants_help
 from camo_core.sensing import load_image
 from camo_nodes.topics import (
     LATCHED,
     LEAN_NODE,
     RunTopics,
     image_to_msg,
+    node_parameters,
     run_from_parameter,
     start_ros,
 )
@@ -35,14 +36,15 @@ def load(image_path: str, pattern: str) -> np.ndarray:
     return load_image(image_path) if image_path else background(pattern or "forest")
 
 
+PROJECTOR_PARAMETERS = {"image": "", "pattern": "forest", "run_id": ""}
+
+
 class ProjectorNode(Node):
     def __init__(self, topics: RunTopics, **kwargs) -> None:
         super().__init__("projector", namespace=topics.robot_namespace, **kwargs)
-        self.declare_parameter("image", "")
-        self.declare_parameter("pattern", "forest")
-        self.declare_parameter("run_id", topics.run)
+        values = node_parameters(self, {**PROJECTOR_PARAMETERS, "run_id": topics.run})
         self.publisher = self.create_publisher(Image, topics.background, LATCHED)
-        self.image = load(self.get_parameter("image").value, self.get_parameter("pattern").value)
+        self.image = load(values["image"], values["pattern"])
         self.add_on_set_parameters_callback(self._on_set)
         # A topic as well as the parameters: data is a built-in name or an image path.
         self.create_subscription(String, topics.load, self._on_load, 10)
@@ -81,9 +83,13 @@ class ProjectorNode(Node):
 def main(args=None) -> int:
     if wants_help(args):
         about = "Publishes the background image projected onto the arena (latched)."
-        parameters = {"image": "", "pattern": "forest", "run_id": ""}
-        print(node_help("projector_node", about, parameters))
+        print(node_help("projector_node", about, PROJECTOR_PARAMETERS))
         return 0
+    try:
+        args = node_command_line("projector_node", args)
+    except CamoError as exc:
+        print(f"projector_node: error: {exc}", file=sys.stderr)
+        return 2
     start_ros("projector_node", args)
     node = None
     try:
