@@ -159,6 +159,8 @@ def main(argv: list[str] | None = None) -> int:
     node = None
     executor = EventsExecutor()
     try:
+        wanted = f"run {run_id}" if run_id else "the only run in the domain"
+        print(f"camo view: waiting for {wanted} (up to {args.wait:g} s)", file=sys.stderr)
         run = join(executor, run_id, args.wait, stop)
         node = ViewNode(run, args.host, args.port)
         executor.add_node(node)

@@ -119,8 +119,8 @@ def write_params_file(
     values = {}
     for action in parser._actions:
         value = getattr(args, action.dest, None)
-        if action.dest in NOT_PARAMETERS or value is None or action.dest == "func":
-            continue
+        if action.dest in NOT_PARAMETERS or value is None or value == []:
+            continue  # an option not given (a repeatable one included) is left out
         if isinstance(value, Path):
             value = str(value)
         elif isinstance(value, list | tuple):

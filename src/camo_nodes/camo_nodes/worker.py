@@ -78,6 +78,12 @@ def join(node: Node, args, stop) -> tuple[RunTopics, dict]:
         rclpy.spin_once(node, timeout_sec=0.1)
 
     run_id = check_run_id(args.run_id) if args.run_id else None
+    print(
+        f"camo worker: waiting for {'run ' + run_id if run_id else 'a run'} "
+        f"(up to {args.wait:g} s; Ctrl-C to stop)",
+        file=sys.stderr,
+        flush=True,
+    )
     topics = RunTopics(wait_for_run(node, spin, run_id, args.wait, stop))
     return topics, wait_for_setup(node, spin, topics, args.wait, stop)
 
