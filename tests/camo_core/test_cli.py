@@ -134,3 +134,20 @@ def test_bench_whole_process_times_camo_sim_in_a_subprocess():
     report = {"pipeline": "", "baseline": "", "results": [], "whole_process": whole}
     report |= {"per_robot_64x64_s": 1.0, "vectorised_64x64_s": 0.1, "speedup_over_per_robot": 10}
     assert "whole process: python -m camo_core.cli sim" in bench.format_table(report)
+
+
+def test_an_output_folder_that_holds_something_is_refused_unless_forced(tmp_path):
+    out = tmp_path / "taken"
+    out.mkdir()
+    (out / "mine.txt").write_text("keep me")
+    refused = run_camo("sim", "--rows", "4", "--cols", "4", "--out", str(out))
+    assert refused.returncode == 2 and "already exists and is not empty" in refused.stderr
+    assert "--force" in refused.stderr and sorted(p.name for p in out.iterdir()) == ["mine.txt"]
+    forced = run_camo("sim", "--rows", "4", "--cols", "4", "--out", str(out), "--force")
+    assert forced.returncode == 0, forced.stderr
+    assert (out / "summary.json").exists() and (out / "mine.txt").read_text() == "keep me"
+
+
+def test_an_abbreviated_option_is_refused():
+    out = run_camo("sim", "--row", "8", "--out", "unused")
+    assert out.returncode == 2 and "unrecognized arguments: --row" in out.stderr

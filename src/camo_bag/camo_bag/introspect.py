@@ -28,7 +28,9 @@ from camo_nodes.topics import start_ros
 from . import msgdefs
 from .graph_topics import taking_qos
 
-DISCOVERY = 1.0  # s to let the graph fill before listing it (ros2cli's daemon keeps it filled)
+# Before listing: at least DISCOVERY s for the graph to fill (ros2cli's daemon keeps it filled),
+# then until it has not changed for SETTLED s, MAX_DISCOVERY s at most (a loaded machine is slow).
+DISCOVERY, SETTLED, MAX_DISCOVERY = 2.0, 1.0, 6.0
 
 
 def as_plain(message, no_arr: bool = False):
@@ -50,10 +52,18 @@ def as_plain(message, no_arr: bool = False):
     return message
 
 
-def wait_for_graph(node: Node, seconds: float = DISCOVERY) -> None:
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
+def wait_for_graph(node: Node) -> None:
+    started = changed = time.monotonic()
+    seen = None
+    while True:
         rclpy.spin_once(node, timeout_sec=0.05)
+        now = time.monotonic()
+        graph = (node.get_topic_names_and_types(), node.get_node_names_and_namespaces())
+        if graph != seen:
+            seen, changed = graph, now
+        waited = now - started
+        if waited > MAX_DISCOVERY or (waited > DISCOVERY and now - changed > SETTLED):
+            return
 
 
 def topic_type(node: Node, topic: str, wait: float) -> str:

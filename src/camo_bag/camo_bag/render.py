@@ -16,7 +16,6 @@ lacks; `--partial` renders what it holds, with the gaps named in summary.json
 
 from __future__ import annotations
 
-import argparse
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,7 +25,7 @@ from sensor_msgs.msg import Image
 
 from camo_core import figures
 from camo_core.exceptions import CamoError
-from camo_core.options import Parser, out_dir
+from camo_core.options import Parser, add_out_options, out_dir
 from camo_core.output import run_title, write_round
 from camo_core.params import CamoParams
 from camo_core.record import Backgrounds, Rounds
@@ -135,9 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "bag", help="bag folder (or its .mcap file) recorded by ./camo run --record"
     )
-    parser.add_argument(
-        "--out", type=Path, default=None, help="output folder (default results/<timestamp>/)"
-    )
+    add_out_options(parser)
     parser.add_argument(
         "--partial",
         action="store_true",
@@ -145,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     try:
         args = parser.parse_args(argv)
-        out = out_dir(argparse.Namespace(out=args.out))
+        out = out_dir(args)
         summaries = render(args.bag, out, args.partial)
     except IncompleteBag as exc:
         print(f"camo render: error: {exc}", file=sys.stderr)

@@ -56,7 +56,7 @@ class Parser(argparse.ArgumentParser):
 # Options that name where a run writes, or that a parameters file must not repeat.
 NOT_PARAMETERS = {
     *("help", "params_file", "params_node", "options_parser", "func", "command"),
-    *("out", "record", "default_pattern"),
+    *("out", "force", "record", "default_pattern"),
 }
 
 
@@ -171,10 +171,17 @@ def add_run_options(
     parser.add_argument(
         "--formation-steps", type=int, default=None, help="default: 10 paper, 20 droplet"
     )
+    add_out_options(parser)
+    parser.set_defaults(default_pattern=default_pattern)
+
+
+def add_out_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out", type=Path, default=None, help="output folder (default results/<timestamp>/)"
     )
-    parser.set_defaults(default_pattern=default_pattern)
+    parser.add_argument(
+        "--force", action="store_true", help="write into --out even if it holds something"
+    )
 
 
 def params_from(args: argparse.Namespace) -> CamoParams:
@@ -206,7 +213,20 @@ def new_folder_problem(path: Path, what: str = "folder") -> str | None:
 
 
 def out_dir(args: argparse.Namespace) -> Path:
-    folder = args.out or Path("results") / time.strftime("%Y%m%d-%H%M%S")
+    """The output folder, created: --out if given (refused if it holds something, unless
+    --force), else a new results/<time>/ (results/<time>-2/ if that is taken)."""
+    folder = args.out
+    if folder is None:
+        stamp = time.strftime("%Y%m%d-%H%M%S")
+        folder = Path("results") / stamp
+        for k in itertools.count(2):
+            if not folder.exists():
+                break
+            folder = Path("results") / f"{stamp}-{k}"
+    elif not getattr(args, "force", False):
+        problem = new_folder_problem(folder, "output folder")
+        if problem:
+            raise UsageError(f"{problem} (or --force to write into it)")
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -213,7 +213,9 @@ def format_table(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="camo bench ros", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="camo bench ros", description=__doc__.splitlines()[0], allow_abbrev=False
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument(
         "--rate-sides", default="8", help="grid sides of the long-run rate comparison (default 8)"

@@ -11,10 +11,12 @@ writes what the swarm had reported, bag included.
 
 from __future__ import annotations
 
+import faulthandler
 import json
 import os
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import rclpy
@@ -301,6 +303,7 @@ def run(config: RunConfig) -> int:
         print(f"camo run: error: {exc}", file=sys.stderr)
         code, ended = exc.code, "failed"
     finally:
+        stuck = watchdog(config.folder)
         group.stop(keep=lambda proc: proc is group.recorder)
         if written < config.rounds and group.cells:
             summary = write_partial(config, session.monitor, written)
@@ -312,7 +315,23 @@ def run(config: RunConfig) -> int:
             print(f"camo run: warning: {module} did not stop within 5 s; killed", file=sys.stderr)
         session.close()
         rclpy.try_shutdown()
+        faulthandler.cancel_dump_traceback_later()
+        stuck.close()
+        Path(stuck.name).unlink()  # it ended in time: nothing to say
     return code
+
+
+TEARDOWN_LIMIT = 60.0  # s; stopping, writing and the result take 25 s at most
+
+
+def watchdog(folder: Path):
+    """Bound the end of a run. Fast DDS can block a writer for good on the shared-memory port of
+    a process killed at the wrong moment (seen: publishing the result after the recorder was
+    SIGKILLed), holding the interpreter: only a thread outside Python can end the process then.
+    What the run wrote stays; the threads' stacks go to stuck.txt; exit code 1."""
+    stuck = open(folder / "stuck.txt", "w")  # kept open: the watchdog thread writes to it
+    faulthandler.dump_traceback_later(TEARDOWN_LIMIT, exit=True, file=stuck)
+    return stuck
 
 
 def main(argv: list[str] | None = None) -> int:

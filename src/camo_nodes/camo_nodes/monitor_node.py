@@ -32,7 +32,13 @@ from sensor_msgs.msg import Image
 from visualization_msgs.msg import MarkerArray
 
 from camo_core.exceptions import CamoError
-from camo_core.options import Parser, add_network_options, network_env, out_dir
+from camo_core.options import (
+    Parser,
+    add_network_options,
+    add_out_options,
+    network_env,
+    out_dir,
+)
 from camo_core.output import run_title, write_round
 from camo_core.params import CamoParams
 from camo_core.protocol import CONSENSUS, PHASE_NAMES
@@ -232,7 +238,7 @@ class MonitorNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     parser = Parser(prog="monitor_node", description="watch a running swarm and write its results")
-    parser.add_argument("--out", type=Path, default=None, help="output folder (default results/)")
+    add_out_options(parser)
     parser.add_argument("--run-id", default=None, help="the run to watch (default: the only one)")
     parser.add_argument("--wait", type=float, default=60.0, help="seconds to wait for a run")
     add_network_options(parser)

@@ -23,13 +23,15 @@ from .launch_config import RunConfig, worker_groups
 PR_SET_PDEATHSIG = 1
 
 
-def _dying_with(parent: int) -> Callable[[], None]:
-    """In the child, before exec: SIGTERM when the launcher exits, however it dies (SIGKILL,
-    the OOM killer), so that no robot of a dead run lingers in the domain (Linux prctl)."""
+def _dying_with(parent: int, how: int = signal.SIGKILL) -> Callable[[], None]:
+    """In the child, before exec: signal `how` when the launcher exits, however it dies (SIGKILL,
+    the OOM killer), so that no robot of a dead run lingers in the domain (Linux prctl). SIGKILL,
+    not SIGTERM: a process whose writer is stuck on a dead peer's shared-memory port (Fast DDS)
+    would never get to its shutdown. Only the recorder gets SIGTERM, to close its bag."""
 
     def die_with_parent() -> None:
         try:
-            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, how)
         except (OSError, AttributeError):
             return
         if os.getppid() != parent:  # it died between fork and prctl: nobody will signal
@@ -74,17 +76,22 @@ class ProcessGroup:
         self._interrupted: list[subprocess.Popen] = []
         self.killed: list[str] = []  # modules that did not stop in time (their shm is left)
 
-    def _start(self, module: str, *args: str) -> subprocess.Popen:
+    def _start(self, module: str, *args: str, on_orphan: int = signal.SIGKILL) -> subprocess.Popen:
         command = [sys.executable, "-m", module, *args]
         proc = subprocess.Popen(
-            command, env=self.env, start_new_session=True, preexec_fn=_dying_with(os.getpid())
+            command,
+            env=self.env,
+            start_new_session=True,
+            preexec_fn=_dying_with(os.getpid(), on_orphan),
         )
         self.procs.append(proc)
         return proc
 
     def start_recorder(self, bag: str, run: str) -> subprocess.Popen:
         self.recorder = self._start(
-            "camo_bag.recorder_node", bag, "--run-id", run, "--ros-args", "--log-level", "warn"
+            "camo_bag.recorder_node",
+            *(bag, "--run-id", run, "--ros-args", "--log-level", "warn"),
+            on_orphan=signal.SIGTERM,  # it closes its bag: nothing recorded is lost
         )
         return self.recorder
 

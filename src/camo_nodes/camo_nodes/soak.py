@@ -158,7 +158,9 @@ def format_report(report: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="camo bench soak", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog="camo bench soak", description=__doc__.splitlines()[0], allow_abbrev=False
+    )
     parser.add_argument("--runs", type=int, default=50, help="consecutive runs (default 50)")
     parser.add_argument("--side", type=int, default=4, help="grid side of each run (default 4)")
     parser.add_argument("--procs", type=int, default=2, help="worker processes (default 2)")
