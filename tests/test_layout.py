@@ -151,3 +151,18 @@ def test_ruff_lint_and_format_are_clean():
         [*ruff, "format", "--check", "src", "tests"], capture_output=True, text=True, cwd=ROOT
     )
     assert form.returncode == 0, form.stdout[-3000:]
+
+
+def test_no_text_cites_a_document_that_is_not_in_the_repository():
+    """The algorithm is docs/algorithm.md; nothing refers to the spec it was written from."""
+    tracked = subprocess.run(
+        ["git", "ls-files"], capture_output=True, text=True, cwd=ROOT, check=True
+    ).stdout.split()
+    citing = [
+        name
+        for name in tracked
+        if name.endswith((".py", ".md", ".txt", ".yaml", ".xml", ".toml"))
+        and re.search(r"\bSPEC\b", (ROOT / name).read_text(errors="replace"))
+    ]
+    assert citing == []
+    assert (ROOT / "docs" / "algorithm.md").exists()

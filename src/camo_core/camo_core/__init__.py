@@ -1,1 +1,1 @@
-"""The distributed camouflage algorithm (SPEC.md), free of ROS."""
+"""The distributed camouflage algorithm (docs/algorithm.md), free of ROS."""

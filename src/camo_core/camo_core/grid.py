@@ -1,4 +1,4 @@
-"""SPEC section 1: the grid, robot ids and the 12 neighbour slots."""
+"""docs/algorithm.md §1: the grid, robot ids and the 12 neighbour slots."""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 Each robot's arithmetic is exactly that of `rules.py`, in the same float64
 order (no fast-math, so no reassociation or fused multiply-add); only the loop
 over robots is compiled, and rows run in parallel. The link's loss draws are
-SPEC section 3's hash, computed in place from (prefix, sender, receiver).
+docs/algorithm.md §3's hash, computed in place from (prefix, sender, receiver).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from .rules import (
 
 DI = np.array([o[0] for o in NEIGHBOR_OFFSETS], dtype=np.int64)
 DJ = np.array([o[1] for o in NEIGHBOR_OFFSETS], dtype=np.int64)
-# Fallback slots per slot (-1: none), in the order SPEC 2.4 tries them.
+# Fallback slots per slot (-1: none), in the order docs/algorithm.md §2.4 tries them.
 FALLBACK = np.full((12, 3), -1, dtype=np.int64)
 for _s in range(12):
     _chain = DIAGONAL_FALLBACKS.get(_s) or (OPPOSITE_CARDINAL[_s],)
@@ -36,7 +36,7 @@ for _k in range(3):
     ROLE[_k, list(ACTIVATORS[_k])] = 1
     ROLE[_k, list(INHIBITORS[_k])] = -1
 
-# SPEC section 3's SplitMix64, with rng.py's constants (numba freezes module globals).
+# docs/algorithm.md §3's SplitMix64, with rng.py's constants (numba freezes module globals).
 _GOLDEN = np.uint64(rng.GOLDEN)
 _M1 = np.uint64(rng.M1)
 _M2 = np.uint64(rng.M2)
@@ -142,7 +142,7 @@ def formation_step(
 
 @njit(cache=True, inline="always")
 def _counts_with_fill(state, known, i, j, pattern, prefix, rho, on_act, on_inh):
-    """Activator and inhibitor counts where slots may be missing (SPEC 2.4 mirror rules)."""
+    """Activator and inhibitor counts where slots may be missing (docs/algorithm.md §2.4)."""
     for s in range(12):
         role = ROLE[pattern, s]
         if role == 0:
@@ -162,7 +162,7 @@ def _counts_with_fill(state, known, i, j, pattern, prefix, rho, on_act, on_inh):
 
 @njit(cache=True, parallel=True)
 def vote_all(sensed, known, prefix, rho, paper_profile, threshold, votes):
-    """The local one-hot vote of every robot (SPEC 2.2), as rules.vote computes it."""
+    """The local one-hot vote of every robot (docs/algorithm.md §2.2), as rules.vote has it."""
     rows, cols = sensed.shape
     for i in prange(rows):
         side = np.empty(4)

@@ -10,7 +10,7 @@ from .exceptions import CamoError
 
 PROFILES = ("paper", "droplet")
 
-# SPEC section 2: steps per phase and Young's inhibitor weight, per profile.
+# docs/algorithm.md §2: steps per phase and Young's inhibitor weight, per profile.
 PROFILE_DEFAULTS: dict[str, dict[str, Any]] = {
     "paper": {
         "consensus_steps": 35,

@@ -36,7 +36,8 @@ from .robot_io import NOTHING, Display, Message, NoDisplay, Output, Report, Sens
 DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = range(5)
 PHASE_NAMES = ("discovery", "sensing", "consensus", "formation", "done")
 KINDS = ("hello", "color", "vote", "state")
-# Each kind is heard from the first LISTEN[kind] slots (SPEC: descriptor 0-3, consensus 0-7).
+# Each kind is heard from the first LISTEN[kind] slots (docs/algorithm.md §1: vote 0-3,
+# consensus 0-7).
 LISTEN = {"hello": NUM_SLOTS, "color": 4, "vote": 8, "state": NUM_SLOTS}
 STREAM = {
     "hello": rng.STREAM_HELLO,

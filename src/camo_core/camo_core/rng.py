@@ -1,4 +1,4 @@
-"""SPEC section 3: counter-based randomness, a pure function of (seed, stream, a, b, c).
+"""docs/algorithm.md §3: counter-based randomness, a pure function of (seed, stream, a, b, c).
 
 Every random event of a run (a lost message, a noisy sensor) is drawn from
 these, so the distributed swarm and the reference simulator agree bit for bit

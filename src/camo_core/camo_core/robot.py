@@ -3,7 +3,7 @@
 The per-robot reference driver (`perrobot.py`) and the step protocol
 (`protocol.py`, which every robot node runs) use this class. It takes what was *delivered* to the
 robot, applies the
-simulated link (SPEC section 3: a message is lost by a deterministic draw keyed
+simulated link (docs/algorithm.md §3: a message is lost by a deterministic draw keyed
 on sender, receiver and step) and calls the rules of `rules.py`.
 """
 

@@ -1,4 +1,4 @@
-"""The per-robot rules of SPEC section 2, as pure functions of what one robot has.
+"""The per-robot rules of docs/algorithm.md §2, as pure functions of what one robot has.
 
 A robot node calls these with what it received; the per-robot driver of the
 reference simulator calls them for every cell. Missing messages are None.
@@ -15,7 +15,7 @@ from .params import CamoParams
 HORIZONTAL, VERTICAL, MOTTLED = 0, 1, 2
 PATTERN_NAMES = ("horizontal", "vertical", "mottled")
 
-# Slot pairs that stand in for each other when one is missing (SPEC 2.2, 2.4).
+# Slot pairs that stand in for each other when one is missing (docs/algorithm.md §2.2, 2.4).
 OPPOSITE_CARDINAL = {0: 2, 2: 0, 1: 3, 3: 1, 8: 10, 10: 8, 9: 11, 11: 9}
 # Diagonals: mirror across the robot's row, then across its column, then point-opposite.
 DIAGONAL_FALLBACKS: dict[int, tuple[int, int, int]] = {
@@ -25,7 +25,8 @@ DIAGONAL_FALLBACKS: dict[int, tuple[int, int, int]] = {
     7: (6, 4, 5),
 }
 
-# SPEC 2.4: activator and inhibitor slots per pattern (the robot itself is an activator).
+# docs/algorithm.md §2.4: activator and inhibitor slots per pattern (the robot itself is an
+# activator).
 ACTIVATORS: dict[int, tuple[int, ...]] = {
     HORIZONTAL: (1, 3, 9, 11),
     VERTICAL: (0, 2, 8, 10),

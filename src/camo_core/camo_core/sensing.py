@@ -1,4 +1,4 @@
-"""SPEC section 2.1: what each robot senses of the projected background."""
+"""docs/algorithm.md §2.1: what each robot senses of the projected background."""
 
 from __future__ import annotations
 

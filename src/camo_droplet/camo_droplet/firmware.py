@@ -1,8 +1,8 @@
-"""Reading the camouflage firmware's own printouts (SPEC section 5) as a robot's status: no ROS
-here.
+"""Reading the camouflage firmware's own printouts (docs/algorithm.md §5) as a robot's status:
+no ROS here.
 
-Our reading of the three lines SPEC names (the firmware's source is not part of
-SPEC, so this is documented in docs/hardware.md):
+Our reading of the three lines docs/algorithm.md §5 names (what they mean is ours to read,
+and docs/hardware.md says how):
 - `Px: %0.4f Py: %0.4f`: the robot's current p_horizontal and p_vertical;
   p_mottled is what is left, 1 - Px - Py (clipped at 0).
 - `Pre-pattern: [a b c] Cur-pattern: [a b c]`: p before and after one
