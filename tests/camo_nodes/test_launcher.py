@@ -503,3 +503,24 @@ def test_a_runs_params_yaml_repeats_it_bit_for_bit(tmp_path):
     written.pop("domain_id")  # each test run has a domain of its own, given on the command line
     assert rewritten["ros__parameters"].pop("domain_id") != first
     assert rewritten["ros__parameters"] == written
+
+
+def test_the_demo_writes_an_animation_of_the_swarm_at_work(tmp_path):
+    from PIL import Image
+
+    out = subprocess.run(
+        ["bash", str(ROOT / "camo"), "demo", "--domain-id", str(domain()), "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "look at run.gif" in out.stderr + out.stdout
+    gif = tmp_path / "run.gif"
+    assert gif.stat().st_size < 2 * 1024 * 1024
+    frames = set()
+    with Image.open(gif) as image:
+        for k in range(image.n_frames):
+            image.seek(k)
+            frames.add(image.convert("RGB").tobytes())
+    assert len(frames) >= 10  # consensus and formation change over many steps

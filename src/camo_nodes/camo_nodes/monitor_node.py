@@ -31,6 +31,7 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 from visualization_msgs.msg import MarkerArray
 
+from camo_core.animation import write_animation
 from camo_core.exceptions import CamoError
 from camo_core.options import (
     Parser,
@@ -200,16 +201,22 @@ class MonitorNode(Node):
         return self.rounds[round_index].result(self.dead(round_index), partial)
 
     def write(self, round_index: int, folder: Path, label: str, partial: bool = False) -> dict:
-        """summary.json and figure.png of a round (partial: how far a stopped run got)."""
+        """summary.json, figure.png and run.gif of a round (partial: how far a stopped run
+        got)."""
         image = self.images[round_index] if round_index < len(self.images) else None
-        return write_round(
+        title = run_title(label, self.params, "robot nodes")
+        summary = write_round(
             self.result(round_index, partial),
             image,
             folder,
-            run_title(label, self.params, "robot nodes"),
+            title,
             self.progress_line(round_index) if partial else None,
             {"rejected_messages": self.rejected_messages()},
         )
+        write_animation(
+            self.record(round_index), self.dead(round_index), folder / "run.gif", title
+        )
+        return summary
 
     def _publish_pattern(self) -> None:
         latest = self.rounds[max(self.rounds, default=0)]

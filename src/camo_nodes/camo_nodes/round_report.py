@@ -75,7 +75,7 @@ def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dic
         )
     print(
         f"pattern: {summary['pattern']} ({counts}){notes}; "
-        f"wrote {folder}/summary.json and figure.png"
+        f"wrote {folder}/summary.json, figure.png and run.gif"
     )
     return summary
 
