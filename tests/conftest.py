@@ -94,6 +94,13 @@ def foxglove_client():
     return node
 
 
+def pytest_sessionstart(session):
+    """Shared memory that killed processes of an earlier session left would hang this one's."""
+    from camo_nodes.shm import remove_stale
+
+    remove_stale()
+
+
 def pytest_sessionfinish(session, exitstatus):
     """Tests kill robots, workers and launchers: remove the shared-memory files Fast DDS leaves
     of processes killed (those whose lock nobody holds, as `fastdds shm clean` does)."""

@@ -60,16 +60,23 @@ def test_shared_memory_of_a_dead_owner_is_stale_and_of_a_live_one_is_not(tmp_pat
         (tmp_path / name).write_bytes(b"")
     (tmp_path / "sem.fastrtps_dead_mutex").write_bytes(b"")
     (tmp_path / "unrelated").write_bytes(b"")
+    # Left empty by a creator killed at birth (Fast DDS would wait for it for ever), and one
+    # being created right now.
+    (tmp_path / "fastrtps_port7411").write_bytes(b"")
+    os.utime(tmp_path / "fastrtps_port7411", (time.time() - 60, time.time() - 60))
+    (tmp_path / "fastrtps_port7413").write_bytes(b"")
     holder = os.open(tmp_path / "fastrtps_live_el", os.O_RDONLY)
     fcntl.flock(holder, fcntl.LOCK_EX)  # as a live Fast DDS process holds its lock file
     try:
         stale = sorted(p.name for p in stale_files(tmp_path))
-        assert stale == ["fastrtps_dead", "fastrtps_dead_el", "sem.fastrtps_dead_mutex"]
-        assert remove_stale(tmp_path) == 3
+        expected = ["fastrtps_dead", "fastrtps_dead_el", "fastrtps_port7411"]
+        assert stale == [*expected, "sem.fastrtps_dead_mutex"]
+        assert remove_stale(tmp_path) == 4
     finally:
         os.close(holder)
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "fastrtps_live",
         "fastrtps_live_el",
+        "fastrtps_port7413",
         "unrelated",
     ]

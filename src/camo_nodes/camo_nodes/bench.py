@@ -34,7 +34,7 @@ from camo_core.params import CamoParams
 from camo_msgs.msg import Vote
 
 from .launch_config import split_cells
-from .topics import LEAN_NODE, RunTopics, history_qos, tile_name, use_camo_dds_settings
+from .topics import LEAN_NODE, RunTopics, history_qos, start_ros, tile_name
 from .transport import edge_of, listener_qos
 
 BARE_RUN = "bench_bare"
@@ -56,8 +56,7 @@ def bare_worker(side: int, steps: int, block: int, procs: int) -> dict:
         if n is not None and n not in hosted
     }
     topics = RunTopics(BARE_RUN)
-    use_camo_dds_settings()  # the swarm's DDS settings: the same footing
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    start_ros("camo bench ros", [], signal_handler_options=SignalHandlerOptions.NO)  # same footing
     node = rclpy.create_node(f"bare_{block}", **LEAN_NODE)
     qos = history_qos(len(mine) * (steps + 4))
     name = tile_name(first, last)

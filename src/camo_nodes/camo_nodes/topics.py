@@ -28,6 +28,8 @@ from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
 from camo_core.params import CamoParams, ParameterError
 from camo_core.params_file import check_ros_args
 
+from .shm import remove_stale
+
 FASTDDS_PROFILE = Path(__file__).with_name("fastdds.xml")
 
 
@@ -43,6 +45,7 @@ def start_ros(prog: str, args: list[str] | None = None, **options) -> None:
     first and what rcl refuses is said in one line (rcl's text without its source locations):
     `prog: error: ...` and exit code 2, as for any bad command line."""
     use_camo_dds_settings()
+    remove_stale()  # a port file a killed process left empty would hang this one (shm.py)
     try:
         check_ros_args(sys.argv if args is None else args)
         try:
