@@ -30,7 +30,7 @@ from .graph_topics import taking_qos
 
 # Before listing: at least DISCOVERY s for the graph to fill (ros2cli's daemon keeps it filled),
 # then until it has not changed for SETTLED s, MAX_DISCOVERY s at most (a loaded machine is slow).
-DISCOVERY, SETTLED, MAX_DISCOVERY = 2.0, 1.0, 6.0
+DISCOVERY, SETTLED, MAX_DISCOVERY = 2.0, 1.0, 8.0
 
 
 def as_plain(message, no_arr: bool = False):
@@ -58,11 +58,14 @@ def wait_for_graph(node: Node) -> None:
     while True:
         rclpy.spin_once(node, timeout_sec=0.05)
         now = time.monotonic()
-        graph = (node.get_topic_names_and_types(), node.get_node_names_and_namespaces())
+        nodes = node.get_node_names_and_namespaces()
+        graph = (node.get_topic_names_and_types(), nodes)
         if graph != seen:
             seen, changed = graph, now
+        others = any(name != node.get_name() for name, _ in nodes)
         waited = now - started
-        if waited > MAX_DISCOVERY or (waited > DISCOVERY and now - changed > SETTLED):
+        # A graph of nobody but this tool has not settled: it has not been heard yet.
+        if waited > MAX_DISCOVERY or (others and waited > DISCOVERY and now - changed > SETTLED):
             return
 
 
