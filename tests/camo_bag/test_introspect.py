@@ -10,7 +10,7 @@ import sys
 import time
 
 import pytest
-from support import ROOT, domain
+from support import ROOT, bag_tool, domain
 
 TALKER = """
 import sys, rclpy
@@ -41,14 +41,8 @@ def talker():
     proc.wait()
 
 
-def camo(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "camo_bag.introspect", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
+def camo(*args: str) -> subprocess.CompletedProcess:
+    return bag_tool("introspect", *args)
 
 
 def test_topic_list_shows_names_and_types_as_ros2_does(talker):

@@ -126,10 +126,10 @@ def write_params_file(
         elif isinstance(value, list | tuple):
             value = [str(v) if isinstance(v, Path) else v for v in value]
         values[action.dest] = value
-    if "pattern" in values or "image" in values or not getattr(args, "default_pattern", None):
-        pass
-    else:  # the built-in background it ran on, named: a later default cannot change it
-        values = {"pattern": args.default_pattern, **values}
+    default = getattr(args, "default_pattern", None)
+    if default and not {"pattern", "image"} & values.keys():
+        # the built-in background it ran on, named: a later default cannot change it
+        values = {"pattern": default, **values}
     path = folder / "params.yaml"
     path.write_text(
         f"# {parser.prog}: repeat with --params-file {path}\n"

@@ -25,7 +25,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from camo_core.exceptions import CamoError
-from camo_core.options import node_command_line, node_help, wants_help
+from camo_core.options import node_help, wants_help
 from camo_core.params import CamoParams, ParameterError
 from camo_core.protocol import CONSENSUS, NO_PATTERN, SENSING
 from camo_core.sensing import Calibration
@@ -217,12 +217,9 @@ def main(args=None) -> int:
         print(node_help("droplet_bridge", about, {**ROBOT_PARAMETERS, **BRIDGE_PARAMETERS}))
         return 0
     stop = StopFlag()
-    try:
-        args = node_command_line("droplet_bridge", args)
-    except CamoError as exc:
-        print(f"droplet_bridge: error: {exc}", file=sys.stderr)
-        return 2
-    start_ros("droplet_bridge", args, signal_handler_options=SignalHandlerOptions.NO)
+    start_ros(
+        "droplet_bridge", args, node_options=True, signal_handler_options=SignalHandlerOptions.NO
+    )
     try:
         params, row, col, *timeouts, topics, values = robot_parameters(
             {**ROBOT_PARAMETERS, **BRIDGE_PARAMETERS}, stop, check_bridge_values

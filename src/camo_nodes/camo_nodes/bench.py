@@ -266,25 +266,16 @@ def main(argv: list[str] | None = None) -> int:
         for side in map(int, args.sides.split(","))
         if side
     ]
-    added = {}
-    if args.record_side:
-        added["recording"] = added_cost(
-            args.record_side,
-            args.procs,
-            domain,
-            args.out / "record",
-            args.repeat,
-            lambda folder: ["--record", str(folder / "bag")],
-        )
-    if args.view_side:
-        added["live view"] = added_cost(
-            args.view_side,
-            args.procs,
-            domain,
-            args.out / "view",
-            args.repeat,
-            lambda folder: ["--foxglove", "0"],  # no client connected
-        )
+    # What recording, and a live view with no client connected, add to a run.
+    extras = {
+        "recording": (args.record_side, "record", lambda out: ["--record", str(out / "bag")]),
+        "live view": (args.view_side, "view", lambda out: ["--foxglove", "0"]),
+    }
+    added = {
+        what: added_cost(side, args.procs, domain, args.out / folder, args.repeat, extra)
+        for what, (side, folder, extra) in extras.items()
+        if side
+    }
     if args.json:
         print(json.dumps({"rates": rates, "whole": whole, **added}))
     else:

@@ -22,7 +22,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from camo_core.exceptions import CamoError
-from camo_core.options import node_command_line, node_help, wants_help
+from camo_core.options import node_help, wants_help
 from camo_core.params import CamoParams, ParameterError
 from camo_core.protocol import StepProtocol
 from camo_core.robot_io import NOTHING, Display, Message, Output, Sensor
@@ -223,12 +223,9 @@ def main(args=None) -> int:
         print(node_help("robot_node", "One robot of the camouflage swarm.", ROBOT_PARAMETERS))
         return 0
     stop = StopFlag()
-    try:
-        args = node_command_line("robot_node", args)
-    except CamoError as exc:
-        print(f"robot_node: error: {exc}", file=sys.stderr)
-        return 2
-    start_ros("robot_node", args, signal_handler_options=SignalHandlerOptions.NO)
+    start_ros(
+        "robot_node", args, node_options=True, signal_handler_options=SignalHandlerOptions.NO
+    )
     try:
         params, row, col, step_timeout, discovery_timeout, topics = robot_parameters(
             ROBOT_PARAMETERS, stop

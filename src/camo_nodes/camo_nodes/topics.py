@@ -25,6 +25,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import Image
 
 from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
+from camo_core.options import node_command_line
 from camo_core.params import CamoParams, ParameterError
 from camo_core.params_file import check_ros_args
 
@@ -40,13 +41,19 @@ def use_camo_dds_settings(environ=os.environ) -> None:
     environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(FASTDDS_PROFILE))
 
 
-def start_ros(prog: str, args: list[str] | None = None, **options) -> None:
-    """rclpy.init for a process of ours, with camo's DDS settings. Parameters files are checked
-    first and what rcl refuses is said in one line (rcl's text without its source locations):
-    `prog: error: ...` and exit code 2, as for any bad command line."""
+def start_ros(
+    prog: str, args: list[str] | None = None, node_options: bool = False, **options
+) -> None:
+    """rclpy.init for a process of ours, with camo's DDS settings. With `node_options`, `args`
+    is a node's whole command line, whose domain and network options before --ros-args set
+    its environment first. Parameters files are checked before rcl reads them, and what rcl
+    refuses is said in one line (rcl's text without its source locations): `prog: error: ...`
+    and exit code 2, as for any bad command line."""
     use_camo_dds_settings()
     remove_stale()  # a port file a killed process left empty would hang this one (shm.py)
     try:
+        if node_options:
+            args = node_command_line(prog, args)
         check_ros_args(sys.argv if args is None else args)
         try:
             rclpy.init(args=args, **options)

@@ -19,7 +19,7 @@ from std_msgs.msg import String
 
 from camo_core.backgrounds import BACKGROUNDS, background
 from camo_core.exceptions import CamoError
-from camo_core.options import node_command_line, node_help, wants_help
+from camo_core.options import node_help, wants_help
 from camo_core.sensing import load_image
 from camo_nodes.topics import (
     LATCHED,
@@ -85,12 +85,7 @@ def main(args=None) -> int:
         about = "Publishes the background image projected onto the arena (latched)."
         print(node_help("projector_node", about, PROJECTOR_PARAMETERS))
         return 0
-    try:
-        args = node_command_line("projector_node", args)
-    except CamoError as exc:
-        print(f"projector_node: error: {exc}", file=sys.stderr)
-        return 2
-    start_ros("projector_node", args)
+    start_ros("projector_node", args, node_options=True)
     node = None
     try:
         reader = Node("projector_run", **LEAN_NODE)
