@@ -162,7 +162,7 @@ def test_large_grid_figure_is_drawn_from_resized_grids(tmp_path, monkeypatch):
     image = np.random.default_rng(0).integers(0, 256, (2200, 1200, 3), dtype=np.uint8)
     path = figures.run_figure(synthetic_run(rows, cols, dead=True), image, tmp_path / "big.png")
     figure = cv2.imread(str(path))
-    assert figure.shape == (360, 1700, 3)  # figsize 17 x 3.6 inches at 100 dpi, as ever
+    assert figure.shape == (390, 1700, 3)  # figsize 17 x 3.9 inches at 100 dpi
     assert len(calls) == 4  # input image, sensed, initial, final
     cap = figures.MAX_PANEL_PX
     assert calls[0][0] == (cap, cap, 3)  # each side on its own
@@ -178,6 +178,6 @@ def test_small_grid_figure_is_drawn_as_before(tmp_path, monkeypatch):
     calls = drawn_panels(monkeypatch)
     image = np.random.default_rng(0).integers(0, 256, (128, 192), dtype=np.uint8)
     path = figures.run_figure(synthetic_run(rows, cols), image, tmp_path / "small.png")
-    assert cv2.imread(str(path)).shape == (360, 1700, 3)
+    assert cv2.imread(str(path)).shape == (390, 1700, 3)
     assert [shape for shape, _ in calls] == [(128, 192), (rows, cols), (rows, cols), (rows, cols)]
     assert not any("extent" in kwargs for _, kwargs in calls)

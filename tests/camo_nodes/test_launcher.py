@@ -277,6 +277,16 @@ def test_run_writes_timing(tmp_path):
     assert 0 < timing["startup_s"] <= timing["launch_to_done_s"]
 
 
+def test_without_a_projector_the_title_names_the_background_topic_not_the_default(tmp_path):
+    from camo_nodes.launch_config import build_parser, config_from
+
+    args = ["--no-projector", "--out", str(tmp_path / "a")]
+    config = config_from(build_parser().parse_args(args))
+    assert config.labels == [f"the background on {config.topics.background}"]
+    config = config_from(build_parser().parse_args(["--out", str(tmp_path / "b")]))
+    assert config.labels == ["built-in forest"]
+
+
 def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one(tmp_path):
     import rclpy
     from std_msgs.msg import String

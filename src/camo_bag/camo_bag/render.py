@@ -46,6 +46,7 @@ class RecordedRun:
     rounds: Rounds
     images: Backgrounds  # round k camouflaged images[k]
     elapsed_s: dict[int, float]  # span of each round's statuses in the bag
+    bridged: frozenset[int] = frozenset()  # robots that were real Droplets
 
 
 def load_run(path: str | Path) -> RecordedRun:
@@ -87,7 +88,8 @@ def load_run(path: str | Path) -> RecordedRun:
     if not rounds:
         raise BagError(f"{path} holds no robot status: nothing to render")
     elapsed = {index: (max(t) - min(t)) / 1e9 for index, t in times.items()}
-    return RecordedRun(params, setup.get("backgrounds", []), rounds, images, elapsed)
+    bridged = frozenset(setup.get("bridged", []))
+    return RecordedRun(params, setup.get("backgrounds", []), rounds, images, elapsed, bridged)
 
 
 class IncompleteBag(CamoError):
@@ -117,7 +119,8 @@ def render(path: str | Path, out: Path, partial: bool = False) -> list[dict]:
         if index < len(results) and "rejected_messages" in results[index]:
             extra["rejected_messages"] = results[index]["rejected_messages"]
         lacks = "; ".join(gaps_of_round(gaps, index))
-        summaries.append(write_round(result, image, folder, title, lacks or None, extra))
+        marks = record.marks(~record.finished, run.bridged)
+        summaries.append(write_round(result, image, folder, title, lacks or None, extra, marks))
         figures.timeline_figure(
             record.timeline(),
             folder / "timeline.png",

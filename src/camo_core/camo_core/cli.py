@@ -23,6 +23,7 @@ from .options import (
     params_from,
     write_params_file,
 )
+from .output import run_title
 from .progress import ProgressBar
 from .result import write_summary
 from .sensing import sense_image
@@ -72,8 +73,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
         result,
         image,
         folder / "figure.png",
-        title=f"{label}, {params.rows}x{params.cols} robots, {params.profile} profile, "
-        f"seed {params.seed}, rho_meas {params.rho_meas:g}, rho_comm {params.rho_comm:g}",
+        title=run_title(label, params),
+        marks=None if exempt is None else {"real reading": exempt},
     )
     counts = ", ".join(f"{k} {v}" for k, v in result.selection_counts.items())
     print(
@@ -98,6 +99,7 @@ def cmd_errors(args: argparse.Namespace) -> int:
         params.count / 2,
         folder / "errors.png",
         title=f"{label}, {params.rows}x{params.cols} robots, {args.trials} trials per point",
+        cells=params.count,
     )
     print(f"wrote {folder}/errors.csv and errors.png")
     return 0

@@ -15,7 +15,16 @@ from .progress import ProgressBar
 from .simulator import simulate
 
 MODES = ("measurement", "communication", "both")
-CSV_COLUMNS = ("mode", "rho", "trials", "mean_diff", "std_diff", "correct_rate")
+CSV_COLUMNS = (
+    "mode",
+    "rho",
+    "trials",
+    "mean_diff",
+    "std_diff",
+    "p10_diff",
+    "p90_diff",
+    "correct_rate",
+)
 
 
 @dataclass
@@ -25,6 +34,8 @@ class ErrorPoint:
     trials: int
     mean_diff: float
     std_diff: float
+    p10_diff: float  # the trials' 10th and 90th percentiles: the figure's band
+    p90_diff: float
     correct_rate: float
 
     def as_row(self) -> dict:
@@ -67,6 +78,8 @@ def error_analysis(
                     trials,
                     float(np.mean(diffs)),
                     float(np.std(diffs)),
+                    float(np.percentile(diffs, 10)),
+                    float(np.percentile(diffs, 90)),
                     correct / trials,
                 )
             )

@@ -8,6 +8,7 @@ import cv2
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.figure
 import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
@@ -36,36 +37,66 @@ def _shown(values: np.ndarray, nearest: bool) -> tuple[np.ndarray, dict]:
     return small, {"extent": (-0.5, cols - 0.5, rows - 0.5, -0.5)}
 
 
+# How the run figure marks robots that did not simply run (name -> scatter style and legend).
+MARK_STYLES = {
+    "dead": {"marker": "x", "color": "red", "label": "dead: no result"},
+    "silent": {
+        "marker": "o",
+        "facecolors": "none",
+        "edgecolors": "darkorange",
+        "label": "silent for a while: a neighbour gave up on it",
+    },
+    "bridged": {
+        "marker": "s",
+        "facecolors": "none",
+        "edgecolors": "deepskyblue",
+        "label": "real Droplet (bridged)",
+    },
+    "real reading": {
+        "marker": "D",
+        "facecolors": "none",
+        "edgecolors": "deepskyblue",
+        "label": "real sensor reading (--sensed)",
+    },
+}
+
+
 def run_figure(
-    result: RunResult, image: np.ndarray | None, path: str | Path, title: str = ""
+    result: RunResult,
+    image: np.ndarray | None,
+    path: str | Path,
+    title: str = "",
+    marks: dict[str, np.ndarray] | None = None,
 ) -> Path:
-    """One row of five panels: input, sensed grid, consensus curves, initial and final states."""
-    fig, axes = plt.subplots(1, 5, figsize=(17, 3.6))
+    """figure.png: run_plot's figure, saved."""
+    return _save(run_plot(result, image, title, marks), path)
+
+
+def run_plot(
+    result: RunResult,
+    image: np.ndarray | None,
+    title: str = "",
+    marks: dict[str, np.ndarray] | None = None,
+) -> matplotlib.figure.Figure:
+    """One row of five panels: background, sensed grid, consensus curves, initial and final
+    states.
+
+    marks: name (a key of MARK_STYLES) -> rows x cols bool, the robots to mark on the grids;
+    dead robots (those not alive in the result) are always marked.
+    """
+    fig, axes = plt.subplots(1, 5, figsize=(17, 3.9))
     if image is not None:
         shown, extent = _shown(image, nearest=False)
         shown = shown if shown.ndim == 2 else shown[:, :, ::-1]
         axes[0].imshow(shown, cmap="gray", vmin=0, vmax=255, **extent)
-    axes[0].set_title("input image")
+    axes[0].set_title("background")
     shown, extent = _shown(result.sensed, nearest=True)
     axes[1].imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
-    axes[1].set_title(f"sensed ({result.params.rows}x{result.params.cols})")
-    trace = result.consensus_trace
-    for k, name in enumerate(PATTERN_COLORS):
-        axes[2].plot(
-            range(len(trace)),
-            trace[:, k],
-            label=f"p_{name[0]} ({name})",
-            color=PATTERN_COLORS[name],
-        )
-    axes[2].axhline(0.5, color="red", linewidth=1.2)
-    axes[2].set_ylim(-0.02, 1.02)
-    axes[2].set_xlabel("consensus step")
-    axes[2].set_ylabel("mean p over robots")
-    axes[2].legend(fontsize=7, loc="best")
-    axes[2].set_title(f"consensus: {result.majority_pattern}")
+    axes[1].set_title(f"sensed grey ({result.params.rows}x{result.params.cols} robots)")
+    _consensus_panel(axes[2], result)
     for ax, states, label in (
-        (axes[3], result.initial, "initial state"),
-        (axes[4], result.final, "generated pattern"),
+        (axes[3], result.initial, "initial state (dark: sensed < 127)"),
+        (axes[4], result.final, f"generated pattern ({result.majority_pattern})"),
     ):
         shown = np.where(states == 1, 0, 255).astype(float)
         if result.alive is not None:
@@ -73,42 +104,134 @@ def run_figure(
         shown, extent = _shown(shown, nearest=True)
         ax.imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
         ax.set_title(label)
+    all_marks = dict(marks or {})
+    if result.alive is not None:
+        all_marks["dead"] = ~result.alive
+    handles = _mark(axes[1], all_marks) + _mark(axes[3], all_marks) + _mark(axes[4], all_marks)
+    if handles:
+        legend = {h.get_label(): h for h in handles}
+        fig.legend(legend.values(), legend.keys(), loc="lower right", fontsize=8, ncol=4)
     for ax in (axes[0], axes[1], axes[3], axes[4]):
         ax.set_xticks([])
         ax.set_yticks([])
     if title:
         fig.suptitle(title)
-    return _save(fig, path)
+    fig.tight_layout(rect=(0, 0.07 if handles else 0, 1, 1))
+    return fig
+
+
+def _consensus_panel(ax, result: RunResult) -> None:
+    """Each pattern's mean p over robots by consensus step, the band from the least to the
+    greatest robot's p around it, and the p = 0.5 line the paper draws."""
+    trace = result.consensus_trace
+    steps = range(len(trace))
+    spread = result.consensus_range
+    for k, name in enumerate(PATTERN_COLORS):
+        color = PATTERN_COLORS[name]
+        ax.plot(steps, trace[:, k], label=f"p_{name[0]} ({name}), mean", color=color)
+        if spread is not None and len(spread) == len(trace):
+            ax.fill_between(steps, spread[:, k, 0], spread[:, k, 1], color=color, alpha=0.15)
+    if spread is not None and len(spread):
+        ax.fill_between([], [], [], color="grey", alpha=0.3, label="band: least to greatest robot")
+    ax.axhline(0.5, color="red", linewidth=1.2, label="p = 0.5")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("consensus step")
+    ax.set_ylabel("p over robots")
+    ax.legend(fontsize=6.5, loc="best")
+    ax.set_title(f"consensus: {result.majority_pattern}")
+
+
+def _mark(ax, marks: dict[str, np.ndarray]) -> list:
+    """Scatter the marked robots of each kind on a grid panel; their legend handles."""
+    handles = []
+    for name, mask in marks.items():
+        rows, cols = np.nonzero(np.asarray(mask, bool))
+        if len(rows):
+            handles.append(ax.scatter(cols, rows, s=28, linewidths=1.3, **MARK_STYLES[name]))
+    return handles
+
+
+# The paper's error figure in its colours: red measurement, blue communication (both: black).
+ERROR_MODES = (
+    ("measurement", "measurement error only", "tab:red"),
+    ("communication", "communication error only", "tab:blue"),
+    ("both", "both, equal probability", "black"),
+)
+# What the paper reports of its error analysis (Li, Klingner, Correll, arXiv 1709.07051, Fig.
+# "errorAnalysis" and its text): it gives no table, only these two figures.
+PAPER_ROBUST_UP_TO = (0.15, 0.2)  # "robust up to about 0.15-0.2, then sharply worse"
+PAPER_RANDOM_8X8 = 32  # "a random 8x8 pattern differs by 32 on average"
 
 
 def errors_figure(
-    rows: list[dict], random_level: float, path: str | Path, title: str = ""
+    rows: list[dict], random_level: float, path: str | Path, title: str = "", cells: int = 64
 ) -> Path:
-    """Mean total absolute difference against error probability, one line per mode."""
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for mode, label in (
-        ("measurement", "measurement error only"),
-        ("communication", "communication error only"),
-        ("both", "both, equal probability"),
-    ):
-        data = [r for r in rows if r["mode"] == mode]
-        ax.errorbar(
-            [r["rho"] for r in data],
-            [r["mean_diff"] for r in data],
-            yerr=[r["std_diff"] for r in data],
-            marker="o",
-            capsize=3,
-            label=label,
-        )
-    ax.axhline(
-        random_level, color="gray", linestyle="--", label=f"random pattern ({random_level:g})"
+    """errors.png: errors_plot's figure, saved."""
+    return _save(errors_plot(rows, random_level, title, cells), path)
+
+
+def errors_plot(
+    rows: list[dict], random_level: float, title: str = "", cells: int = 64
+) -> matplotlib.figure.Figure:
+    """Left: the mean total absolute difference to the error-free pattern against the error
+    probability, with the 10th-90th percentile band of the trials (a count: never below zero);
+    right: the rate of trials that chose the error-free run's pattern. What the paper reports is
+    overlaid (its random-pattern level only for an 8x8 swarm, `cells` = 64)."""
+    fig, (diff_ax, rate_ax) = plt.subplots(1, 2, figsize=(12, 4.8))
+    for mode, label, color in ERROR_MODES:
+        data = sorted((r for r in rows if r["mode"] == mode), key=lambda r: r["rho"])
+        if not data:
+            continue
+        rho = [r["rho"] for r in data]
+        diff_ax.plot(rho, [r["mean_diff"] for r in data], marker="o", color=color, label=label)
+        if all("p10_diff" in r for r in data):
+            diff_ax.fill_between(
+                rho,
+                [r["p10_diff"] for r in data],
+                [r["p90_diff"] for r in data],
+                color=color,
+                alpha=0.15,
+            )
+        rate_ax.plot(rho, [r["correct_rate"] for r in data], marker="o", color=color, label=label)
+    diff_ax.fill_between([], [], [], color="grey", alpha=0.3, label="band: 10th-90th percentile")
+    diff_ax.axhline(
+        random_level,
+        color="grey",
+        linestyle="--",
+        label=f"a random pattern differs by {random_level:g} (half the robots)",
     )
-    ax.set_xlabel("error probability")
-    ax.set_ylabel("total absolute difference to error-free pattern")
-    ax.legend()
+    for ax in (diff_ax, rate_ax):
+        ax.axvspan(
+            *PAPER_ROBUST_UP_TO,
+            color="gold",
+            alpha=0.25,
+            label="paper: robust up to 0.15-0.2, then sharply worse",
+        )
+        ax.set_xlabel("error probability")
+    if cells == 64:
+        diff_ax.plot(
+            [], [], " ", label=f"paper: a random 8x8 pattern differs by {PAPER_RANDOM_8X8}"
+        )
+    diff_ax.set_ylim(bottom=0)
+    diff_ax.set_ylabel(f"robots whose final state differs\nfrom the error-free run (of {cells})")
+    diff_ax.set_title("pattern difference")
+    diff_ax.legend(fontsize=7.5)
+    rate_ax.set_ylim(-0.02, 1.02)
+    rate_ax.set_ylabel("share of trials that chose the error-free pattern")
+    rate_ax.set_title("correct-pattern rate")
+    rate_ax.legend(fontsize=7.5, loc="lower left")
+    fig.text(
+        0.01,
+        0.01,
+        "paper: Li, Klingner, Correll, arXiv 1709.07051, Fig. errorAnalysis and its text "
+        "(mean of 10 trials on its forest photograph; it gives no table of values)",
+        fontsize=7,
+        color="dimgray",
+    )
     if title:
-        ax.set_title(title)
-    return _save(fig, path)
+        fig.suptitle(title)
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    return fig
 
 
 def timeline_figure(
@@ -151,11 +274,11 @@ def timeline_figure(
         x=0.02,
         ha="left",
     )
+    fig.tight_layout()
     return _save(fig, path)
 
 
 def _save(fig, path: str | Path) -> Path:
-    fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=100)
     plt.close(fig)

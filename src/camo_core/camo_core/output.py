@@ -36,9 +36,10 @@ def write_round(
     title: str,
     incomplete: str | None = None,
     extra: dict | None = None,
+    marks: dict[str, np.ndarray] | None = None,
 ) -> dict:
     """summary.json (with `incomplete` saying how far a stopped run got, and `extra` keys) and
-    figure.png."""
+    figure.png (with `marks`: the robots it marks, as figures.run_figure takes them)."""
     summary = result.summary()
     if incomplete is not None:
         # What robots never said is unknown, not a number: null, never NaN.
@@ -46,5 +47,5 @@ def write_round(
         summary["incomplete"] = incomplete
     summary.update(extra or {})
     write_summary(summary, folder)
-    figures.run_figure(result, image, folder / "figure.png", title=title)
+    figures.run_figure(result, image, folder / "figure.png", title=title, marks=marks)
     return summary

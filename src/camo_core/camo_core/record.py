@@ -14,7 +14,7 @@ import numpy as np
 
 from .params import CamoParams
 from .protocol import CONSENSUS, DONE, FORMATION
-from .result import RunResult, mean_p
+from .result import RunResult, mean_p, p_range
 from .rules import select_pattern
 
 
@@ -103,6 +103,17 @@ class RoundRecord:
         gone = self.declared_silent() if lost is None else self.declared_silent() | lost
         return ~self.finished & gone
 
+    def marks(self, dead: np.ndarray, bridged=()) -> dict[str, np.ndarray]:
+        """The robots a figure marks besides the dead (rows x cols masks): those a neighbour gave
+        up on for a while that finished all the same, and the bridged Droplets (ids)."""
+        shape = (self.params.rows, self.params.cols)
+        real = np.zeros(self.params.count, bool)
+        real[[i for i in bridged if 0 <= i < self.params.count]] = True
+        return {
+            "silent": (self.declared_silent() & ~dead).reshape(shape),
+            "bridged": real.reshape(shape),
+        }
+
     def timeline(self) -> list[tuple[str, np.ndarray]]:
         """The swarm at each consensus step (selected pattern, -1 unknown) and formation step
         (state)."""
@@ -131,11 +142,13 @@ class RoundRecord:
         else:
             alive = self.finished & ~dead
             selected = self.selected
-        trace = []
+        trace, spread = [], []
         for step in self.p_trace:
             if np.isnan(step[alive]).any():
                 break
             trace.append(mean_p(step[alive]))
+            if alive.any():
+                spread.append(p_range(step[alive]))
         first = self.p_trace[0]
         votes = np.where(np.isnan(first).any(axis=1), -1, np.argmax(np.nan_to_num(first), axis=1))
         return RunResult(
@@ -149,6 +162,7 @@ class RoundRecord:
             consensus_trace=np.array(trace).reshape(-1, 3),
             elapsed_s=time.monotonic() - self.started,
             alive=None if alive.all() else alive.reshape(shape),
+            consensus_range=np.array(spread).reshape(-1, 3, 2) if spread else None,
         )
 
 

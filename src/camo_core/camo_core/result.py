@@ -42,6 +42,12 @@ def mean_p(p: np.ndarray) -> np.ndarray:
     return kernels.mean_p(np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3))
 
 
+def p_range(p: np.ndarray) -> np.ndarray:
+    """3 x 2: the least and the greatest p over robots (p: ... x 3), per pattern."""
+    flat = np.asarray(p, dtype=np.float64).reshape(-1, 3)
+    return np.stack([flat.min(axis=0), flat.max(axis=0)], axis=1)
+
+
 @dataclass
 class RunResult:
     params: CamoParams
@@ -54,6 +60,9 @@ class RunResult:
     consensus_trace: np.ndarray  # (consensus_steps + 1) x 3, mean p before step 0 and after each
     elapsed_s: float = 0.0
     alive: np.ndarray | None = None  # rows x cols bool; None means every robot took part
+    # (consensus_steps + 1) x 3 x 2: the least and the greatest p over robots at each step, the
+    # spread the figure draws around the mean; None where a driver did not keep it.
+    consensus_range: np.ndarray | None = None
 
     @property
     def selection_counts(self) -> dict[str, int]:

@@ -17,7 +17,7 @@ import numpy as np
 from . import kernels, rng
 from .grid import NEIGHBOR_OFFSETS, NUM_SLOTS
 from .params import CamoParams
-from .result import RunResult, mean_p
+from .result import RunResult, mean_p, p_range
 from .rules import select_pattern
 from .sensing import apply_noise
 
@@ -89,7 +89,7 @@ def simulate(
     initial = (sensed < 127).astype(np.uint8)
 
     # Phase 2: consensus.
-    p, trace = _consensus(grid, params, votes, known_mask, progress)
+    p, trace, spread = _consensus(grid, params, votes, known_mask, progress)
     selected = select_pattern(p)
 
     # Phase 3: pattern formation.
@@ -105,6 +105,7 @@ def simulate(
         final=final,
         consensus_trace=trace,
         elapsed_s=time.perf_counter() - start,
+        consensus_range=spread,
     )
 
 
@@ -129,7 +130,7 @@ def _consensus(
     votes: np.ndarray,
     known_mask: np.ndarray,
     progress: Progress | None,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     degree = np.zeros((grid.rows, grid.cols), np.uint8)
     for s in range(8):
         degree += ((known_mask >> s) & 1).astype(np.uint8)
@@ -137,15 +138,16 @@ def _consensus(
     for k in range(3):
         p[:, :, k] = votes == k
     nxt = np.empty_like(p)
-    trace = [mean_p(p)]
+    trace, spread = [mean_p(p)], [p_range(p)]
     for step in range(params.consensus_steps):
         prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_CONSENSUS, step))
         kernels.consensus_step(p, nxt, known_mask, degree, prefix, params.rho_comm)
         p, nxt = nxt, p
         trace.append(mean_p(p))
+        spread.append(p_range(p))
         if progress:
             progress("consensus", step + 1, params.consensus_steps)
-    return p, np.array(trace)
+    return p, np.array(trace), np.array(spread)
 
 
 def _formation(

@@ -235,6 +235,8 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
     topics = RunTopics(check_run_id(args.run_id) if args.run_id else new_run_id())
     if args.no_projector:
         projector = None
+        # The background is whatever another projector publishes: say so, not the default's name.
+        label = f"the background on {topics.background}"
     elif args.image:
         projector = ["-p", f"image:={Path(args.image).resolve()}"]
     else:

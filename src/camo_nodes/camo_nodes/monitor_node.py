@@ -212,6 +212,7 @@ class MonitorNode(Node):
             title,
             self.progress_line(round_index) if partial else None,
             {"rejected_messages": self.rejected_messages()},
+            self.record(round_index).marks(self.dead(round_index), self.bridged),
         )
         write_animation(
             self.record(round_index), self.dead(round_index), folder / "run.gif", title
