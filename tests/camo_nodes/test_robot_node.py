@@ -115,6 +115,14 @@ def test_wrong_kinds_and_unknown_parameters_are_one_line_not_a_traceback():
         assert "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
 
 
+def test_an_argument_rcl_does_not_know_is_one_line_not_a_traceback():
+    out = robot_node("--help", "-p", "row:=1")
+    assert out.returncode == 2, out.stderr
+    assert (
+        out.stderr.strip() == "robot_node: error: unknown ROS arguments after --ros-args: --help"
+    )
+
+
 def test_an_integer_where_a_number_is_declared_is_that_number():
     # rho_comm:=0 is an integer to ROS; the robot takes it as 0.0 and goes on to its checks.
     out = robot_node("-p", "rho_comm:=0", "-p", "row:=9", "-p", "run_id:=x")

@@ -62,6 +62,9 @@ def start_ros(
                 "failed to initialize rcl: "
             )
             raise UsageError(f"ROS arguments refused: {' '.join(text.split())}") from None
+        except _rclpy.UnknownROSArgsError as exc:  # `--ros-args --help`, say: not an RCLError
+            unknown = " ".join(re.findall(r"'([^']*)'", str(exc))) or str(exc)  # "['--help']"
+            raise UsageError(f"unknown ROS arguments after --ros-args: {unknown}") from None
     except UsageError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE) from None

@@ -1,0 +1,81 @@
+"""Write docs/cli/COMMAND.txt, the --help text of every ./camo command, from the parsers.
+
+`./camo COMMAND --help` prints these files, so that it answers at once and before any set-up
+(a command's parser sits in modules that import NumPy, OpenCV, numba or rclpy).
+tests/test_help.py fails when a file differs from what its parser prints: after changing an
+option, run `.venv/bin/python tools/write_help.py` (with the workspace sourced, as ./camo test
+has it) and commit the texts.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+FOLDER = ROOT / "docs" / "cli"
+COLUMNS = "100"  # the width the texts are written at, whatever the terminal
+
+# The file a `./camo` command line's help comes from (the command, and for commands with
+# subcommands the subcommand), and the module call that prints it.
+HELP = {
+    "sim": ["camo_core.cli", "sim"],
+    "errors": ["camo_core.cli", "errors"],
+    "bench": ["camo_core.cli", "bench"],
+    "bench-sim": ["camo_core.cli", "bench"],
+    "bench-ros": ["camo_nodes.bench"],
+    "bench-soak": ["camo_nodes.soak"],
+    "run": ["camo_nodes.launcher"],
+    "demo": ["camo_nodes.launcher"],
+    "worker": ["camo_nodes.worker"],
+    "discovery-server": ["camo_nodes.discovery_server"],
+    "record": ["camo_bag.recorder_node"],
+    "view": ["camo_bag.view_node"],
+    "replay": ["camo_bag.replay"],
+    "render": ["camo_bag.render"],
+    "bag": ["camo_bag.cli"],
+    "bag-info": ["camo_bag.cli", "info"],
+    "bag-repair": ["camo_bag.cli", "repair"],
+    "droplet-emulator": ["camo_droplet.emulator"],
+    "droplet-bridge": ["camo_droplet.bridge_node"],
+    "topic": ["camo_bag.introspect", "topic"],
+    "topic-list": ["camo_bag.introspect", "topic", "list"],
+    "topic-echo": ["camo_bag.introspect", "topic", "echo"],
+    "topic-hz": ["camo_bag.introspect", "topic", "hz"],
+    "node": ["camo_bag.introspect", "node"],
+    "node-list": ["camo_bag.introspect", "node", "list"],
+    "robot": ["camo_nodes.robot_node"],
+    "projector": ["camo_projector.projector_node"],
+    "monitor": ["camo_nodes.monitor_node"],
+}
+
+
+def live_help(key: str) -> str:
+    """What the parser behind `key` prints for --help, at the texts' width."""
+    env = {**os.environ, "COLUMNS": COLUMNS}
+    done = subprocess.run(
+        [sys.executable, "-m", *HELP[key], "--help"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"{key}: --help exited {done.returncode}: {done.stderr.strip()}")
+    return done.stdout
+
+
+def main() -> int:
+    FOLDER.mkdir(parents=True, exist_ok=True)
+    for stale in set(FOLDER.glob("*.txt")) - {FOLDER / f"{key}.txt" for key in HELP}:
+        stale.unlink()
+    for key in HELP:
+        (FOLDER / f"{key}.txt").write_text(live_help(key))
+    print(f"wrote {len(HELP)} help texts into {FOLDER.relative_to(ROOT)}/")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
