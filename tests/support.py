@@ -35,6 +35,28 @@ def run_camo(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     )
 
 
+def sweep(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run `./camo sweep` (as the camo script does, inside ./camo test)."""
+    return subprocess.run(
+        [sys.executable, "-m", "camo_sweep.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
+
+
+def sweep_table(folder) -> list[dict]:
+    """A sweep table's rows by trial id, without the run times (the one column that may
+    differ between two runs of one sweep)."""
+    from camo_sweep.table import read
+
+    rows = read(folder).to_pylist()
+    for row in rows:
+        row.pop("run_s")
+    return sorted(rows, key=lambda r: r["trial_id"])
+
+
 _next_domain = [0]
 
 

@@ -30,7 +30,7 @@ def test_every_command_with_options_has_a_help_text():
     script = (ROOT / "camo").read_text()
     commands = {"sim", "errors", "bench", "run", "demo", "worker", "record", "view", "replay"}
     commands |= {"render", "bag", "topic", "node", "robot", "projector", "monitor"}
-    commands |= {"discovery-server", "droplet-emulator", "droplet-bridge"}
+    commands |= {"discovery-server", "droplet-emulator", "droplet-bridge", "sweep"}
     for command in commands:
         assert f"{command})" in script or f"|{command}" in script or f"{command}|" in script
         assert command in write_help.HELP, command
@@ -43,6 +43,8 @@ def test_every_command_with_options_has_a_help_text():
         (["bench", "ros", "-h"], "bench-ros"),
         (["bag", "info", "--help"], "bag-info"),
         (["sim", "--help"], "sim"),
+        (["sweep", "plot", "--help"], "sweep-plot"),
+        (["sweep", "my.yaml", "--out", "x", "--help"], "sweep"),
     ],
 )
 def test_help_answers_from_the_texts_without_any_set_up(tmp_path, argv, key):

@@ -11,7 +11,15 @@ import pytest
 from support import ROOT
 
 SRC = ROOT / "src"
-PACKAGES = ("camo_core", "camo_msgs", "camo_nodes", "camo_bag", "camo_droplet", "camo_projector")
+PACKAGES = (
+    "camo_core",
+    "camo_msgs",
+    "camo_nodes",
+    "camo_bag",
+    "camo_droplet",
+    "camo_projector",
+    "camo_sweep",
+)
 # What each package may import of the others. Concerns meet through camo_core, camo_msgs and the
 # topic module; a Droplet bridge is a robot node with the Droplet's sensor and LED, so it also
 # composes camo_nodes.robot_node. Nothing imports a package that imports it back.
@@ -19,6 +27,8 @@ ALLOWED = {
     "camo_core": {"camo_core"},
     "camo_nodes": {"camo_core", "camo_msgs", "camo_nodes"},
     "camo_projector": {"camo_core", "camo_msgs", "camo_nodes.topics", "camo_projector"},
+    # Sweeps run the simulator here and a swarm trial as a `./camo run` process: no ROS import.
+    "camo_sweep": {"camo_core", "camo_sweep"},
     "camo_bag": {"camo_core", "camo_msgs", "camo_nodes.topics", "camo_bag"},
     "camo_droplet": {
         "camo_core",

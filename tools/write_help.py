@@ -22,11 +22,14 @@ COLUMNS = "100"  # the width the texts are written at, whatever the terminal
 # subcommands the subcommand), and the module call that prints it.
 HELP = {
     "sim": ["camo_core.cli", "sim"],
-    "errors": ["camo_core.cli", "errors"],
+    "errors": ["camo_sweep.errors"],
+    "sweep": ["camo_sweep.cli"],
+    "sweep-plot": ["camo_sweep.cli", "plot"],
     "bench": ["camo_core.cli", "bench"],
     "bench-sim": ["camo_core.cli", "bench"],
     "bench-ros": ["camo_nodes.bench"],
     "bench-soak": ["camo_nodes.soak"],
+    "bench-sweep": ["camo_sweep.bench"],
     "run": ["camo_nodes.launcher"],
     "demo": ["camo_nodes.launcher"],
     "worker": ["camo_nodes.worker"],

@@ -1,6 +1,5 @@
 """The reference tools from the command line: outputs, and one-line errors on bad input."""
 
-import csv
 import json
 
 import cv2
@@ -8,7 +7,6 @@ import numpy as np
 import pytest
 from support import run_camo
 
-from camo_core import errors
 from camo_core.result import SUMMARY_KEYS
 
 
@@ -79,26 +77,6 @@ def test_corrupt_image_is_one_line_and_exit_2(tmp_path):
     out = run_camo("sim", "--image", str(bad), "--out", str(tmp_path / "o"))
     assert out.returncode == 2 and "cannot read image" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
-
-
-def test_errors_writes_csv_and_figure(tmp_path):
-    out = run_camo(
-        "errors", "--pattern", "forest", "--trials", "2", "--rhos", "0,0.3", "--out", str(tmp_path)
-    )
-    assert out.returncode == 0, out.stderr
-    rows = list(csv.DictReader((tmp_path / "errors.csv").open()))
-    assert [r["mode"] for r in rows] == ["measurement"] * 2 + ["communication"] * 2 + ["both"] * 2
-    assert set(rows[0]) == set(errors.CSV_COLUMNS) >= {"p10_diff", "p90_diff", "correct_rate"}
-    at_zero = [r for r in rows if float(r["rho"]) == 0.0]
-    assert all(float(r["mean_diff"]) == 0.0 and float(r["correct_rate"]) == 1.0 for r in at_zero)
-    assert max(float(r["mean_diff"]) for r in rows) > 0
-    assert cv2.imread(str(tmp_path / "errors.png")) is not None
-    assert "error analysis" in out.stderr  # the progress bar
-
-
-def test_errors_rejects_bad_rhos(tmp_path):
-    out = run_camo("errors", "--rhos", "0,2", "--out", str(tmp_path))
-    assert out.returncode == 2 and "probabilities" in out.stderr
 
 
 def test_bench_prints_json_with_ratios():

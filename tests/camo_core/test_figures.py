@@ -7,7 +7,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from camo_core import errors, figures
+from camo_core import figures
 from camo_core.backgrounds import background
 from camo_core.params import CamoParams
 from camo_core.sensing import sense_image
@@ -73,16 +73,24 @@ def test_an_unmarked_run_has_no_marks_legend(noisy_forest):
 
 @pytest.fixture(scope="module")
 def error_rows():
-    params = CamoParams(rows=8, cols=8)
-    raw = sense_image(background("forest"), 8, 8, "paper")
-    points = errors.error_analysis(params, raw, [0.0, 0.3, 0.5], 6, show_progress=False)
-    return [p.as_row() for p in points]
-
-
-def test_error_points_carry_percentiles_that_bound_a_count(error_rows):
-    for row in error_rows:
-        assert 0 <= row["p10_diff"] <= row["p90_diff"] <= 64
-    assert any(row["p90_diff"] > 0 for row in error_rows)
+    # What ./camo errors draws: mean, spread and correct rate per mode and rho; a spread of
+    # several trials, some of them above zero.
+    rng = np.random.default_rng(3)
+    rows = []
+    for mode in ("measurement", "communication", "both"):
+        for rho in (0.0, 0.3, 0.5):
+            diffs = rng.integers(0, 40, 6) * (rho > 0)
+            rows.append(
+                {
+                    "mode": mode,
+                    "rho": rho,
+                    "mean_diff": float(np.mean(diffs)),
+                    "p10_diff": float(np.percentile(diffs, 10)),
+                    "p90_diff": float(np.percentile(diffs, 90)),
+                    "correct_rate": float(rng.uniform()),
+                }
+            )
+    return rows
 
 
 def test_the_error_figure_has_a_band_above_zero_a_rate_panel_and_the_paper(error_rows):

@@ -13,7 +13,7 @@ import sys
 
 import numpy as np
 
-from . import bench, errors, figures
+from . import bench, figures
 from .exceptions import EXIT_USAGE, CamoError, UsageError
 from .options import (
     Parser,
@@ -84,27 +84,6 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_errors(args: argparse.Namespace) -> int:
-    params = params_from(args)
-    if args.trials < 1 or args.trials > 10_000:
-        raise UsageError(f"--trials must be an integer in 1..10000 (got {args.trials})")
-    rhos = errors.parse_rhos(args.rhos)
-    image, label = image_from(args)
-    raw = sense_image(image, params.rows, params.cols, params.profile)
-    folder = out_dir(args)
-    points = errors.error_analysis(params, raw, rhos, args.trials)
-    errors.write_csv(points, folder / "errors.csv")
-    figures.errors_figure(
-        [p.as_row() for p in points],
-        params.count / 2,
-        folder / "errors.png",
-        title=f"{label}, {params.rows}x{params.cols} robots, {args.trials} trials per point",
-        cells=params.count,
-    )
-    print(f"wrote {folder}/errors.csv and errors.png")
-    return 0
-
-
 def cmd_bench(args: argparse.Namespace) -> int:
     sizes = tuple(int(s) for s in args.sizes.split(",")) if args.sizes else bench.SIZES
     report = bench.run(sizes=sizes, whole=args.whole)
@@ -112,11 +91,16 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> Parser:
-    parser = Parser(prog="camo", description="camouflage swarm: reference tools")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
-    sim = sub.add_parser("sim", help="run the centralized reference simulator once")
+def add_sim_arguments(sim: Parser) -> Parser:
+    """`./camo sim`'s options on `sim` (also the options a sweep's trials take)."""
     add_run_options(sim)
+    for name, what in (("stripes", "horizontal and vertical stripes"), ("mottled", "mottled")):
+        sim.add_argument(
+            f"--w2-{name}",
+            type=float,
+            default=None,
+            help=f"inhibitor weight W2 of the {what} kernels (default: the profile's)",
+        )
     sim.add_argument(
         "--sensed",
         action="append",
@@ -127,15 +111,13 @@ def build_parser() -> Parser:
     )
     sim.add_params_file_option("camo_sim")
     sim.set_defaults(func=cmd_sim, options_parser=sim)
-    err = sub.add_parser("errors", help="the paper's error analysis")
-    add_run_options(err)
-    err.add_argument("--trials", type=int, default=10, help="trials per point (default 10)")
-    err.add_argument(
-        "--rhos",
-        default=",".join(f"{x / 100:g}" for x in range(0, 51, 5)),
-        help="comma-separated error probabilities (default 0,0.05,...,0.5)",
-    )
-    err.set_defaults(func=cmd_errors)
+    return sim
+
+
+def build_parser() -> Parser:
+    parser = Parser(prog="camo", description="camouflage swarm: reference tools")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    add_sim_arguments(sub.add_parser("sim", help="run the centralized reference simulator once"))
     ben = sub.add_parser("bench", help="benchmarks")
     ben.add_argument("what", choices=["sim"], help="what to benchmark")
     ben.add_argument("--json", action="store_true", help="print one JSON object")

@@ -195,6 +195,8 @@ def params_from(args: argparse.Namespace) -> CamoParams:
         seed=args.seed,
         rho_meas=args.rho_meas,
         rho_comm=args.rho_comm,
+        w2_stripes=getattr(args, "w2_stripes", None),  # options of ./camo sim alone
+        w2_mottled=getattr(args, "w2_mottled", None),
     )
 
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from .params import CamoParams
 from .protocol import CONSENSUS, DONE, FORMATION
-from .result import RunResult, mean_p, p_range
+from .result import RunResult, mean_p, p_stats
 from .rules import select_pattern
 
 
@@ -146,9 +146,12 @@ class RoundRecord:
         for step in self.p_trace:
             if np.isnan(step[alive]).any():
                 break
-            trace.append(mean_p(step[alive]))
             if alive.any():
-                spread.append(p_range(step[alive]))
+                mean, least_greatest = p_stats(step[alive])
+                trace.append(mean)
+                spread.append(least_greatest)
+            else:
+                trace.append(mean_p(step[alive]))
         first = self.p_trace[0]
         votes = np.where(np.isnan(first).any(axis=1), -1, np.argmax(np.nan_to_num(first), axis=1))
         return RunResult(

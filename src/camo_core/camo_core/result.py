@@ -42,10 +42,9 @@ def mean_p(p: np.ndarray) -> np.ndarray:
     return kernels.mean_p(np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3))
 
 
-def p_range(p: np.ndarray) -> np.ndarray:
-    """3 x 2: the least and the greatest p over robots (p: ... x 3), per pattern."""
-    flat = np.asarray(p, dtype=np.float64).reshape(-1, 3)
-    return np.stack([flat.min(axis=0), flat.max(axis=0)], axis=1)
+def p_stats(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """mean_p(p), and 3 x 2: the least and the greatest p over robots, per pattern."""
+    return kernels.p_stats(np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3))
 
 
 @dataclass

@@ -17,7 +17,7 @@ import numpy as np
 from . import kernels, rng
 from .grid import NEIGHBOR_OFFSETS, NUM_SLOTS
 from .params import CamoParams
-from .result import RunResult, mean_p, p_range
+from .result import RunResult, p_stats
 from .rules import select_pattern
 from .sensing import apply_noise
 
@@ -138,13 +138,15 @@ def _consensus(
     for k in range(3):
         p[:, :, k] = votes == k
     nxt = np.empty_like(p)
-    trace, spread = [mean_p(p)], [p_range(p)]
+    mean, least_greatest = p_stats(p)
+    trace, spread = [mean], [least_greatest]
     for step in range(params.consensus_steps):
         prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_CONSENSUS, step))
         kernels.consensus_step(p, nxt, known_mask, degree, prefix, params.rho_comm)
         p, nxt = nxt, p
-        trace.append(mean_p(p))
-        spread.append(p_range(p))
+        mean, least_greatest = p_stats(p)
+        trace.append(mean)
+        spread.append(least_greatest)
         if progress:
             progress("consensus", step + 1, params.consensus_steps)
     return p, np.array(trace), np.array(spread)

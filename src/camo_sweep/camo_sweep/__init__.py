@@ -1,0 +1,1 @@
+"""Parameter sweeps: `./camo sweep`, `./camo errors`, `./camo bench sweep`."""

@@ -1,0 +1,208 @@
+"""`./camo sweep [SWEEP.yaml] --out DIR [--axis NAME=VALUES ...]` and `./camo sweep plot DIR`."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from pathlib import Path
+
+import yaml
+
+from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
+from camo_core.options import Parser
+
+from . import engines
+from .spec import DRIVERS, SweepSpec, build_spec, spec_from_yaml
+from .sweep import run_sweep
+
+SPEC_FILE = "sweep.yaml"
+
+
+def build_parser() -> Parser:
+    parser = Parser(
+        prog="camo sweep",
+        description="trials of ./camo sim (or of the swarm) over the product of axes, into a "
+        "resumable Parquet table DIR/trials/; `./camo sweep plot DIR --x AXIS` draws it",
+    )
+    parser.add_argument("file", nargs="?", type=Path, help="SWEEP.yaml (docs/sweeps.md)")
+    parser.add_argument("--out", type=Path, help="the sweep's folder (resumable); required")
+    parser.add_argument(
+        "--axis",
+        action="append",
+        default=[],
+        metavar="NAME=VALUES",
+        help="an axis over a ./camo sim option: FROM:TO:STEP, a,b,c; tied options share "
+        "values: rho_meas,rho_comm=0:0.5:0.1 (repeatable)",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a fixed ./camo sim option of every trial, e.g. rows=16 (repeatable)",
+    )
+    parser.add_argument("--trials", type=int, default=None, help="replicates per point (1)")
+    parser.add_argument("--seed", type=int, default=None, help="the root seed (default 0)")
+    parser.add_argument("--driver", choices=DRIVERS, default=None, help="sim (default) or ros")
+    engine = parser.add_mutually_exclusive_group()
+    engine.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="local Dask worker processes (default: one per core); 1: in this process, no Dask",
+    )
+    engine.add_argument(
+        "--scheduler", metavar="tcp://HOST:PORT", help="submit to this Dask scheduler"
+    )
+    engine.add_argument(
+        "--slurm", action="store_true", help="Dask workers in SLURM jobs (dask-jobqueue)"
+    )
+    for key, what in (
+        ("queue", "partition"),
+        ("account", "account"),
+        ("cores", "cores per job: one worker process each"),
+        ("memory", "memory per job, e.g. 8GB"),
+        ("walltime", "time limit per job, e.g. 02:00:00"),
+        ("max-jobs", "jobs at most"),
+    ):
+        parser.add_argument(f"--slurm-{key}", default=None, help=f"SLURM {what}")
+    parser.add_argument(
+        "--print-job-script",
+        action="store_true",
+        help="with --slurm: print the job script and submit nothing",
+    )
+    parser.add_argument(
+        "--ros-per-worker",
+        type=int,
+        default=1,
+        help="--driver ros: swarms a local worker runs at once (default 1)",
+    )
+    parser.add_argument(
+        "--ros-timeout", type=float, default=300.0, help="--driver ros: seconds a swarm may take"
+    )
+    parser.add_argument(
+        "--batch-s", type=float, default=0.25, help="seconds of simulator trials per task"
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def slurm_settings(args, given: dict) -> dict:
+    """The SLURM settings: a sweep file's `slurm:` section, then the --slurm-* options."""
+    settings = dict(given)
+    for key in engines.SLURM_KEYS:
+        value = getattr(args, f"slurm_{key}")
+        if value is not None:
+            settings[key] = (
+                int(value) if key in ("cores", "max_jobs") and value.isdigit() else value
+            )
+    return settings
+
+
+def check_folder(folder: Path, spec: SweepSpec) -> None:
+    """A folder holds one sweep: refuse another sweep's folder, or one that is not a sweep's."""
+    if not folder.exists() or (folder.is_dir() and not any(folder.iterdir())):
+        return
+    saved = folder / SPEC_FILE
+    if not saved.is_file():
+        raise UsageError(f"{folder} exists and holds no {SPEC_FILE}: it is not a sweep's folder")
+    try:
+        before = SweepSpec(**{k: v for k, v in yaml.safe_load(saved.read_text()).items()})
+    except (yaml.YAMLError, TypeError, AttributeError, CamoError):
+        raise UsageError(f"{saved} is damaged; give another --out") from None
+    if not spec.same_sweep(before):
+        raise UsageError(
+            f"{folder} holds another sweep (see {saved}); give another --out "
+            "(only --trials may change between runs of one sweep)"
+        )
+
+
+def make_engine(args, spec: SweepSpec):
+    if args.scheduler:
+        return engines.remote_engine(args.scheduler)
+    if args.slurm:
+        return engines.slurm_engine(slurm_settings(args, spec.slurm))
+    workers = (os.cpu_count() or 1) if args.workers is None else args.workers
+    if not 1 <= workers <= 1024:
+        raise UsageError(f"--workers must be in 1..1024 (got {workers})")
+    if workers == 1:
+        return engines.InProcess()
+    return engines.local_engine(workers, args.ros_per_worker)
+
+
+def cmd_sweep(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
+    if args.ros_per_worker < 1:
+        raise UsageError(f"--ros-per-worker must be at least 1 (got {args.ros_per_worker})")
+    if not args.ros_timeout > 0 or not args.batch_s > 0:
+        raise UsageError("--ros-timeout and --batch-s must be positive")
+    data = spec_from_yaml(args.file) if args.file else None
+    if args.print_job_script:
+        if not args.slurm:
+            raise UsageError("--print-job-script goes with --slurm")
+        cluster = engines.slurm_cluster(slurm_settings(args, (data or {}).get("slurm", {})))
+        try:
+            print(cluster.job_script())
+        finally:
+            cluster.close()
+        return 0
+    if args.out is None:
+        raise UsageError("the following arguments are required: --out")
+    spec = build_spec(data, args.axis, args.set, args.trials, args.seed, args.driver)
+    check_folder(args.out, spec)
+    engine = make_engine(args, spec)  # an unreachable scheduler fails here, before any write
+    signal.signal(signal.SIGTERM, _interrupt)  # as Ctrl-C: finished trials are kept
+    try:
+        if spec.driver == "ros" and isinstance(engine, engines.DaskEngine):
+            if engine.ros_slots() < 1:
+                raise UsageError(
+                    f"no worker of {engine.name} offers the 'ros' resource: start workers with "
+                    "--resources ros=1"
+                )
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / SPEC_FILE).write_text(yaml.safe_dump(spec.as_dict(), sort_keys=False))
+        if isinstance(engine, engines.DaskEngine):
+            engine.warm()
+        report = run_sweep(
+            spec, args.out, engine, args.batch_s, args.ros_timeout, progress=not args.quiet
+        )
+    except KeyboardInterrupt:
+        print(
+            f"camo sweep: interrupted; every finished trial is in {args.out}/trials/: "
+            "the same command goes on from there",
+            file=sys.stderr,
+        )
+        return 130
+    finally:
+        engine.close()
+    rate = f", {report.ran / report.seconds:.0f} trials/s" if report.seconds > 0 else ""
+    print(
+        f"sweep: {report.total} trials, {report.skipped} already in the table, {report.ran} run "
+        f"({report.failed} failed){rate} on {engine.name}; table {args.out}/trials/"
+    )
+    return 0
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        if argv[:1] == ["plot"]:
+            from .plot import cmd_plot
+
+            return cmd_plot(argv[1:])
+        return cmd_sweep(argv)
+    except CamoError as exc:
+        print(f"camo sweep: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("camo sweep: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

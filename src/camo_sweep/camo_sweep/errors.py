@@ -1,0 +1,186 @@
+"""`./camo errors`: the paper's error analysis (its Fig. "errorAnalysis") as a preset sweep.
+
+Three blocks of trials over the error probability rho: measurement errors only
+(rho_meas = rho), communication errors only (rho_comm = rho), and both at once (tied axes). The
+table is the sweep's (OUT/trials/, resumable with --force); errors.csv and errors.png are drawn
+from it: per mode and rho, the mean, spread and percentiles of the cells that differ from the
+error-free run, and the rate of trials that chose the error-free run's pattern.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from camo_core import figures
+from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
+from camo_core.options import Parser, add_run_options, image_from, out_dir, params_from
+
+from . import engines
+from .spec import SweepSpec
+from .sweep import run_sweep
+from .table import read
+
+MODES = ("measurement", "communication", "both")
+CSV_COLUMNS = (
+    "mode",
+    "rho",
+    "trials",
+    "mean_diff",
+    "std_diff",
+    "p10_diff",
+    "p90_diff",
+    "correct_rate",
+)
+
+
+@dataclass
+class ErrorPoint:
+    mode: str
+    rho: float
+    trials: int
+    mean_diff: float
+    std_diff: float
+    p10_diff: float  # the trials' 10th and 90th percentiles: the figure's band
+    p90_diff: float
+    correct_rate: float
+
+    def as_row(self) -> dict:
+        return {k: getattr(self, k) for k in CSV_COLUMNS}
+
+
+def error_spec(args, rhos: list[float]) -> SweepSpec:
+    """The preset: the run options given, three blocks over rho, --trials replicates."""
+    options = {"image": args.image} if args.image else {"pattern": args.pattern or "forest"}
+    options |= {"rows": args.rows, "cols": args.cols, "profile": args.profile}
+    options["threshold"] = args.threshold
+    for name in ("consensus_steps", "formation_steps"):
+        if getattr(args, name) is not None:
+            options[name] = getattr(args, name)
+    blocks = [{"rho_meas": rhos}, {"rho_comm": rhos}, {"rho_meas,rho_comm": rhos}]
+    return SweepSpec(blocks=blocks, options=options, trials=args.trials, seed=args.seed)
+
+
+def points_from(folder: Path, rhos: list[float]) -> list[ErrorPoint]:
+    data = read(folder, columns=["rho_meas", "rho_comm", "diff_cells", "correct", "status"])
+    data = data.to_pydict()
+    meas, comm = np.array(data["rho_meas"]), np.array(data["rho_comm"])
+    ok = np.array([s == "ok" for s in data["status"]])
+    diff = np.array([np.nan if d is None else d for d in data["diff_cells"]], dtype=float)
+    correct = np.array([bool(c) for c in data["correct"]])
+    points = []
+    for mode in MODES:
+        for rho in rhos:
+            if mode == "measurement":
+                keep = (meas == rho) & (comm == 0)
+            elif mode == "communication":
+                keep = (meas == 0) & (comm == rho)
+            else:
+                keep = (meas == rho) & (comm == rho)
+            keep &= ok
+            if not keep.any():
+                continue
+            values = diff[keep]
+            points.append(
+                ErrorPoint(
+                    mode,
+                    rho,
+                    int(keep.sum()),
+                    float(np.mean(values)),
+                    float(np.std(values)),
+                    float(np.percentile(values, 10)),
+                    float(np.percentile(values, 90)),
+                    float(np.mean(correct[keep])),
+                )
+            )
+    return points
+
+
+def write_csv(points: list[ErrorPoint], path: Path) -> None:
+    with open(path, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=CSV_COLUMNS)
+        writer.writeheader()
+        for point in points:
+            writer.writerow(point.as_row())
+
+
+def parse_rhos(text: str) -> list[float]:
+    """'0,0.05,0.1' -> floats; each must be a probability."""
+    try:
+        values = [float(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise UsageError(f"--rhos must be comma-separated numbers (got {text!r})") from None
+    if not values or any(not math.isfinite(v) or not 0.0 <= v <= 1.0 for v in values):
+        raise UsageError(f"--rhos must be probabilities in [0, 1] (got {text!r})")
+    return sorted(set(values))
+
+
+def build_parser() -> Parser:
+    parser = Parser(
+        prog="camo errors",
+        description="the paper's error analysis, as a sweep: errors.csv, errors.png and the "
+        "sweep's table (trials/) in --out",
+    )
+    add_run_options(parser)
+    parser.add_argument("--trials", type=int, default=10, help="trials per point (default 10)")
+    parser.add_argument(
+        "--rhos",
+        default=",".join(f"{x / 100:g}" for x in range(0, 51, 5)),
+        help="comma-separated error probabilities (default 0,0.05,...,0.5)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="local Dask worker processes (default 1: in this process; the paper's 330 trials "
+        "take under a second)",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        args = build_parser().parse_args(argv)
+        params = params_from(args)  # bad values fail here, in one line
+        if args.trials < 1 or args.trials > 10_000:
+            raise UsageError(f"--trials must be an integer in 1..10000 (got {args.trials})")
+        if not 1 <= args.workers <= 1024:
+            raise UsageError(f"--workers must be in 1..1024 (got {args.workers})")
+        rhos = parse_rhos(args.rhos)
+        _, label = image_from(args)  # an unreadable image fails here
+        spec = error_spec(args, rhos)
+        folder = out_dir(args)
+        engine = engines.InProcess() if args.workers == 1 else engines.local_engine(args.workers)
+        try:
+            if isinstance(engine, engines.DaskEngine):
+                engine.warm()
+            run_sweep(spec, folder, engine, progress=not args.quiet)
+        finally:
+            engine.close()
+        points = points_from(folder, rhos)
+        write_csv(points, folder / "errors.csv")
+        figures.errors_figure(
+            [p.as_row() for p in points],
+            params.count / 2,
+            folder / "errors.png",
+            title=f"{label}, {params.rows}x{params.cols} robots, {args.trials} trials per point",
+            cells=params.count,
+        )
+        print(f"wrote {folder}/errors.csv, errors.png and the trials' table trials/")
+        return 0
+    except CamoError as exc:
+        print(f"camo errors: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("camo errors: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,309 @@
+"""What a sweep runs: products of axes over `./camo sim`'s options, times replicates, and each
+trial's identity and seed.
+
+A trial is a `./camo sim` command line: its options (the sweep's fixed options and one value of
+every axis) and a seed. The trial's id is a hash of its options, replicate number, root seed and
+driver; its seed comes from `numpy.random.SeedSequence(root_seed, spawn_key=...)` with a key
+derived from its options and replicate. Neither depends on where the trial sits in the sweep, so
+its result is the same whatever the engine, order, batch or number of workers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import itertools
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from camo_core.cli import add_sim_arguments
+from camo_core.exceptions import UsageError
+from camo_core.options import Parser
+
+DRIVERS = ("sim", "ros")
+# Options of ./camo sim that are not a trial's: where it writes, the seed (a trial's own, from the
+# root seed), real readings and parameters files.
+NOT_AXES = {"out", "force", "seed", "sensed", "params_file", "help"}
+SPEC_KEYS = {"seed", "trials", "driver", "options", "axes", "blocks", "slurm"}
+MAX_TRIALS = 10_000_000
+
+
+@cache
+def sim_parser() -> Parser:
+    """A parser of ./camo sim's options: the options a trial takes."""
+    return add_sim_arguments(Parser(prog="camo sim"))
+
+
+@cache
+def defaults() -> argparse.Namespace:
+    """./camo sim's options when none is given."""
+    return sim_parser().parse_args([])
+
+
+@cache
+def sim_actions() -> dict[str, argparse.Action]:
+    """Option name (dest: rho_comm) -> its argparse action, for the options a trial can set."""
+    return {
+        action.dest: action
+        for action in sim_parser()._actions
+        if action.option_strings
+        and action.dest not in NOT_AXES
+        and action.default != "==SUPPRESS=="
+    }
+
+
+def typed(name: str, value: Any) -> Any:
+    """An option's value as ./camo sim's parser reads it (`"0.10"` and `0.1` are one value)."""
+    actions = sim_actions()
+    if name not in actions:
+        known = ", ".join(sorted(actions))
+        raise UsageError(f"unknown option or axis {name!r}: not an option of ./camo sim ({known})")
+    action = actions[name]
+    if action.nargs == 0:  # a flag
+        if not isinstance(value, bool):
+            raise UsageError(f"{name} is a flag: true or false (got {value!r})")
+        return value
+    text = str(value).strip()
+    convert = action.type or str
+    try:
+        out = convert(text)
+    except (TypeError, ValueError):
+        raise UsageError(f"{name}: {value!r} is not a valid value") from None
+    if action.choices is not None and out not in action.choices:
+        choices = ", ".join(map(str, action.choices))
+        raise UsageError(f"{name}: {value!r} is not one of {choices}")
+    if isinstance(out, float) and not math.isfinite(out):
+        raise UsageError(f"{name}: {value!r} is not a finite number")
+    return out
+
+
+RANGE = re.compile(r"^\s*([-+0-9.eE]+)\s*:\s*([-+0-9.eE]+)\s*:\s*([-+0-9.eE]+)\s*$")
+
+
+def axis_values(name: str, given: Any) -> list[Any]:
+    """An axis's values: a list (YAML), `FROM:TO:STEP` (TO included) or `a,b,c`."""
+    if isinstance(given, list):
+        raw = given
+    elif isinstance(given, str) and RANGE.match(given):
+        raw = value_range(name, *RANGE.match(given).groups())
+    elif isinstance(given, str):
+        raw = [part for part in given.split(",") if part.strip()]
+    else:
+        raw = [given]
+    names = name.split(",")
+    values = [typed(names[0], v) for v in raw]
+    for other in names[1:]:
+        for v in raw:
+            typed(other, v)
+    if not values:
+        raise UsageError(f"axis {name} is empty")
+    if len(set(map(repr, values))) != len(values):
+        raise UsageError(f"axis {name} repeats a value")
+    return values
+
+
+def value_range(name: str, first: str, last: str, step: str) -> list[Any]:
+    try:
+        a, b, d = float(first), float(last), float(step)
+    except ValueError:
+        raise UsageError(f"axis {name}: {first}:{last}:{step} is not FROM:TO:STEP") from None
+    if not d > 0 or not all(map(math.isfinite, (a, b, d))) or b < a:
+        raise UsageError(f"axis {name}: {first}:{last}:{step} needs FROM <= TO and STEP > 0")
+    count = math.floor((b - a) / d + 1e-9) + 1
+    if count > 100_000:
+        raise UsageError(f"axis {name}: {first}:{last}:{step} has {count} values")
+    integers = all(re.fullmatch(r"[-+]?\d+", t) for t in (first, last, step))
+    return [int(a + k * d) if integers else round(a + k * d, 12) for k in range(count)]
+
+
+@dataclass(frozen=True)
+class Trial:
+    trial_id: str
+    replicate: int
+    seed: int
+    options: dict[str, Any]  # option name -> value: the fixed options and this trial's axes
+
+    def sim_args(self) -> list[str]:
+        """The trial as ./camo sim's options (without --seed and --out)."""
+        return sim_args(self.options)
+
+
+def sim_args(options: dict[str, Any]) -> list[str]:
+    actions = sim_actions()
+    args: list[str] = []
+    for name, value in options.items():
+        flag = max(actions[name].option_strings, key=len)
+        if actions[name].nargs == 0:
+            args += [flag] if value else []
+        else:
+            args += [flag, repr(value) if isinstance(value, float) else str(value)]
+    return args
+
+
+def canonical(data: Any) -> bytes:
+    return json.dumps(data, sort_keys=True, separators=(",", ":")).encode()
+
+
+@dataclass
+class SweepSpec:
+    """A sweep: the union of products of axes (blocks), fixed options, replicates, a root seed."""
+
+    blocks: list[dict[str, list[Any]]]  # axis ("rho_comm", or tied "rho_meas,rho_comm") -> values
+    options: dict[str, Any] = field(default_factory=dict)
+    trials: int = 1
+    seed: int = 0
+    driver: str = "sim"
+    slurm: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.driver not in DRIVERS:
+            raise UsageError(f"driver must be one of {', '.join(DRIVERS)} (got {self.driver!r})")
+        if isinstance(self.trials, bool) or not isinstance(self.trials, int) or self.trials < 1:
+            raise UsageError(f"trials must be a positive integer (got {self.trials!r})")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise UsageError(f"seed must be a non-negative integer (got {self.seed!r})")
+        if not self.blocks or not all(self.blocks):
+            raise UsageError("a sweep needs at least one axis (--axis NAME=VALUES)")
+        self.options = {name: typed(name, value) for name, value in self.options.items()}
+        names = self.axis_names()
+        for name in names:
+            if name in self.options:
+                raise UsageError(f"{name} is both an axis and a fixed option")
+        sources = {"image", "pattern"} & (set(names) | set(self.options))
+        if len(sources) > 1:
+            raise UsageError("a sweep takes --image or --pattern values, not both")
+        if self.count() > MAX_TRIALS:
+            raise UsageError(f"the sweep has {self.count()} trials (at most {MAX_TRIALS})")
+
+    def axis_names(self) -> list[str]:
+        """Every option an axis sets, in order of first appearance: the table's axis columns."""
+        names: list[str] = []
+        for block in self.blocks:
+            for axis in block:
+                names += [n for n in axis.split(",") if n not in names]
+        return names
+
+    def count(self) -> int:
+        points = sum(math.prod(len(v) for v in block.values()) for block in self.blocks)
+        return points * self.trials
+
+    def trial_list(self) -> list[Trial]:
+        """Every trial once, in a fixed order; a point in two blocks is one point."""
+        out, seen = [], set()
+        names = self.axis_names()
+        for block in self.blocks:
+            axes = list(block.items())
+            for values in itertools.product(*(v for _, v in axes)):
+                options = dict(self.options)
+                for (axis, _), value in zip(axes, values, strict=True):
+                    for name in axis.split(","):
+                        options[name] = value
+                # An axis another block sweeps takes ./camo sim's default here, so that one
+                # point reached from two blocks is one trial.
+                for name in names:
+                    options.setdefault(name, getattr(defaults(), name))
+                key = canonical(options)
+                if key in seen:
+                    continue
+                seen.add(key)
+                out += [self.trial(options, r) for r in range(self.trials)]
+        return out
+
+    def trial(self, options: dict[str, Any], replicate: int) -> Trial:
+        digest = hashlib.sha256(canonical(options)).digest()
+        spawn_key = (*(int.from_bytes(digest[k : k + 4], "little") for k in range(0, 16, 4)),)
+        sequence = np.random.SeedSequence(self.seed, spawn_key=(*spawn_key, replicate))
+        seed = int(sequence.generate_state(1, np.uint64)[0])
+        identity = {"options": options, "replicate": replicate, "root": self.seed}
+        identity["driver"] = self.driver
+        trial_id = hashlib.sha256(canonical(identity)).hexdigest()[:20]
+        return Trial(trial_id, replicate, seed, options)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The spec as sweep.yaml keeps it (axes as lists of values)."""
+        data: dict[str, Any] = {"seed": self.seed, "trials": self.trials, "driver": self.driver}
+        data["options"] = dict(self.options)
+        data["blocks"] = [{axis: list(values) for axis, values in b.items()} for b in self.blocks]
+        if self.slurm:
+            data["slurm"] = dict(self.slurm)
+        return data
+
+    def same_sweep(self, other: SweepSpec) -> bool:
+        """The same trials but perhaps for their number: a table of one can take the other's."""
+        mine, theirs = self.as_dict(), other.as_dict()
+        for data in (mine, theirs):
+            data.pop("trials")
+            data.pop("slurm", None)
+        return canonical(mine) == canonical(theirs)
+
+
+def spec_from_yaml(path: Path) -> dict[str, Any]:
+    """A SWEEP.yaml's contents, checked for shape (values are checked by SweepSpec)."""
+    try:
+        data = yaml.safe_load(Path(path).read_text())
+    except OSError as exc:
+        raise UsageError(f"cannot read {path}: {exc.strerror}") from None
+    except yaml.YAMLError as exc:
+        where = getattr(exc, "problem_mark", None)
+        at = f" (line {where.line + 1})" if where is not None else ""
+        raise UsageError(f"{path} is not valid YAML{at}") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise UsageError(f"{path}: a sweep file is a mapping of {', '.join(sorted(SPEC_KEYS))}")
+    unknown = set(data) - SPEC_KEYS
+    if unknown:
+        raise UsageError(
+            f"{path}: unknown key {sorted(unknown)[0]!r} (keys: {', '.join(sorted(SPEC_KEYS))})"
+        )
+    if "axes" in data and "blocks" in data:
+        raise UsageError(f"{path}: give axes or blocks, not both")
+    for key in ("options", "axes", "slurm"):
+        if not isinstance(data.get(key, {}), dict):
+            raise UsageError(f"{path}: {key} must be a mapping")
+    blocks = data.get("blocks", [])
+    if not isinstance(blocks, list) or not all(isinstance(b, dict) for b in blocks):
+        raise UsageError(f"{path}: blocks must be a list of mappings of axes")
+    return data
+
+
+def build_spec(
+    file_data: dict[str, Any] | None,
+    axes: list[str],
+    options: list[str],
+    trials: int | None,
+    seed: int | None,
+    driver: str | None,
+) -> SweepSpec:
+    """The sweep from a file's contents and the command line (which adds axes and overrides)."""
+    data = dict(file_data or {})
+    blocks = [dict(b) for b in data.get("blocks", [])] or [dict(data.get("axes", {}))]
+    for text in axes:
+        name, sep, values = text.partition("=")
+        if not sep or not name.strip():
+            raise UsageError(f"--axis takes NAME=VALUES (got {text!r})")
+        for block in blocks:
+            block[name.strip()] = values
+    fixed = dict(data.get("options", {}))
+    for text in options:
+        name, sep, value = text.partition("=")
+        if not sep or not name.strip():
+            raise UsageError(f"--set takes NAME=VALUE (got {text!r})")
+        fixed[name.strip()] = value
+    checked = [{axis: axis_values(axis, v) for axis, v in block.items()} for block in blocks]
+    return SweepSpec(
+        blocks=[b for b in checked],
+        options=fixed,
+        trials=data.get("trials", 1) if trials is None else trials,
+        seed=data.get("seed", 0) if seed is None else seed,
+        driver=data.get("driver", "sim") if driver is None else driver,
+        slurm=dict(data.get("slurm", {})),
+    )

@@ -1,0 +1,107 @@
+"""One sweep from start (or resumption) to its table: the trials not yet in the table, their
+error-free references (each computed once, here), batches of about `batch_s` seconds handed to
+an engine, and every finished batch written as a part of the table."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from camo_core.exceptions import CamoError
+from camo_core.progress import ProgressBar
+
+from .spec import SweepSpec, Trial, canonical
+from .table import TableWriter, done_ids, row_of
+from .trials import Reference, reference_of, reference_options, run_ros_batch, run_sim_batch
+
+MAX_BATCH = 5000
+
+
+@dataclass
+class SweepReport:
+    total: int  # trials in the sweep
+    skipped: int  # already in the table when it started
+    ran: int  # run and written now
+    failed: int  # of those, trials whose status is an error
+    seconds: float  # from the first task handed out to the last part written
+
+
+def references_for(trials: list[Trial]) -> tuple[dict[bytes, Reference | str], float]:
+    """Each distinct error-free reference once (or the one-line error that stops its trials),
+    and the time one reference took (the estimate of a trial's cost)."""
+    references: dict[bytes, Reference | str] = {}
+    cost = None
+    for trial in trials:
+        key = canonical(reference_options(trial.options))
+        if key in references:
+            continue
+        start = time.perf_counter()
+        try:
+            references[key] = reference_of(trial.options)
+        except CamoError as exc:
+            references[key] = f"error: {exc}"
+            continue
+        if len(references) > 1 or cost is None:  # the first one also compiles the kernels
+            cost = time.perf_counter() - start
+    return references, cost or 0.001
+
+
+def batches(work: list[tuple[Trial, Reference]], size: int) -> list[list[tuple[Trial, Reference]]]:
+    return [work[k : k + size] for k in range(0, len(work), size)]
+
+
+def run_sweep(
+    spec: SweepSpec,
+    folder: Path,
+    engine,
+    batch_s: float = 0.25,
+    ros_timeout: float = 300.0,
+    progress: bool = True,
+    on_part: Callable[[int], None] | None = None,
+) -> SweepReport:
+    """Run what the table in `folder` lacks of `spec`. Interrupted (Ctrl-C), it stops with every
+    finished batch written; running it again goes on from there."""
+    trials = spec.trial_list()
+    done = done_ids(folder)
+    todo = [t for t in trials if t.trial_id not in done]
+    writer = TableWriter(folder, spec)
+    report = SweepReport(len(trials), len(trials) - len(todo), 0, 0, 0.0)
+    if not todo:
+        return report
+    references, cost = references_for(todo)
+    by_id = {t.trial_id: t for t in todo}
+    failed_rows, work = [], []
+    for trial in todo:
+        reference = references[canonical(reference_options(trial.options))]
+        if isinstance(reference, str):  # its options cannot run at all
+            failed_rows.append(row_of(trial, {"status": reference, "run_s": 0.0}, spec))
+        else:
+            work.append((trial, reference))
+    bar = ProgressBar(len(trials), "sweep", already=report.skipped) if progress else None
+    if failed_rows:
+        writer.write(failed_rows)
+        report.ran += len(failed_rows)
+        report.failed += len(failed_rows)
+        if bar:
+            bar.update(report.skipped + report.ran)
+    if spec.driver == "ros":
+        tasks = [(run_ros_batch, (batch, ros_timeout)) for batch in batches(work, 1)]
+        resources = {"ros": 1}
+    else:
+        size = max(1, min(MAX_BATCH, round(batch_s / cost)))
+        tasks = [(run_sim_batch, (batch,)) for batch in batches(work, size)]
+        resources = None
+    start = time.perf_counter()
+    for results in engine.run(tasks, resources=resources):
+        rows = [row_of(by_id[r["trial_id"]], r, spec) for r in results]
+        writer.write(rows)
+        report.ran += len(rows)
+        report.failed += sum(r["status"] != "ok" for r in rows)
+        if on_part:
+            on_part(report.ran)
+        if bar:
+            bar.update(report.skipped + report.ran, note=engine.name)
+    report.seconds = time.perf_counter() - start
+    return report

@@ -1,0 +1,137 @@
+"""The sweep's table: a Parquet dataset `DIR/trials/`, one row per trial, written in parts.
+
+Each part is written under a name Parquet readers skip (`_` first) and renamed into place, so a
+reader never sees half a file and a killed driver leaves only whole parts; a temporary file it
+left is removed on the next start. The rows already there are the trials a resumed sweep skips.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+import pyarrow.dataset as ds
+import pyarrow.parquet as pq
+
+from camo_core.exceptions import CamoError
+from camo_core.rules import PATTERN_NAMES
+
+from .spec import SweepSpec, Trial
+
+TABLE = "trials"
+
+
+class TableError(CamoError):
+    """A folder whose table cannot be read."""
+
+
+def schema(spec: SweepSpec) -> pa.Schema:
+    """The columns: identity, every axis's value, the results, how the trial went."""
+    fields = [
+        pa.field("trial_id", pa.string()),
+        pa.field("replicate", pa.int64()),
+        pa.field("seed", pa.uint64()),
+        pa.field("driver", pa.string()),
+    ]
+    for name in spec.axis_names():
+        values = [
+            v
+            for block in spec.blocks
+            for axis, vs in block.items()
+            if name in axis.split(",")
+            for v in vs
+        ]
+        fields.append(pa.field(name, _arrow_type(values)))
+    fields += [
+        pa.field("chosen_pattern", pa.string()),
+        pa.field("correct", pa.bool_()),
+        pa.field("diff_cells", pa.int64()),
+        *(pa.field(f"votes_{name}", pa.int64()) for name in PATTERN_NAMES),
+        *(pa.field(f"mean_p_{name}", pa.float64()) for name in PATTERN_NAMES),
+        pa.field("run_s", pa.float64()),
+        pa.field("status", pa.string()),
+        pa.field("equals_sim", pa.bool_()),
+        pa.field("sim_args", pa.string()),
+    ]
+    return pa.schema(fields)
+
+
+def _arrow_type(values: list[Any]) -> pa.DataType:
+    if all(isinstance(v, bool) for v in values):
+        return pa.bool_()
+    if all(isinstance(v, int) and not isinstance(v, bool) for v in values):
+        return pa.int64()
+    if all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
+        return pa.float64()
+    return pa.string()
+
+
+def row_of(trial: Trial, result: dict[str, Any], spec: SweepSpec) -> dict[str, Any]:
+    """A table row: the trial's identity and axes, and what its task returned."""
+    import shlex
+
+    row = {
+        "trial_id": trial.trial_id,
+        "replicate": trial.replicate,
+        "seed": trial.seed,
+        "driver": spec.driver,
+        **{name: trial.options[name] for name in spec.axis_names()},
+        **{k: v for k, v in result.items() if k != "trial_id"},
+        "sim_args": shlex.join(trial.sim_args()),
+    }
+    return row
+
+
+class TableWriter:
+    """Appends parts of rows to DIR/trials/."""
+
+    def __init__(self, folder: Path, spec: SweepSpec) -> None:
+        self.folder = Path(folder) / TABLE
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.schema = schema(spec)
+        for stale in self.folder.glob("_*.tmp"):  # a part a killed driver was writing
+            stale.unlink()
+
+    def write(self, rows: list[dict[str, Any]]) -> Path | None:
+        if not rows:
+            return None
+        table = pa.Table.from_pylist(rows, schema=self.schema)
+        name = f"part-{uuid.uuid4().hex}.parquet"
+        temporary = self.folder / f"_{name}.tmp"
+        pq.write_table(table, temporary)
+        with open(temporary, "rb") as handle:  # on disk before it is visible under its name
+            os.fsync(handle.fileno())
+        os.replace(temporary, self.folder / name)
+        return self.folder / name
+
+
+def parts(folder: Path) -> list[Path]:
+    return sorted((Path(folder) / TABLE).glob("part-*.parquet"))
+
+
+def done_ids(folder: Path) -> set[str]:
+    """The trial ids the table holds."""
+    if not parts(folder):
+        return set()
+    return set(read(folder, columns=["trial_id"]).column("trial_id").to_pylist())
+
+
+def read(folder: Path, columns: list[str] | None = None) -> pa.Table:
+    """The whole table (each trial once, should a part repeat one)."""
+    files = parts(folder)
+    if not files:
+        raise TableError(f"{folder} holds no sweep table ({TABLE}/part-*.parquet)")
+    try:
+        table = ds.dataset([str(f) for f in files], format="parquet").to_table(columns=columns)
+    except (pa.ArrowInvalid, OSError) as exc:
+        raise TableError(f"{folder}/{TABLE} cannot be read: {exc}") from None
+    ids = table.column("trial_id").to_pylist() if "trial_id" in table.column_names else None
+    if ids is not None and len(set(ids)) != len(ids):
+        first = {}
+        for index, trial_id in enumerate(ids):
+            first.setdefault(trial_id, index)
+        table = table.take(sorted(first.values()))
+    return table

@@ -1,0 +1,169 @@
+"""Running trials, where a worker runs them: a batch of simulator trials in this process, or one
+whole `./camo run` swarm as a subprocess. Each trial gives one row of the table."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from functools import cache
+from typing import Any
+
+import numpy as np
+
+from camo_core.exceptions import CamoError
+from camo_core.options import image_from, params_from
+from camo_core.params import CamoParams
+from camo_core.result import SUMMARY_KEYS, RunResult, mean_p, summary_bytes
+from camo_core.rules import PATTERN_NAMES
+from camo_core.sensing import sense_image
+from camo_core.simulator import simulate
+
+from .spec import Trial, defaults
+
+# Up to this many robots a trial's kernels run on one thread: a small grid gains nothing from
+# numba's threads and loses much to their start-up when the cores are busy (an 8x8 trial takes
+# 0.9 ms on one thread, 12-35 ms on two threads of a loaded 2-core machine).
+ONE_THREAD_CELLS = 128 * 128
+RESULT_COLUMNS = (
+    "chosen_pattern",
+    "correct",
+    "diff_cells",
+    *(f"votes_{name}" for name in PATTERN_NAMES),
+    *(f"mean_p_{name}" for name in PATTERN_NAMES),
+)
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The error-free run of a trial's options: what its errors are measured against."""
+
+    pattern: str
+    final: np.ndarray  # rows x cols uint8
+
+
+def namespace(options: dict[str, Any], seed: int) -> argparse.Namespace:
+    """./camo sim's parsed options for a trial: the parser's defaults, the trial's values."""
+    args = argparse.Namespace(**vars(defaults()))
+    for name, value in options.items():
+        setattr(args, name, value)
+    args.seed = seed
+    return args
+
+
+def reference_options(options: dict[str, Any]) -> dict[str, Any]:
+    """A trial's options without errors: its reference run's."""
+    return {k: v for k, v in options.items() if k not in ("rho_meas", "rho_comm")}
+
+
+@cache
+def _sensed(source: tuple[str | None, str | None], rows: int, cols: int, profile: str):
+    """The block means of a background, once per worker (a sweep reuses a few backgrounds)."""
+    args = argparse.Namespace(image=source[0], pattern=source[1], default_pattern="forest")
+    image, _ = image_from(args)
+    return sense_image(image, rows, cols, profile)
+
+
+def simulate_options(options: dict[str, Any], seed: int) -> RunResult:
+    args = namespace(options, seed)
+    params = params_from(args)
+    raw = _sensed((args.image, args.pattern), params.rows, params.cols, params.profile)
+    _threads_for(params)
+    return simulate(params, raw)
+
+
+def _threads_for(params: CamoParams) -> None:
+    import numba
+
+    wanted = 1 if params.count <= ONE_THREAD_CELLS else numba.config.NUMBA_NUM_THREADS
+    if numba.get_num_threads() != wanted:
+        numba.set_num_threads(wanted)
+
+
+def reference_of(options: dict[str, Any]) -> Reference:
+    result = simulate_options(reference_options(options), 0)
+    return Reference(result.majority_pattern, result.final.copy())
+
+
+def result_columns(summary: dict, reference: Reference) -> dict[str, Any]:
+    """The table's result columns, from a summary (a RunResult's or a swarm's summary.json)."""
+    final = summary["final"]
+    if not isinstance(final, np.ndarray):  # a summary.json's, where a dead robot is null
+        final = np.array([[-1 if v is None else v for v in row] for row in final], np.int64)
+    row = {
+        "chosen_pattern": summary["pattern"],
+        "correct": summary["pattern"] == reference.pattern,
+        "diff_cells": int(np.count_nonzero(final != reference.final)),
+    }
+    for k, name in enumerate(PATTERN_NAMES):
+        row[f"votes_{name}"] = int(summary["votes"][name])
+        row[f"mean_p_{name}"] = float(summary["mean_p"][k])
+    return row
+
+
+def failed(error: str) -> dict[str, Any]:
+    return {**dict.fromkeys(RESULT_COLUMNS), "status": error}
+
+
+def sim_row(trial: Trial, reference: Reference) -> dict[str, Any]:
+    start = time.perf_counter()
+    try:
+        result = simulate_options(trial.options, trial.seed)
+    except CamoError as exc:
+        return {**failed(str(exc)), "run_s": time.perf_counter() - start}
+    summary = {
+        "pattern": result.majority_pattern,
+        "votes": result.selection_counts,
+        "mean_p": mean_p(result.p).tolist(),
+        "final": result.final,
+    }
+    row = result_columns(summary, reference)
+    return {**row, "status": "ok", "run_s": time.perf_counter() - start}
+
+
+def run_sim_batch(batch: list[tuple[Trial, Reference]]) -> list[dict[str, Any]]:
+    """A task: simulator trials, one row each (trial_id, then the result columns)."""
+    return [{"trial_id": trial.trial_id, **sim_row(trial, ref)} for trial, ref in batch]
+
+
+def run_ros_batch(batch: list[tuple[Trial, Reference]], timeout: float) -> list[dict[str, Any]]:
+    """A task: each trial a whole `./camo run` (robot nodes in processes) with a time limit,
+    compared with the simulator bit for bit."""
+    return [{"trial_id": trial.trial_id, **ros_row(trial, ref, timeout)} for trial, ref in batch]
+
+
+def ros_row(trial: Trial, reference: Reference, timeout: float) -> dict[str, Any]:
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="camo-sweep-") as folder:
+        out = os.path.join(folder, "run")
+        command = [sys.executable, "-m", "camo_nodes.launcher", *trial.sim_args()]
+        command += ["--seed", str(trial.seed), "--out", out, "--run-id", f"sw{trial.trial_id}"]
+        try:
+            done = subprocess.run(
+                command, capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL
+            )
+        except subprocess.TimeoutExpired:
+            error = f"error: the swarm did not finish within {timeout:g} s"
+            return {**failed(error), "run_s": time.perf_counter() - start}
+        elapsed = time.perf_counter() - start
+        if done.returncode != 0:
+            lines = [line for line in done.stderr.splitlines() if line.strip()]
+            said = lines[-1] if lines else f"exit code {done.returncode}"
+            return {**failed(f"error: {said}"), "run_s": elapsed}
+        with open(os.path.join(out, "summary.json")) as handle:
+            swarm = json.load(handle)
+    row = result_columns(swarm, reference)
+    sim = json.loads(summary_bytes(simulate_options(trial.options, trial.seed).summary()))
+    same = all(swarm.get(k) == sim[k] for k in SUMMARY_KEYS if k != "elapsed_s")
+    return {**row, "status": "ok", "run_s": elapsed, "equals_sim": same}
+
+
+def warm() -> str:
+    """Compile the kernels in this process (a worker, before its first task)."""
+    simulate(CamoParams(rho_meas=0.1, rho_comm=0.1), np.full((8, 8), 100.0))
+    return "warm"

@@ -1,0 +1,103 @@
+"""A sweep on a cluster of `./camo dask` processes: a worker SIGKILLed mid-sweep costs only its
+tasks, and the table is the one a single process writes; swarm trials take a worker resource."""
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+from camo_sweep.table import parts
+from support import ROOT, sweep
+from support import sweep_table as table
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def start(*args: str) -> subprocess.Popen:
+    """A `./camo dask ...` process in a session of its own (SIGKILL takes all of it)."""
+    return subprocess.Popen(
+        [str(ROOT / "camo"), "dask", *args],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+
+
+def stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=30)
+
+
+def wait_for_workers(address: str, count: int) -> None:
+    from distributed import Client
+
+    with Client(address, timeout=60) as client:
+        client.wait_for_workers(count, timeout=120)
+
+
+@pytest.fixture
+def cluster():
+    port = free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    scheduler = start("scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard")
+    workers = [
+        start("worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard")
+        for _ in range(2)
+    ]
+    try:
+        wait_for_workers(address, 2)
+        yield address, workers
+    finally:
+        for proc in (*workers, scheduler):
+            stop(proc)
+
+
+def test_a_worker_killed_mid_sweep_costs_only_its_tasks(cluster, tmp_path):
+    address, workers = cluster
+    args = ["--axis", "rho_comm=0:0.5:0.05", "--set", "pattern=forest", "--trials", "200"]
+    args += ["--batch-s", "0.02", "--quiet"]
+    one = sweep(*args, "--workers", "1", "--out", str(tmp_path / "one"))
+    assert one.returncode == 0, one.stderr
+    out = tmp_path / "cluster"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_sweep.cli", *args, "--scheduler", address, "--out", str(out)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while len(parts(out)) < 3 and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.02)
+    os.killpg(workers[0].pid, signal.SIGKILL)  # the worker, its nanny and all
+    stdout, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 0, stderr
+    assert "the Dask scheduler at tcp://127.0.0.1" in stdout
+    assert len(parts(out)) > 3  # it went on after the kill
+    assert table(out) == table(tmp_path / "one")
+
+
+def test_swarm_trials_need_a_worker_with_the_ros_resource(cluster, tmp_path):
+    address, _ = cluster
+    done = sweep(
+        "--axis",
+        "rho_comm=0.1",
+        "--driver",
+        "ros",
+        "--scheduler",
+        address,
+        "--out",
+        str(tmp_path / "s"),
+    )
+    assert done.returncode == 2 and "offers the 'ros' resource" in done.stderr
+    assert not (tmp_path / "s").exists()

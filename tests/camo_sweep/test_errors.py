@@ -1,0 +1,52 @@
+"""`./camo errors`: the paper's error analysis as a preset sweep; its CSV and figure come from
+the sweep's table."""
+
+import csv
+import subprocess
+import sys
+
+import cv2
+from camo_sweep.errors import CSV_COLUMNS
+from support import ROOT, sweep_table
+
+
+def errors(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "camo_sweep.errors", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+    )
+
+
+def test_errors_writes_csv_figure_and_the_table_they_come_from(tmp_path):
+    out = errors("--pattern", "forest", "--trials", "4", "--rhos", "0,0.4", "--out", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    rows = list(csv.DictReader((tmp_path / "errors.csv").open()))
+    assert [r["mode"] for r in rows] == ["measurement"] * 2 + ["communication"] * 2 + ["both"] * 2
+    assert tuple(rows[0]) == CSV_COLUMNS
+    at_zero = [r for r in rows if float(r["rho"]) == 0.0]
+    assert all(float(r["mean_diff"]) == 0.0 and float(r["correct_rate"]) == 1.0 for r in at_zero)
+    assert max(float(r["mean_diff"]) for r in rows) > 0
+    assert cv2.imread(str(tmp_path / "errors.png")) is not None
+    assert "sweep" in out.stderr  # the progress bar
+    # The points are the table's: rho 0 is one point shared by the three modes (4 trials),
+    # then 4 trials for each mode at 0.4.
+    table = sweep_table(tmp_path)
+    assert len(table) == 4 + 3 * 4
+    both = [t for t in table if t["rho_meas"] == t["rho_comm"] == 0.4]
+    mean = sum(t["diff_cells"] for t in both) / len(both)
+    assert (
+        float(next(r for r in rows if r["mode"] == "both" and r["rho"] == "0.4")["mean_diff"])
+        == mean
+    )
+
+
+def test_errors_rejects_bad_rhos_and_a_used_folder(tmp_path):
+    out = errors("--rhos", "0,2", "--out", str(tmp_path / "a"))
+    assert out.returncode == 2 and "probabilities" in out.stderr
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "x").write_text("")
+    out = errors("--out", str(tmp_path / "b"))
+    assert out.returncode == 2 and "not empty" in out.stderr

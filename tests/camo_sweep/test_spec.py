@@ -1,0 +1,120 @@
+"""A sweep's trials: axes over ./camo sim's options, ids and seeds that depend on the trial
+alone, and one-line errors for a bad sweep."""
+
+import hashlib
+
+import numpy as np
+import pytest
+from camo_sweep.spec import SweepSpec, axis_values, build_spec, spec_from_yaml
+
+from camo_core.exceptions import UsageError
+
+
+def test_a_range_includes_its_end_and_keeps_integers_integers():
+    assert axis_values("rho_comm", "0:0.5:0.1") == [0.0, 0.1, 0.2, 0.3, 0.4, 0.5]
+    assert axis_values("rows", "4:16:4") == [4, 8, 12, 16]
+    assert axis_values("pattern", "forest,desert") == ["forest", "desert"]
+    assert axis_values("rho_meas", [0, "0.25"]) == [0.0, 0.25]
+
+
+@pytest.mark.parametrize(
+    "name, values, said",
+    [
+        ("rho_com", "0,0.1", "unknown option or axis 'rho_com'"),
+        ("rho_comm", "", "axis rho_comm is empty"),
+        ("rho_comm", "0.1,x", "'x' is not a valid value"),
+        ("pattern", "forest,jungle", "not one of desert, forest, leopard"),
+        ("rho_comm", "0.5:0:0.1", "needs FROM <= TO"),
+        ("seed", "1,2", "unknown option or axis 'seed'"),
+        ("rho_comm", "0.1,0.1", "repeats a value"),
+    ],
+)
+def test_a_bad_axis_is_one_line(name, values, said):
+    with pytest.raises(UsageError, match=said):
+        build_spec(None, [f"{name}={values}"], [], 1, 0, None)
+
+
+def test_ids_and_seeds_depend_on_the_trial_not_on_its_place():
+    one = build_spec(None, ["rho_comm=0,0.1,0.2", "pattern=forest,desert"], [], 3, 7, None)
+    other = build_spec(None, ["pattern=desert,forest", "rho_comm=0.2,0.1,0"], [], 3, 7, None)
+    first = {t.trial_id: (t.seed, t.options) for t in one.trial_list()}
+    second = {t.trial_id: (t.seed, t.options) for t in other.trial_list()}
+    assert first == second and len(first) == 18
+    assert len({seed for seed, _ in first.values()}) == 18
+    # A trial keeps its id and seed when the sweep around it grows.
+    more = build_spec(None, ["rho_comm=0,0.1,0.2,0.3", "pattern=forest,desert"], [], 5, 7, None)
+    grown = {t.trial_id: (t.seed, t.options) for t in more.trial_list()}
+    assert first.items() <= grown.items()
+
+
+def test_the_seed_comes_from_a_seed_sequence_of_the_root_seed():
+    spec = build_spec(None, ["rho_comm=0.1"], [], 2, 11, None)
+    seeds = [t.seed for t in spec.trial_list()]
+    again = [t.seed for t in build_spec(None, ["rho_comm=0.1"], [], 2, 11, None).trial_list()]
+    other_root = [t.seed for t in build_spec(None, ["rho_comm=0.1"], [], 2, 12, None).trial_list()]
+    assert seeds == again and not set(seeds) & set(other_root)
+    # As docs/sweeps.md gives it: the spawn key is the first 16 bytes of the SHA-256 of the
+    # trial's options (canonical JSON) as four little-endian words, then the replicate.
+    digest = hashlib.sha256(b'{"rho_comm":0.1}').digest()
+    words = [int.from_bytes(digest[k : k + 4], "little") for k in range(0, 16, 4)]
+    for replicate, seed in enumerate(seeds):
+        sequence = np.random.SeedSequence(11, spawn_key=(*words, replicate))
+        assert seed == int(sequence.generate_state(1, np.uint64)[0])
+
+
+def test_tied_axes_share_values_and_a_point_in_two_blocks_is_one_trial():
+    rhos = [0.0, 0.2]
+    spec = SweepSpec(
+        blocks=[{"rho_meas": rhos}, {"rho_comm": rhos}, {"rho_meas,rho_comm": rhos}],
+        options={"pattern": "forest"},
+        trials=2,
+    )
+    assert spec.axis_names() == ["rho_meas", "rho_comm"]
+    trials = spec.trial_list()
+    points = [(t.options["rho_meas"], t.options["rho_comm"]) for t in trials]
+    # (0, 0) is in all three blocks, yet one point; the tied block adds only (0.2, 0.2).
+    assert sorted(set(points)) == [(0.0, 0.0), (0.0, 0.2), (0.2, 0.0), (0.2, 0.2)]
+    assert len(trials) == 8 and len({t.trial_id for t in trials}) == 8
+
+
+def test_a_trial_is_a_sim_command_line():
+    spec = build_spec(None, ["rho_comm=0.1"], ["rows=4", "pattern=leopard"], 1, 0, None)
+    (trial,) = spec.trial_list()
+    assert trial.sim_args() == ["--rows", "4", "--pattern", "leopard", "--rho-comm", "0.1"]
+
+
+def test_an_option_both_fixed_and_swept_or_two_backgrounds_are_refused():
+    with pytest.raises(UsageError, match="both an axis and a fixed option"):
+        build_spec(None, ["rows=4,8"], ["rows=8"], 1, 0, None)
+    with pytest.raises(UsageError, match="--image or --pattern"):
+        build_spec(None, ["image=a.png"], ["pattern=forest"], 1, 0, None)
+    with pytest.raises(UsageError, match="at least one axis"):
+        build_spec(None, [], [], 1, 0, None)
+
+
+@pytest.mark.parametrize(
+    "text, said",
+    [
+        ("axes: [1, 2\n", r"is not valid YAML \(line 2\)"),
+        ("- a\n- b\n", "a sweep file is a mapping"),
+        ("axis:\n  rho_comm: 0,0.1\n", "unknown key 'axis'"),
+        ("axes: 3\n", "axes must be a mapping"),
+    ],
+)
+def test_a_bad_sweep_file_is_one_line(tmp_path, text, said):
+    path = tmp_path / "sweep.yaml"
+    path.write_text(text)
+    with pytest.raises(UsageError, match=said):
+        spec_from_yaml(path)
+
+
+def test_a_sweep_file_and_the_command_line_combine(tmp_path):
+    path = tmp_path / "sweep.yaml"
+    path.write_text(
+        "seed: 3\ntrials: 4\noptions:\n  rows: 4\naxes:\n  rho_comm: 0:0.2:0.1\n"
+        "  pattern: [forest, desert]\n"
+    )
+    spec = build_spec(spec_from_yaml(path), ["threshold=40,60"], [], 2, None, None)
+    assert (spec.seed, spec.trials, spec.options) == (3, 2, {"rows": 4})
+    assert spec.axis_names() == ["rho_comm", "pattern", "threshold"]
+    assert spec.count() == 3 * 2 * 2 * 2

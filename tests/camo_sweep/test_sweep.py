@@ -1,0 +1,202 @@
+"""`./camo sweep`: the same table whatever the engine, every row reproduced by ./camo sim,
+resumption after Ctrl-C without duplicates, failed trials as rows, one-line errors that write
+nothing."""
+
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import time
+
+import cv2
+import pyarrow.dataset as ds
+import pytest
+from camo_sweep.spec import sim_parser
+from support import ROOT, run_camo, sweep
+from support import sweep_table as table
+
+from camo_core.backgrounds import background
+from camo_core.options import params_from
+from camo_core.sensing import sense_image
+from camo_core.simulator import simulate
+
+
+@pytest.fixture(scope="module")
+def two_images(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("images")
+    paths = []
+    for name in ("forest", "desert"):
+        path = folder / f"{name}.png"
+        cv2.imwrite(str(path), background(name))
+        paths.append(str(path))
+    return paths
+
+
+@pytest.fixture(scope="module")
+def in_process(tmp_path_factory, two_images):
+    out = tmp_path_factory.mktemp("sweep") / "one"
+    args = ["--axis", f"image={','.join(two_images)}", "--axis", "rho_comm=0,0.25,0.5"]
+    done = sweep(*args, "--trials", "20", "--workers", "1", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    return args, out, done
+
+
+def test_two_workers_over_tcp_give_the_table_of_one_process(in_process, tmp_path):
+    args, one, _ = in_process
+    two = tmp_path / "two"
+    done = sweep(*args, "--trials", "20", "--workers", "2", "--batch-s", "0.01", "--out", str(two))
+    assert done.returncode == 0, done.stderr
+    assert "LocalCluster of 2 workers" in done.stdout
+    rows = table(one)
+    assert len(rows) == 2 * 3 * 20 and len({r["trial_id"] for r in rows}) == len(rows)
+    assert rows == table(two)
+    assert all(r["status"] == "ok" for r in rows)
+    # The errors move the pattern: some trials at 0.5 differ from the error-free run.
+    assert any(r["diff_cells"] > 0 for r in rows if r["rho_comm"] == 0.5)
+    assert all(r["diff_cells"] == 0 and r["correct"] for r in rows if r["rho_comm"] == 0)
+
+
+def test_every_row_is_reproduced_by_camo_sim(in_process, tmp_path):
+    _, one, _ = in_process
+    rows = table(one)
+    parser = sim_parser()
+    for row in rows:  # each row's command line, parsed as ./camo sim parses it, and run
+        args = parser.parse_args([*shlex.split(row["sim_args"]), "--seed", str(row["seed"])])
+        params = params_from(args)
+        image = cv2.imread(args.image)
+        result = simulate(params, sense_image(image, params.rows, params.cols, params.profile))
+        assert result.majority_pattern == row["chosen_pattern"]
+        assert result.selection_counts["vertical"] == row["votes_vertical"]
+    # And ./camo sim itself, for a row with errors.
+    row = next(r for r in rows if r["rho_comm"] == 0.5 and r["diff_cells"] > 0)
+    out = tmp_path / "sim"
+    done = run_camo(
+        "sim", *shlex.split(row["sim_args"]), "--seed", str(row["seed"]), "--out", str(out)
+    )
+    assert done.returncode == 0, done.stderr
+    import json
+
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["pattern"] == row["chosen_pattern"]
+    assert [summary["votes"][k] for k in ("horizontal", "vertical", "mottled")] == [
+        row["votes_horizontal"],
+        row["votes_vertical"],
+        row["votes_mottled"],
+    ]
+    assert summary["mean_p"] == [
+        row["mean_p_horizontal"],
+        row["mean_p_vertical"],
+        row["mean_p_mottled"],
+    ]
+
+
+def test_the_same_command_again_runs_nothing_and_duplicates_nothing(in_process):
+    args, one, _ = in_process
+    before = table(one)
+    again = sweep(*args, "--trials", "20", "--workers", "1", "--out", str(one))
+    assert again.returncode == 0, again.stderr
+    assert "120 already in the table, 0 run" in again.stdout
+    assert table(one) == before
+    # More replicates add only the new ones.
+    more = sweep(*args, "--trials", "21", "--workers", "1", "--out", str(one), "--quiet")
+    assert more.returncode == 0 and "120 already in the table, 6 run" in more.stdout
+    rows = table(one)
+    assert len(rows) == 126 and [r for r in rows if r["replicate"] < 20] == before
+
+
+def test_ctrl_c_mid_sweep_then_the_same_command_gives_the_same_table(tmp_path):
+    args = ["--axis", "rho_comm=0:0.5:0.05", "--set", "pattern=forest", "--trials", "300"]
+    args += ["--workers", "1", "--batch-s", "0.02"]
+    whole = sweep(*args, "--out", str(tmp_path / "whole"), "--quiet")
+    assert whole.returncode == 0, whole.stderr
+    out = tmp_path / "stopped"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_sweep.cli", *args, "--out", str(out)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 60
+    while len(list((out / "trials").glob("part-*.parquet"))) < 3 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    assert "the same command goes on from there" in stderr and "Traceback" not in stderr
+    partial = ds.dataset(str(out / "trials"), format="parquet").count_rows()
+    assert 0 < partial < 3300
+    again = sweep(*args, "--out", str(out), "--quiet")
+    assert again.returncode == 0, again.stderr
+    assert f"{partial} already in the table" in again.stdout
+    raw = ds.dataset(str(out / "trials"), format="parquet").to_table().column("trial_id")
+    assert len(raw) == len(set(raw.to_pylist())) == 3300  # no trial twice, in any part
+    assert table(out) == table(tmp_path / "whole")
+
+
+def test_a_trial_that_cannot_run_is_a_row_with_its_error_and_the_rest_go_on(tmp_path):
+    out = tmp_path / "s"
+    done = sweep("--axis", "rows=4,0", "--trials", "2", "--workers", "1", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    rows = table(out)
+    bad = [r for r in rows if r["rows"] == 0]
+    assert len(bad) == 2 and all(r["status"].startswith("error: rows must be") for r in bad)
+    assert all(r["status"] == "ok" and r["chosen_pattern"] for r in rows if r["rows"] == 4)
+    assert "2 failed" in done.stdout
+
+
+@pytest.mark.parametrize(
+    "args, said",
+    [
+        (["--axis", "rho_com=0,0.1"], "unknown option or axis 'rho_com'"),
+        (["--axis", "rho_comm="], "axis rho_comm is empty"),
+        (["--axis", "rho_comm=0.1", "--sett", "rows=4"], "unrecognized arguments: --sett"),
+        (["--axis", "rho_comm=0.1", "--scheduler", "tcp://127.0.0.1:9"], "cannot reach the Dask"),
+        (["BAD_YAML"], "is not valid YAML"),
+        (["--axis", "rho_comm=0.1", "--print-job-script"], "goes with --slurm"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, said):
+    out = tmp_path / "s"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("axes: {rho_comm: [0, 0.1\n")
+    args = [str(bad) if a == "BAD_YAML" else a for a in args]
+    done = sweep(*args, "--out", str(tmp_path / "new"), timeout=120)
+    assert done.returncode == 2, done.stderr
+    assert said in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert not (tmp_path / "new").exists()
+    # A folder that is not a sweep's is refused, and left as it was.
+    other = sweep("--axis", "rho_comm=0.1", "--workers", "1", "--out", str(out))
+    assert other.returncode == 2 and "not a sweep's folder" in other.stderr
+    assert os.listdir(out) == ["keep.txt"]
+
+
+def test_a_folder_of_another_sweep_is_refused(in_process):
+    _, one, _ = in_process
+    parts = sorted(p.name for p in (one / "trials").iterdir())
+    done = sweep("--axis", "rho_comm=0.1", "--workers", "1", "--out", str(one))
+    assert done.returncode == 2 and "holds another sweep" in done.stderr
+    assert sorted(p.name for p in (one / "trials").iterdir()) == parts
+
+
+def test_slurm_prints_a_job_script_that_starts_a_dask_worker(tmp_path):
+    options = ["--slurm-queue", "short", "--slurm-cores", "4", "--slurm-walltime", "00:30:00"]
+    done = subprocess.run(
+        [sys.executable, "-m", "camo_sweep.cli", "--slurm", *options, "--print-job-script"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
+    assert done.returncode == 0, done.stderr
+    script = done.stdout
+    assert script.startswith("#!/usr/bin/env bash") and "#SBATCH -p short" in script
+    assert "#SBATCH -t 00:30:00" in script and "distributed.cli.dask_worker" in script
+    assert "--nthreads 1" in script and "--nworkers 4" in script and "ros=1" in script
+    assert f"source {ROOT}/ros2_ws/install/setup.bash" in script
+    assert os.listdir(tmp_path) == []  # nothing written, nothing submitted
+    missing = sweep("--axis", "rho_comm=0.1", "--workers", "1")
+    assert missing.returncode == 2 and "required: --out" in missing.stderr
