@@ -35,12 +35,15 @@ RULES = [
     ("./camo droplet-emulator", SERVES, "a Droplet on a pseudo-terminal"),
     ("./camo record", "with a run", "records the only run in its domain"),
     ("./camo view", SERVES, "serves a run to Foxglove until it ends"),
+    ("./camo dask scheduler", SERVES, "the Dask scheduler of a cluster"),
+    ("./camo dask worker tcp://HOST", "skip", "needs the scheduler's host"),
 ]
 UP = {  # what a serving command says once it is up
     "./camo worker": "camo worker: waiting for",
     "./camo discovery-server": "listening on",
     "./camo droplet-emulator": "Ctrl-C to stop",
     "./camo view": "camo view: waiting for",
+    "./camo dask scheduler": "Scheduler at:",
 }
 
 

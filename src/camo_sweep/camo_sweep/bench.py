@@ -97,7 +97,7 @@ def format_table(report: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="camo bench sweep", allow_abbrev=False)
-    parser.add_argument("--trials", type=int, default=6000, help="trials in all (default 6000)")
+    parser.add_argument("--trials", type=int, default=20000, help="trials in all (default 20000)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
     try:

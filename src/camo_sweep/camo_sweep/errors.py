@@ -85,7 +85,7 @@ def points_from(folder: Path, rhos: list[float]) -> list[ErrorPoint]:
             keep &= ok
             if not keep.any():
                 continue
-            values = diff[keep]
+            values = np.sort(diff[keep])  # one order, whatever order the parts hold
             points.append(
                 ErrorPoint(
                     mode,

@@ -13,7 +13,7 @@ from camo_core.exceptions import CamoError
 from camo_core.progress import ProgressBar
 
 from .spec import SweepSpec, Trial, canonical
-from .table import TableWriter, done_ids, row_of
+from .table import Layout, TableWriter, done_ids, rows_table
 from .trials import Reference, reference_of, reference_options, run_ros_batch, run_sim_batch
 
 MAX_BATCH = 5000
@@ -66,39 +66,38 @@ def run_sweep(
     trials = spec.trial_list()
     done = done_ids(folder)
     todo = [t for t in trials if t.trial_id not in done]
-    writer = TableWriter(folder, spec)
+    writer = TableWriter(folder)
+    layout = Layout.of(spec)
     report = SweepReport(len(trials), len(trials) - len(todo), 0, 0, 0.0)
     if not todo:
         return report
     references, cost = references_for(todo)
-    by_id = {t.trial_id: t for t in todo}
     failed_rows, work = [], []
     for trial in todo:
         reference = references[canonical(reference_options(trial.options))]
         if isinstance(reference, str):  # its options cannot run at all
-            failed_rows.append(row_of(trial, {"status": reference, "run_s": 0.0}, spec))
+            failed_rows.append((trial, {"status": reference, "run_s": 0.0}))
         else:
             work.append((trial, reference))
     bar = ProgressBar(len(trials), "sweep", already=report.skipped) if progress else None
     if failed_rows:
-        writer.write(failed_rows)
+        writer.write(rows_table(layout, failed_rows))
         report.ran += len(failed_rows)
         report.failed += len(failed_rows)
         if bar:
             bar.update(report.skipped + report.ran)
     if spec.driver == "ros":
-        tasks = [(run_ros_batch, (batch, ros_timeout)) for batch in batches(work, 1)]
+        tasks = [(run_ros_batch, (batch, layout, ros_timeout)) for batch in batches(work, 1)]
         resources = {"ros": 1}
     else:
         size = max(1, min(MAX_BATCH, round(batch_s / cost)))
-        tasks = [(run_sim_batch, (batch,)) for batch in batches(work, size)]
+        tasks = [(run_sim_batch, (batch, layout)) for batch in batches(work, size)]
         resources = None
     start = time.perf_counter()
-    for results in engine.run(tasks, resources=resources):
-        rows = [row_of(by_id[r["trial_id"]], r, spec) for r in results]
-        writer.write(rows)
-        report.ran += len(rows)
-        report.failed += sum(r["status"] != "ok" for r in rows)
+    for table in engine.run(tasks, resources=resources):
+        writer.write(table)
+        report.ran += table.num_rows
+        report.failed += table.num_rows - table.column("status").to_pylist().count("ok")
         if on_part:
             on_part(report.ran)
         if bar:

@@ -8,7 +8,9 @@ left is removed on the next start. The rows already there are the trials a resum
 from __future__ import annotations
 
 import os
+import shlex
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -69,36 +71,53 @@ def _arrow_type(values: list[Any]) -> pa.DataType:
     return pa.string()
 
 
-def row_of(trial: Trial, result: dict[str, Any], spec: SweepSpec) -> dict[str, Any]:
-    """A table row: the trial's identity and axes, and what its task returned."""
-    import shlex
+@dataclass(frozen=True)
+class Layout:
+    """What a task needs to build its rows as a table: the workers build them, so that the
+    driver only writes (its core is also a worker's, on a small machine)."""
 
-    row = {
-        "trial_id": trial.trial_id,
-        "replicate": trial.replicate,
-        "seed": trial.seed,
-        "driver": spec.driver,
-        **{name: trial.options[name] for name in spec.axis_names()},
-        **{k: v for k, v in result.items() if k != "trial_id"},
-        "sim_args": shlex.join(trial.sim_args()),
-    }
-    return row
+    schema: pa.Schema
+    axes: tuple[str, ...]
+    driver: str
+
+    @classmethod
+    def of(cls, spec: SweepSpec) -> Layout:
+        return cls(schema(spec), tuple(spec.axis_names()), spec.driver)
+
+
+def rows_table(layout: Layout, done: list[tuple[Trial, dict[str, Any]]]) -> pa.Table:
+    """Table rows: each trial's identity and axes, and what running it gave."""
+    command: dict[int, str] = {}  # the trials of one point share their options (and command)
+    rows = []
+    for trial, result in done:
+        key = id(trial.options)
+        if key not in command:
+            command[key] = shlex.join(trial.sim_args())
+        row = {
+            "trial_id": trial.trial_id,
+            "replicate": trial.replicate,
+            "seed": trial.seed,
+            "driver": layout.driver,
+            "sim_args": command[key],
+            **{name: trial.options[name] for name in layout.axes},
+            **result,
+        }
+        rows.append(row)
+    return pa.Table.from_pylist(rows, schema=layout.schema)
 
 
 class TableWriter:
     """Appends parts of rows to DIR/trials/."""
 
-    def __init__(self, folder: Path, spec: SweepSpec) -> None:
+    def __init__(self, folder: Path) -> None:
         self.folder = Path(folder) / TABLE
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.schema = schema(spec)
         for stale in self.folder.glob("_*.tmp"):  # a part a killed driver was writing
             stale.unlink()
 
-    def write(self, rows: list[dict[str, Any]]) -> Path | None:
-        if not rows:
+    def write(self, table: pa.Table) -> Path | None:
+        if not table.num_rows:
             return None
-        table = pa.Table.from_pylist(rows, schema=self.schema)
         name = f"part-{uuid.uuid4().hex}.parquet"
         temporary = self.folder / f"_{name}.tmp"
         pq.write_table(table, temporary)

@@ -15,6 +15,7 @@ from functools import cache
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 
 from camo_core.exceptions import CamoError
 from camo_core.options import image_from, params_from
@@ -25,6 +26,7 @@ from camo_core.sensing import sense_image
 from camo_core.simulator import simulate
 
 from .spec import Trial, defaults
+from .table import Layout, rows_table
 
 # Up to this many robots a trial's kernels run on one thread: a small grid gains nothing from
 # numba's threads and loses much to their start-up when the cores are busy (an 8x8 trial takes
@@ -115,7 +117,7 @@ def sim_row(trial: Trial, reference: Reference) -> dict[str, Any]:
     try:
         result = simulate_options(trial.options, trial.seed)
     except CamoError as exc:
-        return {**failed(str(exc)), "run_s": time.perf_counter() - start}
+        return {**failed(f"error: {exc}"), "run_s": time.perf_counter() - start}
     summary = {
         "pattern": result.majority_pattern,
         "votes": result.selection_counts,
@@ -126,15 +128,15 @@ def sim_row(trial: Trial, reference: Reference) -> dict[str, Any]:
     return {**row, "status": "ok", "run_s": time.perf_counter() - start}
 
 
-def run_sim_batch(batch: list[tuple[Trial, Reference]]) -> list[dict[str, Any]]:
-    """A task: simulator trials, one row each (trial_id, then the result columns)."""
-    return [{"trial_id": trial.trial_id, **sim_row(trial, ref)} for trial, ref in batch]
+def run_sim_batch(batch: list[tuple[Trial, Reference]], layout: Layout) -> pa.Table:
+    """A task: simulator trials, one row each."""
+    return rows_table(layout, [(trial, sim_row(trial, ref)) for trial, ref in batch])
 
 
-def run_ros_batch(batch: list[tuple[Trial, Reference]], timeout: float) -> list[dict[str, Any]]:
+def run_ros_batch(batch: list[tuple[Trial, Reference]], layout: Layout, timeout: float):
     """A task: each trial a whole `./camo run` (robot nodes in processes) with a time limit,
     compared with the simulator bit for bit."""
-    return [{"trial_id": trial.trial_id, **ros_row(trial, ref, timeout)} for trial, ref in batch]
+    return rows_table(layout, [(trial, ros_row(trial, ref, timeout)) for trial, ref in batch])
 
 
 def ros_row(trial: Trial, reference: Reference, timeout: float) -> dict[str, Any]:
