@@ -118,3 +118,25 @@ def test_a_sweep_file_and_the_command_line_combine(tmp_path):
     assert (spec.seed, spec.trials, spec.options) == (3, 2, {"rows": 4})
     assert spec.axis_names() == ["rho_comm", "pattern", "threshold"]
     assert spec.count() == 3 * 2 * 2 * 2
+
+
+def test_millisecond_trials_are_batched_into_tasks_of_about_batch_s(tmp_path):
+    from camo_sweep.engines import InProcess
+    from camo_sweep.sweep import run_sweep
+
+    class Counting(InProcess):
+        def __init__(self) -> None:
+            self.sizes: list[int] = []
+
+        def run(self, tasks, **kwargs):
+            for function, args in tasks:
+                self.sizes.append(len(args[0]))
+                yield function(*args)
+
+    spec = build_spec(None, ["rho_comm=0:0.5:0.1"], [], 100, 0, None)
+    engine = Counting()
+    report = run_sweep(spec, tmp_path, engine, batch_s=0.05, progress=False)
+    assert report.ran == 600 and sum(engine.sizes) == 600
+    # An 8x8 trial takes about a millisecond: tens of trials a task, not one (the kernels'
+    # compilation, on a first run, must not be taken for a trial's cost).
+    assert 10 <= max(engine.sizes) <= 600 and len(engine.sizes) < 60

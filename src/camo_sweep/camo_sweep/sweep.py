@@ -30,22 +30,25 @@ class SweepReport:
 
 def references_for(trials: list[Trial]) -> tuple[dict[bytes, Reference | str], float]:
     """Each distinct error-free reference once (or the one-line error that stops its trials),
-    and the time one reference took (the estimate of a trial's cost)."""
+    and what one trial costs: a reference run again, once the kernels are compiled (the first
+    run may have compiled them)."""
     references: dict[bytes, Reference | str] = {}
-    cost = None
+    timed = None
     for trial in trials:
         key = canonical(reference_options(trial.options))
         if key in references:
             continue
-        start = time.perf_counter()
         try:
             references[key] = reference_of(trial.options)
         except CamoError as exc:
             references[key] = f"error: {exc}"
             continue
-        if len(references) > 1 or cost is None:  # the first one also compiles the kernels
-            cost = time.perf_counter() - start
-    return references, cost or 0.001
+        timed = timed or trial
+    if timed is None:
+        return references, 0.001
+    start = time.perf_counter()
+    reference_of(timed.options)
+    return references, max(time.perf_counter() - start, 1e-5)
 
 
 def batches(work: list[tuple[Trial, Reference]], size: int) -> list[list[tuple[Trial, Reference]]]:
