@@ -119,14 +119,13 @@ class StatusListener:
         from rclpy.executors import SingleThreadedExecutor
 
         from camo_msgs.msg import RobotStatus
-        from camo_nodes.monitor_node import status_listener_qos
-        from camo_nodes.topics import RunTopics
+        from camo_nodes.topics import LATCHED_READER, RunTopics
 
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)
         self.node = rclpy.create_node("status_listener", context=self.context)
         self.node.create_subscription(
-            RobotStatus, RunTopics(self.run).status, self.got.append, status_listener_qos()
+            RobotStatus, RunTopics(self.run).status, self.got.append, LATCHED_READER
         )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)

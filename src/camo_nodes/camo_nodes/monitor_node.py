@@ -25,7 +25,6 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
@@ -66,17 +65,6 @@ from .topics import (
 from .trust import BackgroundCheck, Hosts, Rejections, merged
 
 
-def status_listener_qos() -> QoSProfile:
-    """Every robot writes to one status topic: a listener keeps all, or bursts would push samples
-    out."""
-    return QoSProfile(
-        depth=1,
-        history=HistoryPolicy.KEEP_ALL,
-        reliability=ReliabilityPolicy.RELIABLE,
-        durability=DurabilityPolicy.TRANSIENT_LOCAL,
-    )
-
-
 class MonitorNode(Node):
     def __init__(
         self, params: CamoParams, topics: RunTopics, setup: dict | None = None, **kwargs
@@ -98,7 +86,9 @@ class MonitorNode(Node):
         context = kwargs.get("context")
         self.polled = PolledTopics("monitor_listener", topics.swarm_namespace, context)
         self.polled.listen(Host, topics.hosts, LATCHED_READER, self._on_host)
-        self.polled.listen(RobotStatus, topics.status, status_listener_qos(), self._on_status)
+        # Every robot writes to one status topic: the monitor keeps all (LATCHED_READER keeps every
+        # sample), or bursts would push statuses out.
+        self.polled.listen(RobotStatus, topics.status, LATCHED_READER, self._on_status)
         self.polled.listen(Image, topics.background, LATCHED_READER, self._on_background)
         self.create_timer(0.02, self.polled.poll)
         self.pattern_pub = self.create_publisher(Image, topics.pattern, 10)
