@@ -101,3 +101,31 @@ def test_swarm_trials_need_a_worker_with_the_ros_resource(cluster, tmp_path):
     )
     assert done.returncode == 2 and "offers the 'ros' resource" in done.stderr
     assert not (tmp_path / "s").exists()
+
+
+def _square(x: int) -> int:
+    return x * x
+
+
+def test_a_local_cluster_listens_on_loopback_and_keeps_few_tasks_in_flight():
+    from camo_sweep.engines import local_engine
+
+    engine = local_engine(1)
+    try:
+        assert engine.client.scheduler.address.startswith("tcp://127.0.0.1:")
+        assert engine.cluster.dashboard_link.startswith("http://127.0.0.1:")
+        futures, most = [], [0]
+        submit = engine._submit
+
+        def counting(task, resources):
+            running = sum(not f.done() for f in futures)  # handed out, not finished
+            most[0] = max(most[0], running + 1)
+            futures.append(submit(task, resources))
+            return futures[-1]
+
+        engine._submit = counting
+        results = list(engine.run(((_square, (k,)) for k in range(200)), in_flight=5))
+        assert sorted(results) == [k * k for k in range(200)]
+        assert most[0] <= 5
+    finally:
+        engine.close()
