@@ -1,5 +1,9 @@
 """The two drivers (per-robot step functions, whole-grid simulator) agree bit for bit."""
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -62,3 +66,40 @@ def test_exempt_robots_are_never_replaced_by_noise():
     assert result.sensed[1, 2] == 100.0
     assert np.array_equal(result.sensed, run_per_robot(params, raw, exempt=exempt).sensed)
     assert (result.sensed[~exempt] != 100.0).sum() >= 12
+
+
+STALE_CACHE_RUN = """
+import sys
+import numpy as np
+from camo_core import rules
+if sys.argv[1] == "changed":  # a rules.py of another version: fewer mottled inhibitors
+    rules.INHIBITORS[rules.MOTTLED] = (4, 5, 6, 7)
+from camo_core import kernels
+from camo_core.backgrounds import background
+from camo_core.params import CamoParams
+from camo_core.perrobot import run_per_robot
+from camo_core.sensing import sense_image
+from camo_core.simulator import simulate
+params = CamoParams(rows=8, cols=8)
+raw = sense_image(background("leopard"), 8, 8, "paper")
+grid, robots = simulate(params, raw), run_per_robot(params, raw)
+print(kernels.frozen_tables() == kernels.TABLES, np.array_equal(grid.final, robots.final))
+"""
+
+
+def test_cached_kernels_of_other_tables_are_built_again(tmp_path):
+    # numba keys its cache on kernels.py alone; the tables it freezes come from rules.py.
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    outs = [
+        subprocess.run(
+            [sys.executable, "-c", STALE_CACHE_RUN, version],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=600,
+        )
+        for version in ("as is", "changed")
+    ]
+    for out in outs:
+        assert out.returncode == 0, out.stderr[-2000:]
+        assert out.stdout.split() == ["True", "True"], out.stdout

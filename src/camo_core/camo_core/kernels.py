@@ -8,6 +8,8 @@ docs/algorithm.md §3's hash, computed in place from (prefix, sender, receiver).
 
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 from numba import njit, prange
 
@@ -45,6 +47,19 @@ _INV_2_53 = rng.INV_2_53
 ALL_SLOTS = (1 << 12) - 1
 # w = 1 / (1 + max degree), computed once per possible degree: the same float64 as rules.py.
 METROPOLIS = np.array([1.0 / (1.0 + d) for d in range(9)])
+
+
+def _fingerprint() -> int:
+    """A hash of every value the kernels freeze from other modules. numba's cache is keyed on
+    this file alone: after a change to rules.py, grid.py or rng.py (a `git pull`, say), cached
+    kernels would run the old tables, and the simulator would part from the per-robot rules."""
+    frozen = (DI, DJ, FALLBACK, ROLE, METROPOLIS)
+    numbers = (HORIZONTAL, VERTICAL, MOTTLED, rng.GOLDEN, rng.M1, rng.M2, rng.INV_2_53)
+    text = repr(([a.tolist() for a in frozen], numbers)).encode()
+    return int.from_bytes(hashlib.sha256(text).digest()[:7], "little")  # an int64
+
+
+TABLES = _fingerprint()
 
 
 @njit(cache=True, inline="always")
@@ -227,3 +242,23 @@ def p_stats(p_flat):
             if r == 0 or value > spread[k, 1]:
                 spread[k, 1] = value
     return total / n, spread
+
+
+@njit(cache=True)
+def frozen_tables():
+    """The fingerprint these compiled kernels were built with (TABLES, as it was then)."""
+    return TABLES
+
+
+def _drop_stale_kernels() -> None:
+    """Cached kernels built from other tables than today's are thrown away and built again."""
+    if frozen_tables() == TABLES:
+        return
+    for kernel in list(globals().values()):
+        cache = getattr(kernel, "_cache", None)
+        if cache is not None and hasattr(kernel, "recompile"):
+            cache.flush()  # the cached versions; this process compiles them anew on first call
+    frozen_tables.recompile()
+
+
+_drop_stale_kernels()
