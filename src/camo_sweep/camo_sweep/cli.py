@@ -163,6 +163,10 @@ def cmd_sweep(argv: list[str]) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / SPEC_FILE).write_text(yaml.safe_dump(spec.as_dict(), sort_keys=False))
         if isinstance(engine, engines.DaskEngine):
+            if engine.client.dashboard_link and not args.quiet:
+                print(
+                    f"camo sweep: Dask dashboard {engine.client.dashboard_link}", file=sys.stderr
+                )
             engine.warm()
         report = run_sweep(
             spec, args.out, engine, args.batch_s, args.ros_timeout, progress=not args.quiet
