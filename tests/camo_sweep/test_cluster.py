@@ -87,6 +87,29 @@ def test_a_worker_killed_mid_sweep_costs_only_its_tasks(cluster, tmp_path):
     assert table(out) == table(tmp_path / "one")
 
 
+def test_workers_elsewhere_never_open_the_sweeps_images(cluster, tmp_path):
+    # The workers run in the repository's folder; the sweep, and its relative image, here.
+    import cv2
+
+    from camo_core.backgrounds import background
+
+    address, _ = cluster
+    cv2.imwrite(str(tmp_path / "a.png"), background("desert"))
+    args = ["--axis", "image=a.png", "--axis", "rho_comm=0,0.3", "--trials", "3", "--quiet"]
+    runs = {}
+    for name, engine in (("one", ["--workers", "1"]), ("far", ["--scheduler", address])):
+        done = subprocess.run(
+            [sys.executable, "-m", "camo_sweep.cli", *args, *engine, "--out", name],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            cwd=tmp_path,
+        )
+        assert done.returncode == 0, done.stderr
+        runs[name] = table(tmp_path / name)
+    assert all(r["status"] == "ok" for r in runs["far"]) and runs["far"] == runs["one"]
+
+
 def test_swarm_trials_need_a_worker_with_the_ros_resource(cluster, tmp_path):
     address, _ = cluster
     done = sweep(

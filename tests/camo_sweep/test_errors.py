@@ -50,3 +50,16 @@ def test_errors_rejects_bad_rhos_and_a_used_folder(tmp_path):
     (tmp_path / "b" / "x").write_text("")
     out = errors("--out", str(tmp_path / "b"))
     assert out.returncode == 2 and "not empty" in out.stderr
+
+
+def test_errors_again_in_its_folder_is_the_same_analysis_or_refused(tmp_path):
+    base = ["--trials", "2", "--rhos", "0,0.4", "--quiet", "--out", str(tmp_path)]
+    assert errors(*base).returncode == 0
+    fewer = errors(*base[:1], "1", *base[2:], "--force")
+    assert fewer.returncode == 0, fewer.stderr
+    rows = list(csv.DictReader((tmp_path / "errors.csv").open()))
+    assert {r["trials"] for r in rows} == {"1"}  # this analysis's trials, not the folder's
+    other = errors(*base, "--force", "--pattern", "leopard")
+    assert other.returncode == 2 and "holds another sweep" in other.stderr
+    noisy = errors("--rho-meas", "0.3", "--out", str(tmp_path / "n"))
+    assert noisy.returncode == 2 and "give them as --rhos" in noisy.stderr

@@ -25,13 +25,40 @@ def test_a_range_includes_its_end_and_keeps_integers_integers():
         ("rho_comm", "0.1,x", "'x' is not a valid value"),
         ("pattern", "forest,jungle", "not one of desert, forest, leopard"),
         ("rho_comm", "0.5:0:0.1", "needs FROM <= TO"),
-        ("seed", "1,2", "unknown option or axis 'seed'"),
+        ("seed", "1,2", "seed is not an axis"),
         ("rho_comm", "0.1,0.1", "repeats a value"),
     ],
 )
 def test_a_bad_axis_is_one_line(name, values, said):
     with pytest.raises(UsageError, match=said):
         build_spec(None, [f"{name}={values}"], [], 1, 0, None)
+
+
+def test_an_axis_given_twice_is_refused():
+    for axes in (
+        ["rho_comm=0,0.1", "rho_comm=0.2,0.3"],
+        ["rho_comm=0,0.1", "rho_meas,rho_comm=0.2,0.3"],
+        ["rho_comm,rho_comm=0,0.1"],
+    ):
+        with pytest.raises(UsageError, match="axis rho_comm is given twice"):
+            build_spec(None, axes, [], 1, 0, None)
+
+
+def test_an_option_left_at_a_default_of_none_is_not_on_the_command_line():
+    blocks = {"blocks": [{"consensus_steps": [5, 20]}, {"rho_comm": [0.1]}]}
+    spec = build_spec(blocks, [], [], 1, 0, None)
+    commands = sorted(" ".join(t.sim_args()) for t in spec.trial_list())
+    assert commands == [
+        "--consensus-steps 20 --rho-comm 0.0",
+        "--consensus-steps 5 --rho-comm 0.0",
+        "--rho-comm 0.1",
+    ]
+
+
+def test_one_image_by_two_spellings_is_one_trial():
+    one = build_spec(None, ["image=a.png"], [], 1, 0, None).trial_list()
+    two = build_spec(None, ["image=./a.png"], [], 1, 0, None).trial_list()
+    assert [t.trial_id for t in one] == [t.trial_id for t in two]
 
 
 def test_ids_and_seeds_depend_on_the_trial_not_on_its_place():

@@ -135,15 +135,23 @@ def test_ctrl_c_mid_sweep_then_the_same_command_gives_the_same_table(tmp_path):
     assert table(out) == table(tmp_path / "whole")
 
 
-def test_a_trial_that_cannot_run_is_a_row_with_its_error_and_the_rest_go_on(tmp_path):
+def test_a_table_part_that_is_not_a_sweeps_is_named_in_one_line(tmp_path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     out = tmp_path / "s"
-    done = sweep("--axis", "rows=4,0", "--trials", "2", "--workers", "1", "--out", str(out))
+    done = sweep("--axis", "rho_comm=0,0.1", "--workers", "1", "--quiet", "--out", str(out))
     assert done.returncode == 0, done.stderr
-    rows = table(out)
-    bad = [r for r in rows if r["rows"] == 0]
-    assert len(bad) == 2 and all(r["status"].startswith("error: rows must be") for r in bad)
-    assert all(r["status"] == "ok" and r["chosen_pattern"] for r in rows if r["rows"] == 4)
-    assert "2 failed" in done.stdout
+    stranger = out / "trials" / "part-000.parquet"
+    pq.write_table(pa.table({"trial_id": ["x"], "rho_comm": [0.5]}), stranger)
+    for again in (
+        sweep("--axis", "rho_comm=0,0.1", "--workers", "1", "--out", str(out)),
+        sweep("plot", str(out), "--x", "rho_comm"),
+    ):
+        assert again.returncode == 2, again.stderr
+        assert again.stderr.strip() == (
+            f"camo sweep: error: {stranger} is not a part of a sweep table (no status column)"
+        )
 
 
 @pytest.mark.parametrize(
@@ -155,6 +163,12 @@ def test_a_trial_that_cannot_run_is_a_row_with_its_error_and_the_rest_go_on(tmp_
         (["--axis", "rho_comm=0.1", "--scheduler", "tcp://127.0.0.1:9"], "cannot reach the Dask"),
         (["BAD_YAML"], "is not valid YAML"),
         (["--axis", "rho_comm=0.1", "--print-job-script"], "goes with --slurm"),
+        (["--axis", "rows=4,0"], "rows must be an integer in 1..8192 (got 0)"),
+        (["--axis", "rho_comm=0,2"], "rho_comm must be a number in [0, 1]"),
+        (["--axis", "image=missing.png"], "image not found"),
+        (["--axis", "rho_comm=0.1", "--scheduler", "tcp://127.0.0.1:notaport"], "cannot reach"),
+        (["--axis", "rho_comm=0.1", "--batch-s", "inf"], "--batch-s must be a number"),
+        (["--axis", "rho_comm=0.1", "--slurm"], "needs SLURM's sbatch"),
     ],
 )
 def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, said):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import sys
@@ -14,7 +15,7 @@ from camo_core.options import Parser
 
 from . import engines
 from .spec import DRIVERS, SweepSpec, build_spec, spec_from_yaml
-from .sweep import run_sweep
+from .sweep import plan, run_sweep
 
 SPEC_FILE = "sweep.yaml"
 
@@ -100,10 +101,11 @@ def slurm_settings(args, given: dict) -> dict:
     return settings
 
 
-def check_folder(folder: Path, spec: SweepSpec) -> None:
-    """A folder holds one sweep: refuse another sweep's folder, or one that is not a sweep's."""
+def check_folder(folder: Path, spec: SweepSpec) -> SweepSpec | None:
+    """A folder holds one sweep: refuse another sweep's folder, or one that is not a sweep's;
+    the sweep it holds, if any."""
     if not folder.exists() or (folder.is_dir() and not any(folder.iterdir())):
-        return
+        return None
     saved = folder / SPEC_FILE
     if not saved.is_file():
         raise UsageError(f"{folder} exists and holds no {SPEC_FILE}: it is not a sweep's folder")
@@ -116,6 +118,7 @@ def check_folder(folder: Path, spec: SweepSpec) -> None:
             f"{folder} holds another sweep (see {saved}); give another --out "
             "(only --trials may change between runs of one sweep)"
         )
+    return before
 
 
 def make_engine(args, spec: SweepSpec):
@@ -135,8 +138,11 @@ def cmd_sweep(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     if args.ros_per_worker < 1:
         raise UsageError(f"--ros-per-worker must be at least 1 (got {args.ros_per_worker})")
-    if not args.ros_timeout > 0 or not args.batch_s > 0:
-        raise UsageError("--ros-timeout and --batch-s must be positive")
+    for name in ("ros_timeout", "batch_s"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and 0 < value <= 86400):
+            flag = "--" + name.replace("_", "-")
+            raise UsageError(f"{flag} must be a number of seconds in (0, 86400] (got {value})")
     data = spec_from_yaml(args.file) if args.file else None
     if args.print_job_script:
         if not args.slurm:
@@ -150,8 +156,9 @@ def cmd_sweep(argv: list[str]) -> int:
     if args.out is None:
         raise UsageError("the following arguments are required: --out")
     spec = build_spec(data, args.axis, args.set, args.trials, args.seed, args.driver)
-    check_folder(args.out, spec)
-    engine = make_engine(args, spec)  # an unreachable scheduler fails here, before any write
+    before = check_folder(args.out, spec)
+    work = plan(spec, args.out)  # options that cannot run fail here, before any write
+    engine = make_engine(args, spec)  # and an unreachable scheduler here
     signal.signal(signal.SIGTERM, _interrupt)  # as Ctrl-C: finished trials are kept
     try:
         if spec.driver == "ros" and isinstance(engine, engines.DaskEngine):
@@ -161,7 +168,9 @@ def cmd_sweep(argv: list[str]) -> int:
                     "--resources ros=1"
                 )
         args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / SPEC_FILE).write_text(yaml.safe_dump(spec.as_dict(), sort_keys=False))
+        # The most replicates any run of this sweep asked for: what the table may hold.
+        kept = spec.with_trials(max(spec.trials, before.trials if before else 0))
+        (args.out / SPEC_FILE).write_text(yaml.safe_dump(kept.as_dict(), sort_keys=False))
         if isinstance(engine, engines.DaskEngine):
             if engine.client.dashboard_link and not args.quiet:
                 print(
@@ -169,8 +178,21 @@ def cmd_sweep(argv: list[str]) -> int:
                 )
             engine.warm()
         report = run_sweep(
-            spec, args.out, engine, args.batch_s, args.ros_timeout, progress=not args.quiet
+            spec,
+            args.out,
+            engine,
+            args.batch_s,
+            args.ros_timeout,
+            progress=not args.quiet,
+            planned=work,
         )
+    except engines.LOST_CLUSTER as exc:
+        print(
+            f"camo sweep: error: lost the Dask cluster ({type(exc).__name__}); every finished "
+            f"trial is in {args.out}/trials/: the same command goes on from there",
+            file=sys.stderr,
+        )
+        return 1
     except KeyboardInterrupt:
         print(
             f"camo sweep: interrupted; every finished trial is in {args.out}/trials/: "

@@ -10,6 +10,8 @@ the scheduler runs again elsewhere.
 from __future__ import annotations
 
 import os
+import shutil
+import signal
 import sys
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -21,6 +23,22 @@ ROOT = Path(__file__).resolve().parents[3]
 CONNECT_TIMEOUT_S = 10
 SLURM_KEYS = ("queue", "account", "cores", "memory", "walltime", "max_jobs")
 ROS = "ros"  # the Dask worker resource a swarm trial takes one of
+
+
+def _lost_cluster() -> tuple[type[BaseException], ...]:
+    """What a Dask client raises when its scheduler or the connection to it goes away."""
+    from distributed.client import FutureCancelledError
+    from distributed.comm import CommClosedError
+
+    return (FutureCancelledError, CommClosedError)
+
+
+try:
+    LOST_CLUSTER = _lost_cluster()
+except ImportError:  # an older distributed: the names moved
+    from concurrent.futures import CancelledError
+
+    LOST_CLUSTER = (CancelledError,)
 
 
 class InProcess:
@@ -109,7 +127,18 @@ def local_engine(workers: int, ros_per_worker: int = 1) -> DaskEngine:
     worker_environment()
     from distributed import Client, LocalCluster
 
-    cluster = LocalCluster(
+    # The workers start ignoring SIGINT (they keep the disposition they are born with): Ctrl-C
+    # in a terminal reaches the whole process group, and the sweep stops them itself.
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        cluster = _local_cluster(LocalCluster, workers, ros_per_worker)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    return DaskEngine(Client(cluster), cluster, f"LocalCluster of {workers} workers")
+
+
+def _local_cluster(LocalCluster, workers: int, ros_per_worker: int):
+    return LocalCluster(
         n_workers=workers,
         threads_per_worker=1,
         processes=True,
@@ -119,7 +148,6 @@ def local_engine(workers: int, ros_per_worker: int = 1) -> DaskEngine:
         resources={ROS: ros_per_worker},
         silence_logs=40,  # errors only
     )
-    return DaskEngine(Client(cluster), cluster, f"LocalCluster of {workers} workers")
 
 
 def remote_engine(address: str) -> DaskEngine:
@@ -130,7 +158,7 @@ def remote_engine(address: str) -> DaskEngine:
 
     try:
         client = Client(address, timeout=CONNECT_TIMEOUT_S)
-    except (OSError, TimeoutError) as exc:
+    except (OSError, TimeoutError, ValueError) as exc:  # ValueError: tcp://host:notaport
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise UsageError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
     return DaskEngine(client, None, f"the Dask scheduler at {address}")
@@ -144,9 +172,18 @@ def slurm_cluster(settings: dict[str, Any]):
         raise UsageError(
             f"slurm: unknown setting {sorted(unknown)[0]!r} ({', '.join(SLURM_KEYS)})"
         )
+    for key in ("cores", "max_jobs"):
+        value = settings.get(key, 1)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise UsageError(f"slurm {key} must be a positive integer (got {value!r})")
     cores = settings.get("cores", 1)
-    if isinstance(cores, bool) or not isinstance(cores, int) or cores < 1:
-        raise UsageError(f"slurm cores must be a positive integer (got {cores!r})")
+    from dask.utils import parse_bytes
+
+    try:
+        parse_bytes(str(settings.get("memory", "4GB")))
+    except ValueError:
+        memory = settings.get("memory")
+        raise UsageError(f"slurm memory must be a size like 8GB (got {memory!r})") from None
     worker_environment()
     from dask_jobqueue import SLURMCluster
 
@@ -163,6 +200,9 @@ def slurm_cluster(settings: dict[str, Any]):
             f"source {ROOT}/.venv/bin/activate",
             "set +u",
             f"source {ROOT}/ros2_ws/install/setup.bash",
+            # what ./camo sets before every command
+            f"export AMENT_PREFIX_PATH={ROOT}/.venv${{AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}}",
+            "export ROS_AUTOMATIC_DISCOVERY_RANGE=${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}",
             "export OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1",
         ],
         worker_extra_args=["--resources", f"{ROS}=1"],
@@ -173,6 +213,8 @@ def slurm_cluster(settings: dict[str, Any]):
 def slurm_engine(settings: dict[str, Any]) -> DaskEngine:
     from distributed import Client
 
+    if shutil.which("sbatch") is None:
+        raise UsageError("--slurm needs SLURM's sbatch on the PATH (run it on a login node)")
     cluster = slurm_cluster(settings)
     jobs = settings.get("max_jobs", 1)
     cluster.scale(jobs=jobs)

@@ -16,12 +16,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from camo_core import figures
 from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
 from camo_core.options import Parser, add_run_options, image_from, out_dir, params_from
 
 from . import engines
+from .cli import SPEC_FILE, check_folder
 from .spec import SweepSpec
 from .sweep import run_sweep
 from .table import read
@@ -66,11 +68,14 @@ def error_spec(args, rhos: list[float]) -> SweepSpec:
     return SweepSpec(blocks=blocks, options=options, trials=args.trials, seed=args.seed)
 
 
-def points_from(folder: Path, rhos: list[float]) -> list[ErrorPoint]:
-    data = read(folder, columns=["rho_meas", "rho_comm", "diff_cells", "correct", "status"])
-    data = data.to_pydict()
+def points_from(folder: Path, rhos: list[float], spec: SweepSpec) -> list[ErrorPoint]:
+    """The points of `spec`'s trials (a folder run with more --trials before holds more)."""
+    columns = ["trial_id", "rho_meas", "rho_comm", "diff_cells", "correct", "status"]
+    data = read(folder, columns=columns).to_pydict()
     meas, comm = np.array(data["rho_meas"]), np.array(data["rho_comm"])
-    ok = np.array([s == "ok" for s in data["status"]])
+    ids = {t.trial_id for t in spec.trial_list()}
+    pairs = zip(data["status"], data["trial_id"], strict=True)
+    ok = np.array([status == "ok" and trial in ids for status, trial in pairs])
     diff = np.array([np.nan if d is None else d for d in data["diff_cells"]], dtype=float)
     correct = np.array([bool(c) for c in data["correct"]])
     points = []
@@ -137,7 +142,7 @@ def build_parser() -> Parser:
         "--workers",
         type=int,
         default=1,
-        help="local Dask worker processes (default 1: in this process; the paper's 330 trials "
+        help="local Dask worker processes (default 1: in this process; the paper's 310 trials "
         "take under a second)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -154,8 +159,12 @@ def main(argv: list[str] | None = None) -> int:
             raise UsageError(f"--workers must be in 1..1024 (got {args.workers})")
         rhos = parse_rhos(args.rhos)
         _, label = image_from(args)  # an unreadable image fails here
+        if args.rho_meas or args.rho_comm:
+            raise UsageError("errors sweeps the error probabilities itself: give them as --rhos")
         spec = error_spec(args, rhos)
-        folder = out_dir(args)
+        folder = out_dir(args)  # a folder that holds something only with --force
+        check_folder(folder, spec)  # and then this analysis again, not another
+        (folder / SPEC_FILE).write_text(yaml.safe_dump(spec.as_dict(), sort_keys=False))
         engine = engines.InProcess() if args.workers == 1 else engines.local_engine(args.workers)
         try:
             if isinstance(engine, engines.DaskEngine):
@@ -163,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
             run_sweep(spec, folder, engine, progress=not args.quiet)
         finally:
             engine.close()
-        points = points_from(folder, rhos)
+        points = points_from(folder, rhos, spec)
         write_csv(points, folder / "errors.csv")
         figures.errors_figure(
             [p.as_row() for p in points],

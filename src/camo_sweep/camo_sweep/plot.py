@@ -82,7 +82,12 @@ def _groups(keys: list, values: np.ndarray) -> tuple[list, list[np.ndarray]]:
 
 
 def _sort_key(value):
-    return (isinstance(value, str), value)
+    """Numbers, then text, then unset values (None), each in their own order."""
+    if value is None:
+        return (2, "")
+    if isinstance(value, str):
+        return (1, value)
+    return (0, value)
 
 
 def plot(folder: Path, x: str, y: str, by: str | None, heat: str | None, out: Path) -> Path:
@@ -92,6 +97,11 @@ def plot(folder: Path, x: str, y: str, by: str | None, heat: str | None, out: Pa
     if not data["trial_id"]:
         raise UsageError(f"{folder} holds no trial that ran (status ok)")
     values = np.asarray([np.nan if v is None else float(v) for v in data[y]])
+    if np.isnan(values).all():
+        raise UsageError(f"{y} has no values in {folder} (equals_sim: only --driver ros has it)")
+    for name in (x, by, heat):  # a block that leaves an axis alone: the default, by name
+        if name and None in data[name]:
+            data[name] = ["default" if v is None else str(v) for v in data[name]]
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
     if heat:
         xs, ys = sorted(set(data[x]), key=_sort_key), sorted(set(data[heat]), key=_sort_key)
@@ -141,6 +151,10 @@ def cmd_plot(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     by = f"_by_{args.by}" if args.by else f"_heat_{args.heat}" if args.heat else ""
     out = args.out or args.folder / f"{args.y}_{args.x}{by}.png"
+    if out.suffix.lower() != ".png":
+        raise UsageError(f"--out names a .png file (got {out})")
+    if not out.parent.is_dir():
+        raise UsageError(f"--out {out}: no folder {out.parent}")
     plot(args.folder, args.x, args.y, args.by, args.heat, out)
     print(f"wrote {out}")
     return 0

@@ -15,6 +15,7 @@ import hashlib
 import itertools
 import json
 import math
+import os
 import re
 from dataclasses import dataclass, field
 from functools import cache
@@ -63,6 +64,8 @@ def sim_actions() -> dict[str, argparse.Action]:
 def typed(name: str, value: Any) -> Any:
     """An option's value as ./camo sim's parser reads it (`"0.10"` and `0.1` are one value)."""
     actions = sim_actions()
+    if name == "seed":
+        raise UsageError("seed is not an axis: --trials gives replicates, --seed the root seed")
     if name not in actions:
         known = ", ".join(sorted(actions))
         raise UsageError(f"unknown option or axis {name!r}: not an option of ./camo sim ({known})")
@@ -71,6 +74,8 @@ def typed(name: str, value: Any) -> Any:
         if not isinstance(value, bool):
             raise UsageError(f"{name} is a flag: true or false (got {value!r})")
         return value
+    if isinstance(value, list | dict | tuple) or value is None:
+        raise UsageError(f"{name}: one value, not {value!r}")
     text = str(value).strip()
     convert = action.type or str
     try:
@@ -82,6 +87,8 @@ def typed(name: str, value: Any) -> Any:
         raise UsageError(f"{name}: {value!r} is not one of {choices}")
     if isinstance(out, float) and not math.isfinite(out):
         raise UsageError(f"{name}: {value!r} is not a finite number")
+    if name == "image":  # a.png and ./a.png are one image
+        out = os.path.normpath(out)
     return out
 
 
@@ -140,6 +147,8 @@ def sim_args(options: dict[str, Any]) -> list[str]:
     actions = sim_actions()
     args: list[str] = []
     for name, value in options.items():
+        if value is None:  # an option left at a default of None: ./camo sim is not given it
+            continue
         flag = max(actions[name].option_strings, key=len)
         if actions[name].nargs == 0:
             args += [flag] if value else []
@@ -237,12 +246,21 @@ class SweepSpec:
         return data
 
     def same_sweep(self, other: SweepSpec) -> bool:
-        """The same trials but perhaps for their number: a table of one can take the other's."""
-        mine, theirs = self.as_dict(), other.as_dict()
-        for data in (mine, theirs):
-            data.pop("trials")
-            data.pop("slurm", None)
-        return canonical(mine) == canonical(theirs)
+        """The same points, root seed and driver (the number of replicates may differ, the
+        order of values too): a table of one can take the other's trials."""
+
+        def points(spec: SweepSpec) -> set[bytes]:
+            return {canonical(t.options) for t in spec.with_trials(1).trial_list()}
+
+        same = (self.seed, self.driver, self.axis_names()) == (
+            other.seed,
+            other.driver,
+            other.axis_names(),
+        )
+        return same and points(self) == points(other)
+
+    def with_trials(self, trials: int) -> SweepSpec:
+        return SweepSpec(self.blocks, self.options, trials, self.seed, self.driver, self.slurm)
 
 
 def spec_from_yaml(path: Path) -> dict[str, Any]:
@@ -291,7 +309,17 @@ def build_spec(
         if not sep or not name.strip():
             raise UsageError(f"--axis takes NAME=VALUES (got {text!r})")
         for block in blocks:
+            if name.strip() in block:
+                raise UsageError(f"axis {name.strip()} is given twice")
             block[name.strip()] = values
+    for block in blocks:
+        seen: set[str] = set()
+        for axis in block:
+            names = [n.strip() for n in axis.split(",")]
+            twice = (seen & set(names)) or {n for n in names if names.count(n) > 1}
+            if twice:
+                raise UsageError(f"axis {sorted(twice)[0]} is given twice")
+            seen.update(names)
     fixed = dict(data.get("options", {}))
     for text in options:
         name, sep, value = text.partition("=")

@@ -1,20 +1,28 @@
-"""One sweep from start (or resumption) to its table: the trials not yet in the table, their
-error-free references (each computed once, here), batches of about `batch_s` seconds handed to
-an engine, and every finished batch written as a part of the table."""
+"""One sweep from start (or resumption) to its table: the trials not yet in the table (or that
+failed), their error-free references (each computed once, here), batches of about `batch_s`
+seconds handed to an engine, and every finished batch written as a part of the table."""
 
 from __future__ import annotations
 
+import shlex
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from camo_core.exceptions import CamoError
+from camo_core.exceptions import CamoError, UsageError
 from camo_core.progress import ProgressBar
 
-from .spec import SweepSpec, Trial, canonical
-from .table import Layout, TableWriter, done_ids, rows_table
-from .trials import Reference, reference_of, reference_options, run_ros_batch, run_sim_batch
+from .spec import SweepSpec, Trial, canonical, sim_args
+from .table import Layout, TableWriter, done_ids, drop_failed
+from .trials import (
+    Reference,
+    check_options,
+    reference_of,
+    reference_options,
+    run_ros_batch,
+    run_sim_batch,
+)
 
 MAX_BATCH = 5000
 
@@ -28,27 +36,49 @@ class SweepReport:
     seconds: float  # from the first task handed out to the last part written
 
 
-def references_for(trials: list[Trial]) -> tuple[dict[bytes, Reference | str], float]:
-    """Each distinct error-free reference once (or the one-line error that stops its trials),
-    and what one trial costs: a reference run again, once the kernels are compiled (the first
-    run may have compiled them)."""
-    references: dict[bytes, Reference | str] = {}
+@dataclass
+class Plan:
+    """What a run of a sweep has to do, checked before anything is written."""
+
+    total: int
+    todo: list[Trial]
+    references: dict[bytes, Reference]
+    cost: float  # seconds one simulator trial takes here
+
+
+def plan(spec: SweepSpec, folder: Path) -> Plan:
+    """The trials the table lacks (those that failed included), and their references. Options
+    that cannot make a run (a value out of range, an image that cannot be read) are the
+    sweep's one-line error, not rows."""
+    trials = spec.trial_list()
+    done = done_ids(folder) if folder.exists() else set()
+    todo = [t for t in trials if t.trial_id not in done]
+    checked: set[bytes] = set()
+    for trial in todo:
+        key = canonical(trial.options)
+        if key not in checked:
+            checked.add(key)
+            _refuse_unless(check_options, trial)
+    references: dict[bytes, Reference] = {}
     timed = None
-    for trial in trials:
+    for trial in todo:
         key = canonical(reference_options(trial.options))
-        if key in references:
-            continue
-        try:
-            references[key] = reference_of(trial.options)
-        except CamoError as exc:
-            references[key] = f"error: {exc}"
-            continue
-        timed = timed or trial
-    if timed is None:
-        return references, 0.001
-    start = time.perf_counter()
-    reference_of(timed.options)
-    return references, max(time.perf_counter() - start, 1e-5)
+        if key not in references:
+            references[key] = _refuse_unless(reference_of, trial)
+            timed = timed or trial
+    cost = 0.001
+    if timed is not None:  # a reference again, once the kernels are compiled: a trial's cost
+        start = time.perf_counter()
+        reference_of(timed.options)
+        cost = max(time.perf_counter() - start, 1e-5)
+    return Plan(len(trials), todo, references, cost)
+
+
+def _refuse_unless(check, trial: Trial):
+    try:
+        return check(trial.options)
+    except CamoError as exc:
+        raise UsageError(f"trials of {shlex.join(sim_args(trial.options))}: {exc}") from None
 
 
 def batches(work: list[tuple[Trial, Reference]], size: int) -> list[list[tuple[Trial, Reference]]]:
@@ -63,37 +93,26 @@ def run_sweep(
     ros_timeout: float = 300.0,
     progress: bool = True,
     on_part: Callable[[int], None] | None = None,
+    planned: Plan | None = None,
 ) -> SweepReport:
     """Run what the table in `folder` lacks of `spec`. Interrupted (Ctrl-C), it stops with every
     finished batch written; running it again goes on from there."""
-    trials = spec.trial_list()
-    done = done_ids(folder)
-    todo = [t for t in trials if t.trial_id not in done]
+    work_plan = planned or plan(spec, folder)
     writer = TableWriter(folder)
+    drop_failed(folder)  # their trials are in the plan again
     layout = Layout.of(spec)
-    report = SweepReport(len(trials), len(trials) - len(todo), 0, 0, 0.0)
+    todo = work_plan.todo
+    report = SweepReport(work_plan.total, work_plan.total - len(todo), 0, 0, 0.0)
     if not todo:
         return report
-    references, cost = references_for(todo)
-    failed_rows, work = [], []
-    for trial in todo:
-        reference = references[canonical(reference_options(trial.options))]
-        if isinstance(reference, str):  # its options cannot run at all
-            failed_rows.append((trial, {"status": reference, "run_s": 0.0}))
-        else:
-            work.append((trial, reference))
-    bar = ProgressBar(len(trials), "sweep", already=report.skipped) if progress else None
-    if failed_rows:
-        writer.write(rows_table(layout, failed_rows))
-        report.ran += len(failed_rows)
-        report.failed += len(failed_rows)
-        if bar:
-            bar.update(report.skipped + report.ran)
+    key = lambda t: canonical(reference_options(t.options))  # noqa: E731
+    work = [(trial, work_plan.references[key(trial)]) for trial in todo]
+    bar = ProgressBar(report.total, "sweep", already=report.skipped) if progress else None
     if spec.driver == "ros":
         tasks = [(run_ros_batch, (batch, layout, ros_timeout)) for batch in batches(work, 1)]
         resources = {"ros": 1}
     else:
-        size = max(1, min(MAX_BATCH, round(batch_s / cost)))
+        size = max(1, min(MAX_BATCH, round(batch_s / work_plan.cost)))
         tasks = [(run_sim_batch, (batch, layout)) for batch in batches(work, size)]
         resources = None
     start = time.perf_counter()

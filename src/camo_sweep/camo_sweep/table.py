@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
+import pyarrow.compute
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
@@ -131,11 +132,49 @@ def parts(folder: Path) -> list[Path]:
     return sorted((Path(folder) / TABLE).glob("part-*.parquet"))
 
 
+REQUIRED = {"trial_id": pa.string(), "status": pa.string()}
+
+
+def _check_parts(files: list[Path]) -> None:
+    """Every part has the columns a table needs, or the one that lacks them is named."""
+    for path in files:
+        try:
+            found = pq.read_schema(path)
+        except (pa.ArrowInvalid, OSError):
+            raise TableError(f"{path} is not a readable Parquet file") from None
+        for name, kind in REQUIRED.items():
+            if found.get_field_index(name) < 0 or found.field(name).type != kind:
+                raise TableError(f"{path} is not a part of a sweep table (no {name} column)")
+
+
 def done_ids(folder: Path) -> set[str]:
-    """The trial ids the table holds."""
+    """The trial ids the table holds with status ok (a failed trial runs again)."""
     if not parts(folder):
         return set()
-    return set(read(folder, columns=["trial_id"]).column("trial_id").to_pylist())
+    table = read(folder, columns=["trial_id", "status"]).to_pydict()
+    return {
+        t for t, status in zip(table["trial_id"], table["status"], strict=True) if status == "ok"
+    }
+
+
+def drop_failed(folder: Path) -> int:
+    """Take the failed trials' rows out of their parts (each part rewritten whole and renamed
+    into place), so that running them again leaves one row per trial; how many."""
+    dropped = 0
+    for path in parts(folder):
+        table = pq.read_table(path)
+        keep = pa.compute.equal(table.column("status"), "ok")
+        kept = table.filter(keep)
+        if kept.num_rows == table.num_rows:
+            continue
+        dropped += table.num_rows - kept.num_rows
+        if kept.num_rows:
+            temporary = path.with_name(f"_{path.name}.tmp")
+            pq.write_table(kept, temporary)
+            os.replace(temporary, path)
+        else:
+            path.unlink()
+    return dropped
 
 
 def read(folder: Path, columns: list[str] | None = None) -> pa.Table:
@@ -143,10 +182,12 @@ def read(folder: Path, columns: list[str] | None = None) -> pa.Table:
     files = parts(folder)
     if not files:
         raise TableError(f"{folder} holds no sweep table ({TABLE}/part-*.parquet)")
+    _check_parts(files)
     try:
         table = ds.dataset([str(f) for f in files], format="parquet").to_table(columns=columns)
-    except (pa.ArrowInvalid, OSError) as exc:
-        raise TableError(f"{folder}/{TABLE} cannot be read: {exc}") from None
+    except (pa.ArrowInvalid, OSError, ValueError) as exc:
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise TableError(f"{folder}/{TABLE} cannot be read: {first}") from None
     ids = table.column("trial_id").to_pylist() if "trial_id" in table.column_names else None
     if ids is not None and len(set(ids)) != len(ids):
         first = {}

@@ -25,7 +25,7 @@ from camo_core.rules import PATTERN_NAMES
 from camo_core.sensing import sense_image
 from camo_core.simulator import simulate
 
-from .spec import Trial, defaults
+from .spec import Trial, defaults, sim_args
 from .table import Layout, rows_table
 
 # Up to this many robots a trial's kernels run on one thread: a small grid gains nothing from
@@ -47,6 +47,10 @@ class Reference:
 
     pattern: str
     final: np.ndarray  # rows x cols uint8
+    # The background's block means before noise, read where the sweep runs: a worker on
+    # another machine never opens the image (its path is the driver's).
+    raw: np.ndarray
+    image: str | None  # the image's absolute path there, for a swarm trial's command line
 
 
 def namespace(options: dict[str, Any], seed: int) -> argparse.Namespace:
@@ -71,12 +75,21 @@ def _sensed(source: tuple[str | None, str | None], rows: int, cols: int, profile
     return sense_image(image, rows, cols, profile)
 
 
-def simulate_options(options: dict[str, Any], seed: int) -> RunResult:
+def simulate_options(
+    options: dict[str, Any], seed: int, raw: np.ndarray | None = None
+) -> RunResult:
+    """The trial's RunResult (`raw`: its background's block means, if known)."""
     args = namespace(options, seed)
     params = params_from(args)
-    raw = _sensed((args.image, args.pattern), params.rows, params.cols, params.profile)
+    if raw is None:
+        raw = _sensed((args.image, args.pattern), params.rows, params.cols, params.profile)
     _threads_for(params)
     return simulate(params, raw)
+
+
+def check_options(options: dict[str, Any]) -> None:
+    """Raise the one-line error of options that cannot make a run (before any is run)."""
+    params_from(namespace(options, 0))
 
 
 def _threads_for(params: CamoParams) -> None:
@@ -88,8 +101,12 @@ def _threads_for(params: CamoParams) -> None:
 
 
 def reference_of(options: dict[str, Any]) -> Reference:
-    result = simulate_options(reference_options(options), 0)
-    return Reference(result.majority_pattern, result.final.copy())
+    args = namespace(options, 0)
+    params = params_from(args)
+    raw = _sensed((args.image, args.pattern), params.rows, params.cols, params.profile)
+    result = simulate_options(reference_options(options), 0, raw)
+    image = os.path.abspath(args.image) if args.image else None
+    return Reference(result.majority_pattern, result.final.copy(), raw, image)
 
 
 def result_columns(summary: dict, reference: Reference) -> dict[str, Any]:
@@ -115,9 +132,12 @@ def failed(error: str) -> dict[str, Any]:
 def sim_row(trial: Trial, reference: Reference) -> dict[str, Any]:
     start = time.perf_counter()
     try:
-        result = simulate_options(trial.options, trial.seed)
+        result = simulate_options(trial.options, trial.seed, reference.raw)
     except CamoError as exc:
         return {**failed(f"error: {exc}"), "run_s": time.perf_counter() - start}
+    except Exception as exc:  # noqa: BLE001 - one trial's failure is its row, not the sweep's
+        said = f"error: {type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+        return {**failed(said), "run_s": time.perf_counter() - start}
     summary = {
         "pattern": result.majority_pattern,
         "votes": result.selection_counts,
@@ -143,7 +163,10 @@ def ros_row(trial: Trial, reference: Reference, timeout: float) -> dict[str, Any
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="camo-sweep-") as folder:
         out = os.path.join(folder, "run")
-        command = [sys.executable, "-m", "camo_nodes.launcher", *trial.sim_args()]
+        options = dict(trial.options)
+        if reference.image:  # where the sweep runs; the same path on this worker's machine
+            options["image"] = reference.image
+        command = [sys.executable, "-m", "camo_nodes.launcher", *sim_args(options)]
         command += ["--seed", str(trial.seed), "--out", out, "--run-id", f"sw{trial.trial_id}"]
         try:
             done = subprocess.run(
@@ -160,7 +183,8 @@ def ros_row(trial: Trial, reference: Reference, timeout: float) -> dict[str, Any
         with open(os.path.join(out, "summary.json")) as handle:
             swarm = json.load(handle)
     row = result_columns(swarm, reference)
-    sim = json.loads(summary_bytes(simulate_options(trial.options, trial.seed).summary()))
+    result = simulate_options(trial.options, trial.seed, reference.raw)
+    sim = json.loads(summary_bytes(result.summary()))
     same = all(swarm.get(k) == sim[k] for k in SUMMARY_KEYS if k != "elapsed_s")
     return {**row, "status": "ok", "run_s": elapsed, "equals_sim": same}
 
