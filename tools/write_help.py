@@ -31,7 +31,7 @@ HELP = {
     "bench-soak": ["camo_nodes.soak"],
     "bench-sweep": ["camo_sweep.bench"],
     "run": ["camo_nodes.launcher"],
-    "demo": ["camo_nodes.launcher"],
+    "demo": ["camo_nodes.launcher"],  # after DEMO below
     "worker": ["camo_nodes.worker"],
     "discovery-server": ["camo_nodes.discovery_server"],
     "record": ["camo_bag.recorder_node"],
@@ -55,6 +55,48 @@ HELP = {
 }
 
 
+DEMO = """\
+./camo demo [options of ./camo run]: the main job. ./camo run on the built-in forest at 8x8
+with 15% sensor noise and 10% message loss (--pattern forest --rows 8 --cols 8 --rho-meas 0.15
+--rho-comm 0.1); options given here override those. Results in results/<timestamp>/: run.gif
+(the swarm at work), figure.png, summary.json, timing.json, params.yaml.
+
+"""
+# Commands with no parser of their own.
+STATIC = {
+    "setup": """\
+usage: ./camo setup
+
+Create .venv/ with the pinned dependencies of requirements.txt (ROS 2 Jazzy wheels among them)
+and build src/ into ros2_ws/ with colcon. Every other command does this first, and skips what
+is already up to date.
+""",
+    "test": """\
+usage: ./camo test [pytest arguments]
+
+Set up (as ./camo setup), then run the test suite with pytest in the project's environment;
+the arguments go to pytest (./camo test tests/camo_sweep -k resume, ./camo test -q). For
+pytest's own options: .venv/bin/python -m pytest --help.
+""",
+    "dask": """\
+usage: ./camo dask scheduler [Dask's options] | ./camo dask worker tcp://HOST:8786 [options]
+
+Dask's own command, run in this clone's environment (its processes import camo's modules; one
+thread each for numba and BLAS): the cluster of a sweep across machines (docs/sweeps.md).
+  ./camo dask scheduler --port 8786
+  ./camo dask worker tcp://HOST:8786 --nworkers 2 --nthreads 1 [--resources ros=1]
+Dask's help: ./camo dask scheduler --help, ./camo dask worker --help.
+""",
+}
+
+
+def expected(key: str) -> str:
+    """What docs/cli/KEY.txt holds."""
+    if key in STATIC:
+        return STATIC[key]
+    return (DEMO if key == "demo" else "") + live_help(key)
+
+
 def live_help(key: str) -> str:
     """What the parser behind `key` prints for --help, at the texts' width."""
     env = {**os.environ, "COLUMNS": COLUMNS}
@@ -72,11 +114,12 @@ def live_help(key: str) -> str:
 
 def main() -> int:
     FOLDER.mkdir(parents=True, exist_ok=True)
-    for stale in set(FOLDER.glob("*.txt")) - {FOLDER / f"{key}.txt" for key in HELP}:
+    keys = [*HELP, *STATIC]
+    for stale in set(FOLDER.glob("*.txt")) - {FOLDER / f"{key}.txt" for key in keys}:
         stale.unlink()
-    for key in HELP:
-        (FOLDER / f"{key}.txt").write_text(live_help(key))
-    print(f"wrote {len(HELP)} help texts into {FOLDER.relative_to(ROOT)}/")
+    for key in keys:
+        (FOLDER / f"{key}.txt").write_text(expected(key))
+    print(f"wrote {len(keys)} help texts into {FOLDER.relative_to(ROOT)}/")
     return 0
 
 

@@ -39,7 +39,7 @@ def test_every_consensus_line_is_labelled_and_the_spread_is_drawn(noisy_forest):
     labels = [line.get_label() for line in consensus.get_lines()]
     assert labels and not any(label.startswith("_") for label in labels), labels
     threshold = [line for line in consensus.get_lines() if line.get_ydata()[0] == 0.5]
-    assert [line.get_label() for line in threshold] == ["p = 0.5"]
+    assert [line.get_label() for line in threshold] == ["p = 0.5: half of the weight"]
     bands = [c for c in consensus.collections if len(c.get_paths())]
     assert len(bands) == 3  # one per pattern
     assert "band" in " ".join(t.get_text() for t in consensus.get_legend().get_texts())

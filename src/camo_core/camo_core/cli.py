@@ -44,6 +44,8 @@ def sensed_overrides(texts: list[str], rows: int, cols: int) -> dict[tuple[int, 
             raise UsageError(f"--sensed {text}: outside the {rows}x{cols} grid")
         if not 0.0 <= value <= 255.0:
             raise UsageError(f"--sensed {text}: a grey value is in 0..255")
+        if (row, col) in overrides:
+            raise UsageError(f"--sensed {row},{col}: that cell is given twice")
         overrides[(row, col)] = value
     return overrides
 

@@ -133,7 +133,7 @@ def _consensus_panel(ax, result: RunResult) -> None:
             ax.fill_between(steps, spread[:, k, 0], spread[:, k, 1], color=color, alpha=0.15)
     if spread is not None and len(spread):
         ax.fill_between([], [], [], color="grey", alpha=0.3, label="band: least to greatest robot")
-    ax.axhline(0.5, color="red", linewidth=1.2, label="p = 0.5")
+    ax.axhline(0.5, color="red", linewidth=1.2, label="p = 0.5: half of the weight")
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel("consensus step")
     ax.set_ylabel("p over robots")

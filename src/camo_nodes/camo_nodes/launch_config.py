@@ -120,7 +120,7 @@ def build_parser() -> Parser:
         "--no-projector",
         action="store_true",
         help="start no projector: the background comes from elsewhere, e.g. "
-        "./camo replay BAG --topics /camo/background",
+        "./camo replay BAG --topics /RUN/camo/background --run-id RUN",
     )
     return parser
 
