@@ -25,6 +25,10 @@ def test_render_rebuilds_the_live_summary_from_the_bag_alone(recorded, tmp_path)
     }
     assert (tmp_path / "figure.png").stat().st_size > 10_000
     assert (tmp_path / "timeline.png").stat().st_size > 10_000
+    from PIL import Image
+
+    with Image.open(tmp_path / "run.gif") as gif:  # the run's animation, from the bag alone
+        assert gif.n_frames >= 10
 
 
 def test_render_of_a_run_with_three_backgrounds_writes_each_round_from_a_complete_bag(tmp_path):

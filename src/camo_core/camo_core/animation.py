@@ -3,7 +3,8 @@ written by Pillow).
 
 Left, what the robots sensed (grey). Right, each consensus step with every robot coloured by
 its p-vector (the mix of the three pattern colours it currently holds), then each formation
-step with every robot's state (dark = on). Dead robots carry a red cross.
+step with every robot's state (dark = on). Dead, silent and bridged robots carry the marks
+of figure.png.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.animation import FuncAnimation, PillowWriter
 
-from .figures import PATTERN_COLORS
+from .figures import PATTERN_COLORS, mark
 from .record import RoundRecord
 
 MAX_FRAMES = 80  # a long run is sampled: the GIF stays small and quick to look at
@@ -48,26 +49,36 @@ def frames_of(record: RoundRecord) -> list[tuple[str, np.ndarray]]:
 
 
 def write_animation(
-    record: RoundRecord, dead: np.ndarray, path: str | Path, title: str = ""
+    record: RoundRecord,
+    dead: np.ndarray,
+    path: str | Path,
+    title: str = "",
+    marks: dict[str, np.ndarray] | None = None,
 ) -> Path:
+    """run.gif of a round; `dead` (per robot) and `marks` (name -> rows x cols, as
+    figures.run_figure takes them) say which robots carry a mark, with their legend."""
     params = record.params
     frames = frames_of(record)
     sensed = np.nan_to_num(record.sensed, nan=128.0).reshape(params.rows, params.cols)
-    fig, (left, right) = plt.subplots(1, 2, figsize=(6.4, 3.6))
+    fig, (left, right) = plt.subplots(1, 2, figsize=(6.4, 3.9))
     left.imshow(sensed, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
     left.set_title("sensed grey", fontsize=9)
     shown = right.imshow(frames[0][1], interpolation="nearest")
     caption = right.set_title(frames[0][0], fontsize=9)
-    rows, cols = np.divmod(np.flatnonzero(dead), params.cols)
+    all_marks = {**(marks or {}), "dead": np.asarray(dead, bool).reshape(params.rows, params.cols)}
+    handles = []
     for ax in (left, right):
         ax.set_xticks([])
         ax.set_yticks([])
-        if len(rows):
-            ax.scatter(cols, rows, marker="x", color="red", s=30, label="dead")
-    handles = [matplotlib.patches.Patch(color=c, label=n) for n, c in PATTERN_COLORS.items()]
-    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=8)
+        handles = mark(ax, all_marks)
+    handles += [matplotlib.patches.Patch(color=c, label=n) for n, c in PATTERN_COLORS.items()]
+    handles += [
+        matplotlib.patches.Patch(facecolor="black", edgecolor="grey", label="formation: on"),
+        matplotlib.patches.Patch(facecolor="white", edgecolor="grey", label="formation: off"),
+    ]
+    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=7)
     fig.suptitle(title, fontsize=9)
-    fig.tight_layout(rect=(0, 0.08, 1, 0.95))
+    fig.tight_layout(rect=(0, 0.16, 1, 0.95))
 
     def draw(k: int):
         shown.set_data(frames[k][1])

@@ -107,7 +107,7 @@ def run_plot(
     all_marks = dict(marks or {})
     if result.alive is not None:
         all_marks["dead"] = ~result.alive
-    handles = _mark(axes[1], all_marks) + _mark(axes[3], all_marks) + _mark(axes[4], all_marks)
+    handles = mark(axes[1], all_marks) + mark(axes[3], all_marks) + mark(axes[4], all_marks)
     if handles:
         legend = {h.get_label(): h for h in handles}
         fig.legend(legend.values(), legend.keys(), loc="lower right", fontsize=8, ncol=4)
@@ -141,7 +141,7 @@ def _consensus_panel(ax, result: RunResult) -> None:
     ax.set_title(f"consensus: {result.majority_pattern}")
 
 
-def _mark(ax, marks: dict[str, np.ndarray]) -> list:
+def mark(ax, marks: dict[str, np.ndarray]) -> list:
     """Scatter the marked robots of each kind on a grid panel; their legend handles."""
     handles = []
     for name, mask in marks.items():

@@ -195,6 +195,8 @@ class MonitorNode(Node):
         got)."""
         image = self.images[round_index] if round_index < len(self.images) else None
         title = run_title(label, self.params, "robot nodes")
+        record, dead = self.record(round_index), self.dead(round_index)
+        marks = record.marks(dead, self.bridged)
         summary = write_round(
             self.result(round_index, partial),
             image,
@@ -202,11 +204,9 @@ class MonitorNode(Node):
             title,
             self.progress_line(round_index) if partial else None,
             {"rejected_messages": self.rejected_messages()},
-            self.record(round_index).marks(self.dead(round_index), self.bridged),
+            marks,
         )
-        write_animation(
-            self.record(round_index), self.dead(round_index), folder / "run.gif", title
-        )
+        write_animation(record, dead, folder / "run.gif", title, marks)
         return summary
 
     def _publish_pattern(self) -> None:
