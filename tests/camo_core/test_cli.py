@@ -130,3 +130,30 @@ def test_an_output_folder_that_holds_something_is_refused_unless_forced(tmp_path
 def test_an_abbreviated_option_is_refused():
     out = run_camo("sim", "--row", "8", "--out", "unused")
     assert out.returncode == 2 and "unrecognized arguments: --row" in out.stderr
+
+
+@pytest.mark.parametrize(
+    "module, args",
+    [
+        ("camo_nodes.monitor_node", ["--run-i", "x"]),
+        ("camo_nodes.worker", ["--cells", "0-3", "--run-i", "x"]),
+        ("camo_bag.view_node", ["--prt", "9001"]),
+        ("camo_bag.recorder_node", ["B", "--topic", "x"]),
+    ],
+)
+def test_a_misspelt_option_of_a_node_command_is_an_error_not_a_ros_argument(
+    tmp_path, module, args
+):
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-m", module, *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+    )
+    assert out.returncode == 2, out.stderr
+    assert "unrecognized arguments" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []  # no results folder, no bag

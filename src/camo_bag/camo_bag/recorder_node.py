@@ -244,7 +244,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     add_network_options(parser)
     try:
-        args, ros_args = parser.parse_known_args(argv)
+        args, ros_args = parser.parse_with_ros_args(argv)
         os.environ.update(network_env(args, os.environ))
         run_id = check_run_id(args.run_id) if args.run_id else None
         problem = new_folder_problem(Path(args.path), "the bag")

@@ -145,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     add_network_options(parser)
     try:
-        args, ros_args = parser.parse_known_args(argv)
+        args, ros_args = parser.parse_with_ros_args(argv)
         if not 0 <= args.port <= 65535:
             raise UsageError(f"--port must be in 0..65535 (got {args.port})")
         os.environ.update(network_env(args, os.environ))

@@ -41,6 +41,14 @@ class Parser(argparse.ArgumentParser):
         )
         self.set_defaults(params_node=node)
 
+    def parse_with_ros_args(self, argv: list[str] | None = None):
+        """(options, ROS arguments) of a node's command line: everything before `--ros-args` is
+        ours and must parse (a misspelt option is an error, not a ROS argument); from
+        `--ros-args` on it is rclpy's."""
+        argv = list(sys.argv[1:] if argv is None else argv)
+        at = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
+        return self.parse_args(argv[:at]), argv[at:]
+
     def parse_known_args(self, args=None, namespace=None):
         if not any(a.dest == "params_file" for a in self._actions):  # (a subcommand's, say)
             return super().parse_known_args(args, namespace)

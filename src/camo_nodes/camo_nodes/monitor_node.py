@@ -241,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--wait", type=float, default=60.0, help="seconds to wait for a run")
     add_network_options(parser)
     try:
-        args, ros_args = parser.parse_known_args(argv)
+        args, ros_args = parser.parse_with_ros_args(argv)
         os.environ.update(network_env(args, os.environ))
         run_id = check_run_id(args.run_id) if args.run_id else None
         folder = out_dir(args)

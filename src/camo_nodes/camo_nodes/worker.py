@@ -91,7 +91,7 @@ def join(node: Node, args, stop) -> tuple[RunTopics, dict]:
 def main(argv: list[str] | None = None) -> int:
     stop = StopFlag()
     try:
-        args, ros_args = build_parser().parse_known_args(argv)
+        args, ros_args = build_parser().parse_with_ros_args(argv)
         if not args.wait > 0:
             raise UsageError(f"--wait must be positive (got {args.wait})")
         os.environ.update(network_env(args, os.environ))
