@@ -265,6 +265,9 @@ def timeline_figure(
             ax = axes[row + k // per_row, k % per_row]
             ax.imshow(paint(np.asarray(grid)), interpolation="nearest")
             ax.set_title(label, fontsize=7)
+            ax.axis("on")  # a frame, so that an all-white (all off) grid is seen
+            ax.set_xticks([])
+            ax.set_yticks([])
         row += -(-len(group) // per_row)
     handles = [matplotlib.patches.Patch(color=c, label=n) for n, c in PATTERN_COLORS.items()]
     fig.legend(handles=handles, loc="upper right", fontsize=7, ncol=3)
