@@ -169,6 +169,17 @@ class Session:
                 return
             self.spin()
 
+    def views_matched(self, limit: float = 5.0) -> None:
+        """Before the round's final scene and diagnostics: every recorder subscribes to them
+        (it finds topics as they appear; a short round can end first), or `limit` passes."""
+        recorders = self.node.count_publishers(self.topics.recorded)
+        views = (self.monitor.markers_pub, self.monitor.diagnostics_pub)
+        deadline = time.monotonic() + limit
+        while recorders and time.monotonic() < deadline:
+            if all(v.get_subscription_count() >= recorders for v in views):
+                return
+            self.spin()
+
     def recorders_present(self) -> bool:
         """Whether a recorder records the run. A recorder waiting for a run finds it within
         about a discovery announcement period (fastdds.xml) of its parameters' appearing: a
@@ -238,6 +249,7 @@ class Session:
             for robot in group.lost_cells():
                 monitor.lost[robot] = True
         print(f"camo run: {monitor.progress_line(index)}", file=sys.stderr)
+        self.views_matched()
         monitor.publish_views()  # the round's final scene, however short the round was
         return all_voted or time.monotonic()
 
