@@ -131,23 +131,19 @@ def local_engine(workers: int, ros_per_worker: int = 1) -> DaskEngine:
     # in a terminal reaches the whole process group, and the sweep stops them itself.
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        cluster = _local_cluster(LocalCluster, workers, ros_per_worker)
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            protocol="tcp",
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
+            resources={ROS: ros_per_worker},
+            silence_logs=40,  # errors only
+        )
     finally:
         signal.signal(signal.SIGINT, previous)
     return DaskEngine(Client(cluster), cluster, f"LocalCluster of {workers} workers")
-
-
-def _local_cluster(LocalCluster, workers: int, ros_per_worker: int):
-    return LocalCluster(
-        n_workers=workers,
-        threads_per_worker=1,
-        processes=True,
-        protocol="tcp",
-        host="127.0.0.1",
-        dashboard_address="127.0.0.1:0",
-        resources={ROS: ros_per_worker},
-        silence_logs=40,  # errors only
-    )
 
 
 def remote_engine(address: str) -> DaskEngine:

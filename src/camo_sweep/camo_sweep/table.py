@@ -119,13 +119,17 @@ class TableWriter:
     def write(self, table: pa.Table) -> Path | None:
         if not table.num_rows:
             return None
-        name = f"part-{uuid.uuid4().hex}.parquet"
-        temporary = self.folder / f"_{name}.tmp"
-        pq.write_table(table, temporary)
-        with open(temporary, "rb") as handle:  # on disk before it is visible under its name
-            os.fsync(handle.fileno())
-        os.replace(temporary, self.folder / name)
-        return self.folder / name
+        return put(table, self.folder / f"part-{uuid.uuid4().hex}.parquet")
+
+
+def put(table: pa.Table, path: Path) -> Path:
+    """Write a part under a name readers skip, then rename it into place (over an older one)."""
+    temporary = path.with_name(f"_{path.name}.tmp")
+    pq.write_table(table, temporary)
+    with open(temporary, "rb") as handle:  # on disk before it is visible under its name
+        os.fsync(handle.fileno())
+    os.replace(temporary, path)
+    return path
 
 
 def parts(folder: Path) -> list[Path]:
@@ -169,9 +173,7 @@ def drop_failed(folder: Path) -> int:
             continue
         dropped += table.num_rows - kept.num_rows
         if kept.num_rows:
-            temporary = path.with_name(f"_{path.name}.tmp")
-            pq.write_table(kept, temporary)
-            os.replace(temporary, path)
+            put(kept, path)
         else:
             path.unlink()
     return dropped
