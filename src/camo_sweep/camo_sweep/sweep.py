@@ -42,6 +42,7 @@ class Plan:
 
     total: int
     todo: list[Trial]
+    failed_in_table: bool  # rows of trials that failed before, taken out before they rerun
     references: dict[bytes, Reference]
     cost: float  # seconds one simulator trial takes here
 
@@ -51,7 +52,7 @@ def plan(spec: SweepSpec, folder: Path) -> Plan:
     that cannot make a run (a value out of range, an image that cannot be read) are the
     sweep's one-line error, not rows."""
     trials = spec.trial_list()
-    done = done_ids(folder) if folder.exists() else set()
+    done, failed_before = done_ids(folder) if folder.exists() else (set(), False)
     todo = [t for t in trials if t.trial_id not in done]
     checked: set[bytes] = set()
     for trial in todo:
@@ -71,7 +72,7 @@ def plan(spec: SweepSpec, folder: Path) -> Plan:
         start = time.perf_counter()
         reference_of(timed.options)
         cost = max(time.perf_counter() - start, 1e-5)
-    return Plan(len(trials), todo, references, cost)
+    return Plan(len(trials), todo, failed_before, references, cost)
 
 
 def _refuse_unless(check, trial: Trial):
@@ -99,7 +100,8 @@ def run_sweep(
     finished batch written; running it again goes on from there."""
     work_plan = planned or plan(spec, folder)
     writer = TableWriter(folder)
-    drop_failed(folder)  # their trials are in the plan again
+    if work_plan.failed_in_table:  # their trials are in the plan again
+        drop_failed(folder)
     layout = Layout.of(spec)
     todo = work_plan.todo
     report = SweepReport(work_plan.total, work_plan.total - len(todo), 0, 0, 0.0)

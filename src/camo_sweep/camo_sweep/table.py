@@ -151,14 +151,15 @@ def _check_parts(files: list[Path]) -> None:
                 raise TableError(f"{path} is not a part of a sweep table (no {name} column)")
 
 
-def done_ids(folder: Path) -> set[str]:
-    """The trial ids the table holds with status ok (a failed trial runs again)."""
+def done_ids(folder: Path) -> tuple[set[str], bool]:
+    """The trial ids the table holds with status ok (a failed trial runs again), and whether
+    it holds failed ones."""
     if not parts(folder):
-        return set()
+        return set(), False
     table = read(folder, columns=["trial_id", "status"]).to_pydict()
-    return {
-        t for t, status in zip(table["trial_id"], table["status"], strict=True) if status == "ok"
-    }
+    pairs = list(zip(table["trial_id"], table["status"], strict=True))
+    ok = {trial for trial, status in pairs if status == "ok"}
+    return ok, len(ok) < len(pairs)
 
 
 def drop_failed(folder: Path) -> int:
