@@ -14,7 +14,7 @@ import sys
 import numpy as np
 
 from . import bench, figures
-from .exceptions import EXIT_USAGE, CamoError, UsageError
+from .exceptions import UsageError, reported
 from .options import (
     Parser,
     add_run_options,
@@ -136,15 +136,11 @@ def build_parser() -> Parser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    try:
+    def work() -> int:
         args = build_parser().parse_args(argv)
         return args.func(args)
-    except CamoError as exc:
-        print(f"camo: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("camo: interrupted", file=sys.stderr)
-        return 130
+
+    return reported("camo", work)
 
 
 if __name__ == "__main__":

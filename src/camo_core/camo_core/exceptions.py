@@ -6,6 +6,9 @@ traceback while bad input never does.
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Callable
+
 
 class CamoError(Exception):
     """Something the user can fix: bad input, a missing file, hardware that does not answer."""
@@ -16,3 +19,16 @@ class UsageError(CamoError):
 
 
 EXIT_USAGE = 2
+
+
+def reported(prog: str, work: Callable[[], int]) -> int:
+    """An entry point's exit code: work()'s, or a CamoError as `prog: error: ...` and exit 2,
+    Ctrl-C as `prog: interrupted` and 130."""
+    try:
+        return work()
+    except CamoError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import yaml
 
-from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
+from camo_core.exceptions import CamoError, UsageError, reported
 from camo_core.options import Parser
 
 from . import engines
@@ -216,18 +216,11 @@ def _interrupt(signum, frame) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    try:
-        if argv[:1] == ["plot"]:
-            from .plot import cmd_plot
+    if argv[:1] == ["plot"]:
+        from .plot import cmd_plot
 
-            return cmd_plot(argv[1:])
-        return cmd_sweep(argv)
-    except CamoError as exc:
-        print(f"camo sweep: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("camo sweep: interrupted", file=sys.stderr)
-        return 130
+        return reported("camo sweep", lambda: cmd_plot(argv[1:]))
+    return reported("camo sweep", lambda: cmd_sweep(argv))
 
 
 if __name__ == "__main__":

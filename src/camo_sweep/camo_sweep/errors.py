@@ -19,7 +19,7 @@ import numpy as np
 import yaml
 
 from camo_core import figures
-from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
+from camo_core.exceptions import UsageError, reported
 from camo_core.options import Parser, add_run_options, image_from, out_dir, params_from
 
 from . import engines
@@ -150,45 +150,42 @@ def build_parser() -> Parser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    return reported("camo errors", lambda: run(argv))
+
+
+def run(argv: list[str] | None) -> int:
+    args = build_parser().parse_args(argv)
+    params = params_from(args)  # bad values fail here, in one line
+    if args.trials < 1 or args.trials > 10_000:
+        raise UsageError(f"--trials must be an integer in 1..10000 (got {args.trials})")
+    if not 1 <= args.workers <= 1024:
+        raise UsageError(f"--workers must be in 1..1024 (got {args.workers})")
+    rhos = parse_rhos(args.rhos)
+    _, label = image_from(args)  # an unreadable image fails here
+    if args.rho_meas or args.rho_comm:
+        raise UsageError("errors sweeps the error probabilities itself: give them as --rhos")
+    spec = error_spec(args, rhos)
+    folder = out_dir(args)  # a folder that holds something only with --force
+    check_folder(folder, spec)  # and then this analysis again, not another
+    (folder / SPEC_FILE).write_text(yaml.safe_dump(spec.as_dict(), sort_keys=False))
+    engine = engines.InProcess() if args.workers == 1 else engines.local_engine(args.workers)
     try:
-        args = build_parser().parse_args(argv)
-        params = params_from(args)  # bad values fail here, in one line
-        if args.trials < 1 or args.trials > 10_000:
-            raise UsageError(f"--trials must be an integer in 1..10000 (got {args.trials})")
-        if not 1 <= args.workers <= 1024:
-            raise UsageError(f"--workers must be in 1..1024 (got {args.workers})")
-        rhos = parse_rhos(args.rhos)
-        _, label = image_from(args)  # an unreadable image fails here
-        if args.rho_meas or args.rho_comm:
-            raise UsageError("errors sweeps the error probabilities itself: give them as --rhos")
-        spec = error_spec(args, rhos)
-        folder = out_dir(args)  # a folder that holds something only with --force
-        check_folder(folder, spec)  # and then this analysis again, not another
-        (folder / SPEC_FILE).write_text(yaml.safe_dump(spec.as_dict(), sort_keys=False))
-        engine = engines.InProcess() if args.workers == 1 else engines.local_engine(args.workers)
-        try:
-            if isinstance(engine, engines.DaskEngine):
-                engine.warm()
-            run_sweep(spec, folder, engine, progress=not args.quiet)
-        finally:
-            engine.close()
-        points = points_from(folder, rhos, spec)
-        write_csv(points, folder / "errors.csv")
-        figures.errors_figure(
-            [p.as_row() for p in points],
-            params.count / 2,
-            folder / "errors.png",
-            title=f"{label}, {params.rows}x{params.cols} robots, {args.trials} trials per point",
-            cells=params.count,
-        )
-        print(f"wrote {folder}/errors.csv, errors.png and the trials' table trials/")
-        return 0
-    except CamoError as exc:
-        print(f"camo errors: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("camo errors: interrupted", file=sys.stderr)
-        return 130
+        if isinstance(engine, engines.DaskEngine):
+            engine.warm()
+        run_sweep(spec, folder, engine, progress=not args.quiet)
+    finally:
+        engine.close()
+    points = points_from(folder, rhos, spec)
+    write_csv(points, folder / "errors.csv")
+    figures.errors_figure(
+        [p.as_row() for p in points],
+        params.count / 2,
+        folder / "errors.png",
+        title=f"{label}, {params.rows}x{params.cols} robots, {args.trials} trials per point",
+        cells=params.count,
+    )
+    print(f"wrote {folder}/errors.csv, errors.png and the trials' table trials/")
+    return 0
 
 
 if __name__ == "__main__":
