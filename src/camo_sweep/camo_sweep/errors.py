@@ -25,7 +25,7 @@ from camo_core.options import Parser, add_run_options, image_from, out_dir, para
 from . import engines
 from .cli import SPEC_FILE, check_folder
 from .spec import SweepSpec
-from .sweep import run_sweep
+from .sweep import plan, run_sweep
 from .table import read
 
 MODES = ("measurement", "communication", "both")
@@ -167,12 +167,13 @@ def run(argv: list[str] | None) -> int:
     spec = error_spec(args, rhos)
     folder = out_dir(args)  # a folder that holds something only with --force
     check_folder(folder, spec)  # and then this analysis again, not another
+    work = plan(spec, folder)  # as ./camo sweep: what cannot run fails before anything is written
     (folder / SPEC_FILE).write_text(yaml.safe_dump(spec.as_dict(), sort_keys=False))
     engine = engines.InProcess() if args.workers == 1 else engines.local_engine(args.workers)
     try:
         if isinstance(engine, engines.DaskEngine):
             engine.warm()
-        run_sweep(spec, folder, engine, progress=not args.quiet)
+        run_sweep(spec, folder, engine, progress=not args.quiet, planned=work)
     finally:
         engine.close()
     points = points_from(folder, rhos, spec)
