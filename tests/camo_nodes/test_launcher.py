@@ -534,3 +534,40 @@ def test_the_demo_writes_an_animation_of_the_swarm_at_work(tmp_path):
             image.seek(k)
             frames.add(image.convert("RGB").tobytes())
     assert len(frames) >= 10  # consensus and formation change over many steps
+
+
+def test_the_runs_own_recorder_is_waited_for_before_discovery_shows_it(tmp_path, capfd):
+    """A loaded machine can take longer to show the recorder it started than a short round
+    lasts: the robots must not stop before the recorder has said it holds their round."""
+    import rclpy
+    from std_msgs.msg import String
+
+    from camo_nodes.launch_config import build_parser, config_from
+    from camo_nodes.launcher import Session
+    from camo_nodes.topics import LATCHED
+
+    class NothingFailed:
+        def failed(self):
+            return None
+
+    options = ["--rows", "2", "--out", str(tmp_path / "run"), "--record", str(tmp_path / "bag")]
+    config = config_from(build_parser().parse_args(options))
+    with ros_context() as context:
+        session = Session(config, stop=False, context=context)
+        recorder = rclpy.create_node("recorder", context=context)
+        try:
+            assert session.recorders_present()  # at once: no discovery to wait for
+            start = time.monotonic()
+            session.recording_holds(0, NothingFailed(), limit=1.0)  # no recorder has spoken
+            assert time.monotonic() - start >= 1.0
+            assert "1 recordings lack round 0" in capfd.readouterr().err
+            report = {"recorder": "r", "result": False, "complete": [0], "lacking": [[]]}
+            publisher = recorder.create_publisher(String, config.topics.recorded, LATCHED)
+            publisher.publish(String(data=json.dumps(report)))
+            session.executor.add_node(recorder)
+            session.recording_holds(0, NothingFailed(), limit=30.0)
+            assert "lack" not in capfd.readouterr().err
+        finally:
+            session.executor.remove_node(recorder)
+            recorder.destroy_node()
+            session.close()

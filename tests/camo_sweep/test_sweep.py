@@ -117,6 +117,8 @@ def test_ctrl_c_mid_sweep_then_the_same_command_gives_the_same_table(tmp_path):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        # As a script's background job starts it: with SIGINT ignored, which Python keeps.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
     )
     deadline = time.monotonic() + 60
     while len(list((out / "trials").glob("part-*.parquet"))) < 3 and time.monotonic() < deadline:

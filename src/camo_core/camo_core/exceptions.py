@@ -9,6 +9,8 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 
+from .shutdown import interrupt_on_signals
+
 
 class CamoError(Exception):
     """Something the user can fix: bad input, a missing file, hardware that does not answer."""
@@ -23,7 +25,8 @@ EXIT_USAGE = 2
 
 def reported(prog: str, work: Callable[[], int]) -> int:
     """An entry point's exit code: work()'s, or a CamoError as `prog: error: ...` and exit 2,
-    Ctrl-C as `prog: interrupted` and 130."""
+    Ctrl-C (or SIGTERM) as `prog: interrupted` and 130."""
+    interrupt_on_signals()
     try:
         return work()
     except CamoError as exc:

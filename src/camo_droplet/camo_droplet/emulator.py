@@ -19,7 +19,6 @@ import os
 import pty
 import random
 import select
-import signal
 import sys
 import threading
 import time
@@ -33,6 +32,7 @@ from camo_core.backgrounds import BACKGROUNDS, background
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.options import Parser
 from camo_core.sensing import block_means, load_image
+from camo_core.shutdown import interrupt_on_signals
 
 
 @dataclass
@@ -269,7 +269,7 @@ def main(argv: list[str] | None = None) -> int:
     except CamoError as exc:
         print(f"camo droplet-emulator: error: {exc}", file=sys.stderr)
         return 2
-    signal.signal(signal.SIGTERM, signal.default_int_handler)  # stop cleanly on SIGTERM too
+    interrupt_on_signals()  # Ctrl-C and SIGTERM stop it cleanly
     r, g, b = emulator.rgb
     print(
         f"droplet-emulator {emulator.droplet_id:04X}: on {emulator.link}, reads r {r} g {g} b {b} "

@@ -96,6 +96,9 @@ class Session:
         )
         # Every recorder of the run (ours, or one started by hand) reports what its bag holds.
         self.recorders: dict[str, dict] = {}
+        # Ours is counted before discovery shows it: on a loaded machine that can take longer
+        # than a short round, and the robots must not stop before it has their messages.
+        self.own_recorders = 1 if config.record else 0
         self.node.create_subscription(String, topics.recorded, self._on_recorded, LATCHED_READER)
         # Created now, written at the end: recorders subscribe to it while the run goes on.
         self.result_pub = self.node.create_publisher(String, topics.result, LATCHED)
@@ -145,7 +148,7 @@ class Session:
         def short() -> list[dict]:
             """The reports of recorders that do not hold the round yet."""
             reports = list(self.recorders.values())
-            if len(reports) < self.node.count_publishers(self.topics.recorded):
+            if len(reports) < self.recorder_count():
                 return [{}]  # a recorder not heard from yet
             return [r for r in reports if not holds(r, round_index, finished)]
 
@@ -172,7 +175,7 @@ class Session:
     def views_matched(self, limit: float = 5.0) -> None:
         """Before the round's final scene and diagnostics: every recorder subscribes to them
         (it finds topics as they appear; a short round can end first), or `limit` passes."""
-        recorders = self.node.count_publishers(self.topics.recorded)
+        recorders = self.recorder_count()
         views = (self.monitor.markers_pub, self.monitor.diagnostics_pub)
         deadline = time.monotonic() + limit
         while recorders and time.monotonic() < deadline:
@@ -180,14 +183,20 @@ class Session:
                 return
             self.spin()
 
+    def recorder_count(self) -> int:
+        """The recorders the graph shows, and at least our own."""
+        return max(self.own_recorders, self.node.count_publishers(self.topics.recorded))
+
     def recorders_present(self) -> bool:
         """Whether a recorder records the run. A recorder waiting for a run finds it within
         about a discovery announcement period (fastdds.xml) of its parameters' appearing: a
         run shorter than that gives it the time."""
+        if self.own_recorders:
+            return True
         settle = RECORDER_SETTLE - (time.monotonic() - self.started)
         if settle > 0:
             self.spin_for(settle)
-        return self.node.count_publishers(self.topics.recorded) > 0
+        return self.recorder_count() > 0
 
     def publish_result(self, ended: str, limit: float = 10.0) -> None:
         """The run's last word, latched, and waited for: every recorder must hold it (a bag
@@ -197,7 +206,7 @@ class Session:
         deadline = time.monotonic() + limit
         while time.monotonic() < deadline:
             reports = list(self.recorders.values())
-            present = self.node.count_publishers(self.topics.recorded)
+            present = self.recorder_count()
             if not present or (len(reports) >= present and all(r["result"] for r in reports)):
                 break  # every recorder has it (one that stopped by itself had it)
             self.executor.spin_once(timeout_sec=0.1)  # even after Ctrl-C: it is quick

@@ -20,6 +20,8 @@ import sys
 import time
 from pathlib import Path
 
+from camo_core.shutdown import interrupt_on_signals
+
 from .shm import stale_files
 
 MODULES = ("camo_nodes.", "camo_projector.", "camo_bag.", "camo_droplet.")
@@ -177,6 +179,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--runs must be in 1..10000, --side in 1..64 and --procs in 1..64")
     if not (10 <= args.steps <= 100_000 and 0 <= args.settle <= 60):
         parser.error("--steps must be in 10..100000 and --settle in 0..60")
+    interrupt_on_signals()
     try:
         report = soak(args)
     except KeyboardInterrupt:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import os
-import signal
 import sys
 from pathlib import Path
 
@@ -159,7 +158,6 @@ def cmd_sweep(argv: list[str]) -> int:
     before = check_folder(args.out, spec)
     work = plan(spec, args.out)  # options that cannot run fail here, before any write
     engine = make_engine(args, spec)  # and an unreachable scheduler here
-    signal.signal(signal.SIGTERM, _interrupt)  # as Ctrl-C: finished trials are kept
     try:
         if spec.driver == "ros" and isinstance(engine, engines.DaskEngine):
             if engine.ros_slots() < 1:
@@ -208,10 +206,6 @@ def cmd_sweep(argv: list[str]) -> int:
         f"({report.failed} failed){rate} on {engine.name}; table {args.out}/trials/"
     )
     return 0
-
-
-def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt
 
 
 def main(argv: list[str] | None = None) -> int:
