@@ -24,7 +24,7 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
 from camo_core import figures
-from camo_core.animation import write_animation
+from camo_core.animation import Snapshots, write_animation
 from camo_core.exceptions import CamoError
 from camo_core.options import Parser, add_out_options, out_dir
 from camo_core.output import run_title, write_round
@@ -122,7 +122,10 @@ def render(path: str | Path, out: Path, partial: bool = False) -> list[dict]:
         lacks = "; ".join(gaps_of_round(gaps, index))
         marks = record.marks(~record.finished, run.bridged)
         summaries.append(write_round(result, image, folder, title, lacks or None, extra, marks))
-        write_animation(record, ~record.finished, folder / "run.gif", title, marks)
+        snapshots = Snapshots.of_record(record)
+        write_animation(
+            snapshots, record.sensed, ~record.finished, folder / "run.gif", title, marks
+        )
         figures.timeline_figure(
             record.timeline(),
             folder / "timeline.png",

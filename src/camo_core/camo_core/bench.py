@@ -3,7 +3,7 @@
 Every figure is a ratio against a baseline measured in the same run: the time
 NumPy takes to copy one p-array (rows x cols x 3 float64) once per consensus
 and formation step. Also: the speed-up over the per-robot driver at 64x64, and (--whole) the
-whole `camo sim` process at 1024x1024, image to summary.json and figure.png.
+whole `camo sim` process at 1024x1024, image to summary.json, figure.png and run.gif.
 """
 
 from __future__ import annotations
@@ -52,10 +52,10 @@ def copy_baseline(rows: int, cols: int, steps: int, repeats: int) -> float:
 
 def whole_process(repeats: int = 3, side: int = WHOLE_SIDE) -> dict:
     """Wall time of `python -m camo_core.cli sim --image BIG --rows 1024 --cols 1024 --out TMP`
-    (side 1024 unless given), start to exit: imports, image, simulation, summary.json and
-    figure.png. The best of `repeats` runs after an untimed one, against the best of the copy
-    baselines (45 copies of a side x side x 3 array) measured before each run. BIG: a built-in
-    background resized to twice the grid's side."""
+    (side 1024 unless given), start to exit: imports, image, simulation, summary.json,
+    figure.png and run.gif. The best of `repeats` runs after an untimed one, against the best
+    of the copy baselines (45 copies of a side x side x 3 array) measured before each run.
+    BIG: a built-in background resized to twice the grid's side."""
     params = CamoParams(rows=side, cols=side)
     steps = params.consensus_steps + params.formation_steps
     pixels = WHOLE_IMAGE_SIDE * side // WHOLE_SIDE

@@ -14,6 +14,7 @@ import sys
 import numpy as np
 
 from . import bench, figures
+from .animation import Snapshots, write_animation
 from .exceptions import UsageError, reported
 from .options import (
     Parser,
@@ -68,20 +69,19 @@ def cmd_sim(args: argparse.Namespace) -> int:
         ProgressBar(params.consensus_steps + params.formation_steps, "simulating") if big else None
     )
     progress = (lambda phase, step, total: bar.update(note=phase)) if bar else None
-    result = simulate(params, raw, exempt=exempt, progress=progress)
+    snapshots = Snapshots(params)
+    result = simulate(params, raw, exempt=exempt, progress=progress, observe=snapshots)
     write_summary(result.summary(arrays=True), folder)
     write_params_file(args.options_parser, args, folder)
-    figures.run_figure(
-        result,
-        image,
-        folder / "figure.png",
-        title=run_title(label, params),
-        marks=None if exempt is None else {"real reading": exempt},
-    )
+    title = run_title(label, params)
+    marks = None if exempt is None else {"real reading": exempt}
+    figures.run_figure(result, image, folder / "figure.png", title=title, marks=marks)
+    dead = np.zeros(params.count, bool)  # the simulator loses messages, never robots
+    write_animation(snapshots, result.sensed, dead, folder / "run.gif", title, marks)
     counts = ", ".join(f"{k} {v}" for k, v in result.selection_counts.items())
     print(
-        f"pattern: {result.majority_pattern} ({counts}); wrote {folder}/summary.json and "
-        f"figure.png in {result.elapsed_s:.3f} s"
+        f"pattern: {result.majority_pattern} ({counts}); wrote {folder}/summary.json, "
+        f"figure.png and run.gif; simulated in {result.elapsed_s:.3f} s"
     )
     return 0
 

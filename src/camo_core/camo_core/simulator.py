@@ -24,6 +24,9 @@ from .sensing import apply_noise
 PAD = 2  # slots reach two cells away
 
 Progress = Callable[[str, int, int], None]
+# Shown every step: ("consensus", k, p before consensus step k) and ("formation", k, state
+# before formation step k); the arrays are reused afterwards (animation.Snapshots copies).
+Observer = Callable[[str, int, np.ndarray], None]
 
 
 class Grid:
@@ -66,6 +69,7 @@ def simulate(
     raw_sensed: np.ndarray,
     exempt: np.ndarray | None = None,
     progress: Progress | None = None,
+    observe: Observer | None = None,
 ) -> RunResult:
     """Run all phases on rows x cols block means (before measurement noise)."""
     start = time.perf_counter()
@@ -89,11 +93,11 @@ def simulate(
     initial = (sensed < 127).astype(np.uint8)
 
     # Phase 2: consensus.
-    p, trace, spread = _consensus(grid, params, votes, known_mask, progress)
+    p, trace, spread = _consensus(grid, params, votes, known_mask, progress, observe)
     selected = select_pattern(p)
 
     # Phase 3: pattern formation.
-    final = _formation(grid, params, initial, selected, known_mask, progress)
+    final = _formation(grid, params, initial, selected, known_mask, progress, observe)
 
     return RunResult(
         params=params,
@@ -130,6 +134,7 @@ def _consensus(
     votes: np.ndarray,
     known_mask: np.ndarray,
     progress: Progress | None,
+    observe: Observer | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     degree = np.zeros((grid.rows, grid.cols), np.uint8)
     for s in range(8):
@@ -140,6 +145,8 @@ def _consensus(
     nxt = np.empty_like(p)
     mean, least_greatest = p_stats(p)
     trace, spread = [mean], [least_greatest]
+    if observe:
+        observe("consensus", 0, p)
     for step in range(params.consensus_steps):
         prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_CONSENSUS, step))
         kernels.consensus_step(p, nxt, known_mask, degree, prefix, params.rho_comm)
@@ -147,6 +154,8 @@ def _consensus(
         mean, least_greatest = p_stats(p)
         trace.append(mean)
         spread.append(least_greatest)
+        if observe:
+            observe("consensus", step + 1, p)
         if progress:
             progress("consensus", step + 1, params.consensus_steps)
     return p, np.array(trace), np.array(spread)
@@ -159,9 +168,12 @@ def _formation(
     selected: np.ndarray,
     known_mask: np.ndarray,
     progress: Progress | None,
+    observe: Observer | None,
 ) -> np.ndarray:
     state = initial.copy()
     nxt = np.empty_like(state)
+    if observe:
+        observe("formation", 0, state)
     for step in range(params.formation_steps):
         prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_STATE, step))
         kernels.formation_step(
@@ -177,6 +189,8 @@ def _formation(
             params.profile == "droplet",
         )
         state, nxt = nxt, state
+        if observe:
+            observe("formation", step + 1, state)
         if progress:
             progress("formation", step + 1, params.formation_steps)
     return state

@@ -30,7 +30,7 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 from visualization_msgs.msg import MarkerArray
 
-from camo_core.animation import write_animation
+from camo_core.animation import Snapshots, write_animation
 from camo_core.exceptions import CamoError
 from camo_core.options import (
     Parser,
@@ -206,7 +206,8 @@ class MonitorNode(Node):
             {"rejected_messages": self.rejected_messages()},
             marks,
         )
-        write_animation(record, dead, folder / "run.gif", title, marks)
+        snapshots = Snapshots.of_record(record)
+        write_animation(snapshots, record.sensed, dead, folder / "run.gif", title, marks)
         return summary
 
     def _publish_pattern(self) -> None:

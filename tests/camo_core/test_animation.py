@@ -1,0 +1,73 @@
+"""run.gif: the simulator and the swarm feed the same frames, and the GIF shows the round."""
+
+import numpy as np
+from support import Bus, run_camo
+
+from camo_core.animation import MAX_FRAMES, Snapshots, shown_steps
+from camo_core.params import CamoParams
+from camo_core.record import RoundRecord
+from camo_core.simulator import simulate
+
+
+def gif_frames(path) -> list[bytes]:
+    from PIL import Image
+
+    with Image.open(path) as image:
+        frames = []
+        for k in range(image.n_frames):
+            image.seek(k)
+            frames.append(image.convert("RGB").tobytes())
+    return frames
+
+
+def test_sim_writes_a_small_animation_that_changes_over_many_frames(tmp_path):
+    out = run_camo("sim", "--rho-meas", "0.1", "--rho-comm", "0.1", "--out", str(tmp_path))
+    assert out.returncode == 0, out.stderr
+    gif = tmp_path / "run.gif"
+    assert "run.gif" in out.stdout and gif.stat().st_size < 2 * 1024 * 1024
+    frames = gif_frames(gif)
+    assert len(frames) == 35 + 10 + 2  # every consensus and formation step, and both starts
+    assert len(set(frames)) >= 10
+
+
+def test_a_long_round_is_sampled_with_its_first_and_last_steps():
+    consensus, formation = shown_steps(1000, 300)
+    assert len(consensus) + len(formation) == MAX_FRAMES
+    assert consensus[0] == 0 and formation[-1] == 300
+    assert consensus == sorted(consensus) and formation == sorted(formation)
+    assert shown_steps(3, 2) == ([0, 1, 2, 3], [0, 1, 2])
+
+
+def test_the_swarms_frames_equal_the_simulators():
+    params = CamoParams(rows=3, cols=4, consensus_steps=12, formation_steps=6, seed=3)
+    grid = np.random.default_rng(1).uniform(0, 255, (params.rows, params.cols))
+    reports = []
+    bus = Bus(params, grid, seed=1)
+    original = bus.post
+
+    def post(out):
+        reports.extend(out.reports)
+        original(out)
+
+    bus.post = post
+    bus.run()
+    record = RoundRecord(params)
+    for report in reports:
+        record.add(report)
+    simulated = Snapshots(params)
+    simulate(params, grid, observe=simulated)
+    swarm = Snapshots.of_record(record)
+    assert [c for c, _ in swarm.shown()] == [c for c, _ in simulated.shown()]
+    assert len(swarm.shown()) == 12 + 6 + 2
+    for (caption, a), (_, b) in zip(swarm.shown(), simulated.shown(), strict=True):
+        assert np.array_equal(a, b), caption
+
+
+def test_a_large_swarm_is_shown_by_every_kth_robot():
+    params = CamoParams(rows=600, cols=300, consensus_steps=2, formation_steps=1)
+    snapshots = Snapshots(params)
+    state = np.arange(params.count).reshape(600, 300) % 2
+    snapshots("formation", 1, state)
+    (_, rgb), *_ = snapshots.shown()
+    assert snapshots.stride == 3 and rgb.shape == (200, 100, 3)
+    assert np.array_equal(rgb[..., 0], np.where(state[::3, ::3] == 1, 0.0, 1.0))
