@@ -118,25 +118,29 @@ def test_monitor_mode_turns_a_transcript_into_status_messages():
     assert list(last.p) == [0.5, 0.25, 0.25] and last.pattern == RobotStatus.PATTERN_HORIZONTAL
 
 
-def test_bridge_without_a_port_exits_with_one_line():
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "camo_droplet.bridge_node",
-            "--ros-args",
-            "-p",
-            "rows:=4",
-            "-p",
-            "cols:=4",
-        ],
+def bridge(*ros_args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "camo_droplet.bridge_node", "--ros-args", *ros_args],
         capture_output=True,
         text=True,
         timeout=60,
         env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
     )
+
+
+def test_bridge_without_a_port_exits_with_one_line():
+    out = bridge("-p", "rows:=4", "-p", "cols:=4")
     assert out.returncode == 2 and "serial port" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
+
+
+def test_a_port_that_is_not_there_is_said_at_once_not_after_waiting_for_a_run(tmp_path):
+    # No run is in this domain: had the bridge waited for one, it would say so after 60 s.
+    out = bridge("-p", "rows:=4", "-p", "cols:=4", "-p", f"port:={tmp_path / 'ttyUSB9'}")
+    assert out.returncode == 2, out.stderr
+    port = tmp_path / "ttyUSB9"
+    said = f"droplet_bridge: error: no serial port {port} (is the Droplet plugged in?)"
+    assert out.stderr.strip() == said
 
 
 def test_bridged_droplets_give_the_simulators_states_for_their_readings(tmp_path, emulator):

@@ -17,6 +17,7 @@ reads a recorded printout instead of a port.
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -206,6 +207,9 @@ def run_monitor(
 def check_bridge_values(values: dict) -> None:
     if not values["port"] and not values["transcript"]:
         raise ParameterError("give the Droplet's serial port: -p port:=/dev/ttyUSB0")
+    if values["port"] and not os.path.exists(values["port"]):
+        # Said at once, not after waiting up to a minute for a run to join.
+        raise ParameterError(f"no serial port {values['port']} (is the Droplet plugged in?)")
     if not (values["serial_timeout"] > 0 and values["retries"] >= 0):
         raise ParameterError("serial_timeout must be positive and retries not negative")
 
