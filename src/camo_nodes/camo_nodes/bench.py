@@ -211,16 +211,35 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def grid_sides(text: str) -> list[int]:
+    """--sides 16,32,64 (empty: none)."""
+    try:
+        sides = [int(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"grid sides are integers, comma-separated: {text!r}"
+        ) from None
+    if not all(1 <= side <= 256 for side in sides):
+        raise argparse.ArgumentTypeError(f"a grid side is in 1..256: {text!r}")
+    return sides
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="camo bench ros", description=__doc__.splitlines()[0], allow_abbrev=False
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument(
-        "--rate-sides", default="8", help="grid sides of the long-run rate comparison (default 8)"
+        "--rate-sides",
+        type=grid_sides,
+        default="8",
+        help="grid sides of the long-run rate comparison (default 8; empty: none)",
     )
     parser.add_argument(
-        "--sides", default="16,32,64", help="grid sides of the whole-run comparison"
+        "--sides",
+        type=grid_sides,
+        default="16,32,64",
+        help="grid sides of the whole-run comparison (default 16,32,64; empty: none)",
     )
     parser.add_argument(
         "--record-side", type=int, default=16, help="side of the recording comparison (0: none)"
@@ -258,13 +277,11 @@ def main(argv: list[str] | None = None) -> int:
             args.steps or default_steps(side),
             args.repeat,
         )
-        for side in map(int, args.rate_sides.split(","))
-        if side
+        for side in args.rate_sides
     ]
     whole = [
         compare(side, args.procs, domain, args.out / "whole", None, args.repeat)
-        for side in map(int, args.sides.split(","))
-        if side
+        for side in args.sides
     ]
     # What recording, and a live view with no client connected, add to a run.
     extras = {
