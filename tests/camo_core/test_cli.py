@@ -62,6 +62,8 @@ def test_sim_accepts_a_colour_image_file(tmp_path):
         (["--rows", "200", "--cols", "200"], "smaller than"),
         (["--profile", "nope"], "invalid choice"),
         (["--seed", "abc"], "invalid int value"),
+        (["--consensus-steps", "2.5"], "a whole number of steps or auto"),
+        (["--consensus-steps", "auto", "--rows", "400", "--cols", "400"], "above 100000"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(args, message, tmp_path):

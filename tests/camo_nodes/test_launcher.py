@@ -571,3 +571,12 @@ def test_the_runs_own_recorder_is_waited_for_before_discovery_shows_it(tmp_path,
             session.executor.remove_node(recorder)
             recorder.destroy_node()
             session.close()
+
+
+def test_the_swarm_resolves_auto_before_its_robots_get_the_parameters(tmp_path):
+    from camo_nodes.launch_config import build_parser, config_from
+
+    args = ["--rows", "16", "--cols", "16", "--consensus-steps", "auto", "--out", str(tmp_path)]
+    config = config_from(build_parser().parse_args(args))
+    assert config.params.consensus_steps == 161
+    assert config.setup()["params"]["consensus_steps"] == 161  # what /swarm/params says

@@ -216,3 +216,14 @@ def test_slurm_prints_a_job_script_that_starts_a_dask_worker(tmp_path):
     assert os.listdir(tmp_path) == []  # nothing written, nothing submitted
     missing = sweep("--axis", "rho_comm=0.1", "--workers", "1")
     assert missing.returncode == 2 and "required: --out" in missing.stderr
+
+
+def test_an_axis_of_numbers_and_auto_is_written_as_text(tmp_path):
+    out = tmp_path / "s"
+    done = sweep(
+        "--axis", "consensus_steps=10,auto", "--workers", "1", "--quiet", "--out", str(out)
+    )
+    assert done.returncode == 0, done.stderr
+    rows = table(out)
+    assert sorted(r["consensus_steps"] for r in rows) == ["10", "auto"]
+    assert {r["sim_args"] for r in rows} == {"--consensus-steps 10", "--consensus-steps auto"}

@@ -14,7 +14,7 @@ import numpy as np
 
 from .backgrounds import BACKGROUNDS, background
 from .exceptions import UsageError
-from .params import PROFILES, CamoParams
+from .params import AUTO, PROFILES, CamoParams, auto_consensus_steps
 from .sensing import load_image
 
 
@@ -92,7 +92,7 @@ def _option_value(action: argparse.Action, name: str, value, path: Path):
             raise wrong("a number")
         try:
             item = action.type(item) if action.type else str(item)
-        except (TypeError, ValueError, UsageError):
+        except (TypeError, ValueError, UsageError, argparse.ArgumentTypeError):
             raise wrong("a valid value") from None
         if action.choices is not None and item not in action.choices:
             raise wrong(f"one of {', '.join(map(str, action.choices))}")
@@ -174,7 +174,12 @@ def add_run_options(
         "--threshold", type=float, default=50.0, help="descriptor threshold T (default 50)"
     )
     parser.add_argument(
-        "--consensus-steps", type=int, default=None, help="default: 35 paper, 10 droplet"
+        "--consensus-steps",
+        type=steps_or_auto,
+        default=None,
+        metavar="N|auto",
+        help="default: 35 paper, 10 droplet; auto: the profile's, scaled with the square of "
+        "the grid's diameter over 8x8's",
     )
     parser.add_argument(
         "--formation-steps", type=int, default=None, help="default: 10 paper, 20 droplet"
@@ -192,13 +197,26 @@ def add_out_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def steps_or_auto(value) -> int | str:
+    """--consensus-steps: a whole number, or auto (from the command line or a parameters
+    file)."""
+    if value == AUTO or (isinstance(value, int) and not isinstance(value, bool)):
+        return value
+    if isinstance(value, str) and value.strip().lstrip("+-").isdigit():
+        return int(value)
+    raise argparse.ArgumentTypeError(f"a whole number of steps or auto (got {value!r})")
+
+
 def params_from(args: argparse.Namespace) -> CamoParams:
+    steps = args.consensus_steps
+    if steps == AUTO:
+        steps = auto_consensus_steps(args.profile, args.rows, args.cols)
     return CamoParams(
         profile=args.profile,
         rows=args.rows,
         cols=args.cols,
         threshold=args.threshold,
-        consensus_steps=args.consensus_steps,
+        consensus_steps=steps,
         formation_steps=args.formation_steps,
         seed=args.seed,
         rho_meas=args.rho_meas,

@@ -28,6 +28,8 @@ PROFILE_DEFAULTS: dict[str, dict[str, Any]] = {
 
 MAX_SIDE = 8192  # robots per row or column; ids stay far inside uint32
 MAX_STEPS = 100_000
+AUTO = "auto"
+PAPER_DIAMETER = 7  # hops across the paper's 8x8 swarm, for which its step counts were chosen
 
 
 class ParameterError(CamoError):
@@ -83,6 +85,24 @@ class CamoParams:
         data = asdict(self)
         data.pop("w1")
         return data
+
+
+def auto_consensus_steps(profile: str, rows: int, cols: int) -> int:
+    """`--consensus-steps auto`: the profile's steps, scaled with the square of the grid's
+    diameter D = max(rows, cols) - 1 (hops between its farthest robots) over the paper's 8x8
+    (D = 7), never fewer. Consensus by averaging with neighbours spreads an opinion about one
+    hop a step, and evens it out in about D^2 steps (docs/algorithm.md, "Consensus steps")."""
+    if profile not in PROFILES:
+        raise ParameterError(f"profile must be one of {', '.join(PROFILES)} (got {profile!r})")
+    base = PROFILE_DEFAULTS[profile]["consensus_steps"]
+    diameter = max(rows, cols) - 1
+    steps = max(base, math.ceil(base * diameter**2 / PAPER_DIAMETER**2))
+    if steps > MAX_STEPS:
+        raise ParameterError(
+            f"--consensus-steps auto would be {steps} steps for a {rows}x{cols} grid, above "
+            f"{MAX_STEPS}: give the number of steps"
+        )
+    return steps
 
 
 def _int_in(name: str, value: Any, low: int, high: int) -> None:

@@ -62,6 +62,10 @@ def schema(spec: SweepSpec) -> pa.Schema:
     return pa.schema(fields)
 
 
+def _text(value: Any) -> str | None:
+    return None if value is None else str(value)
+
+
 def _arrow_type(values: list[Any]) -> pa.DataType:
     if all(isinstance(v, bool) for v in values):
         return pa.bool_()
@@ -80,10 +84,16 @@ class Layout:
     schema: pa.Schema
     axes: tuple[str, ...]
     driver: str
+    # Axes whose values are not all of one kind (`consensus_steps=35,auto`): their column is
+    # text, and every value is written as text.
+    text_axes: frozenset[str] = frozenset()
 
     @classmethod
     def of(cls, spec: SweepSpec) -> Layout:
-        return cls(schema(spec), tuple(spec.axis_names()), spec.driver)
+        columns = schema(spec)
+        axes = tuple(spec.axis_names())
+        text = frozenset(name for name in axes if columns.field(name).type == pa.string())
+        return cls(columns, axes, spec.driver, text)
 
 
 def rows_table(layout: Layout, done: list[tuple[Trial, dict[str, Any]]]) -> pa.Table:
@@ -101,6 +111,7 @@ def rows_table(layout: Layout, done: list[tuple[Trial, dict[str, Any]]]) -> pa.T
             "driver": layout.driver,
             "sim_args": command[key],
             **{name: trial.options[name] for name in layout.axes},
+            **{name: _text(trial.options[name]) for name in layout.text_axes},
             **result,
         }
         rows.append(row)
