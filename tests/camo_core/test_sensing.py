@@ -1,5 +1,7 @@
 """Sensing: images, grey values, block means, measurement noise, real readings, calibration."""
 
+import json
+
 import cv2
 import numpy as np
 import pytest
@@ -116,3 +118,37 @@ def test_any_calibration_file_reads_or_is_refused_in_one_line(tmp_path_factory, 
         assert "\n" not in str(exc)
     else:
         assert 0.0 <= cal.apply(128.0) <= 255.0
+
+
+def test_contrast_pulls_every_value_toward_the_images_mean():
+    image = np.array([[0, 100], [200, 100]], np.uint8)  # mean 100
+    assert np.array_equal(sensing.with_contrast(image, 1.0), image)
+    assert np.array_equal(sensing.with_contrast(image, 0.5), [[50, 100], [150, 100]])
+    for bad in (0.0, 1.5):
+        with pytest.raises(ImageError, match=r"--contrast must be in \(0, 1\]"):
+            sensing.with_contrast(image, bad)
+
+
+def test_sim_at_a_contrast_senses_what_it_senses_on_that_image_written_out(tmp_path):
+    from support import run_camo
+
+    from camo_core.backgrounds import background
+
+    faint = tmp_path / "faint.png"
+    cv2.imwrite(str(faint), sensing.with_contrast(background("leopard"), 0.4))
+    runs = {
+        "option": ["--pattern", "leopard", "--contrast", "0.4"],
+        "file": ["--image", str(faint)],
+    }
+    summaries = {}
+    for name, args in runs.items():
+        out = run_camo("sim", *args, "--rho-meas", "0.2", "--out", str(tmp_path / name))
+        assert out.returncode == 0, out.stderr
+        summaries[name] = json.loads((tmp_path / name / "summary.json").read_text())
+    assert summaries["option"]["sensed"] == summaries["file"]["sensed"]
+    assert summaries["option"]["final"] == summaries["file"]["final"]
+    out = run_camo("sim", "--contrast", "2", "--out", str(tmp_path / "bad"))
+    assert (
+        out.returncode == 2
+        and out.stderr.strip() == "camo: error: --contrast must be in (0, 1] (got 2)"
+    )

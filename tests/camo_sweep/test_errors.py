@@ -63,3 +63,19 @@ def test_errors_again_in_its_folder_is_the_same_analysis_or_refused(tmp_path):
     assert other.returncode == 2 and "holds another sweep" in other.stderr
     noisy = errors("--rho-meas", "0.3", "--out", str(tmp_path / "n"))
     assert noisy.returncode == 2 and "give them as --rhos" in noisy.stderr
+
+
+def test_at_lower_contrast_measurement_errors_change_the_forests_pattern(tmp_path):
+    def measurement_diff(folder, *extra):
+        out = errors("--trials", "10", "--rhos", "0.4", "--quiet", "--out", str(folder), *extra)
+        assert out.returncode == 0, out.stderr
+        rows = list(csv.DictReader((folder / "errors.csv").open()))
+        return float(next(r for r in rows if r["mode"] == "measurement")["mean_diff"])
+
+    # The built-in forest's trunks are strong enough that noisy robots change nothing; pulled
+    # toward their mean at contrast 0.3 they are as faint as the paper's photograph.
+    assert measurement_diff(tmp_path / "full") == 0.0
+    assert measurement_diff(tmp_path / "faint", "--contrast", "0.3") > 5.0
+    table = sweep_table(tmp_path / "faint")
+    assert all(r["sim_args"].startswith("--pattern forest") for r in table)
+    assert all("--contrast 0.3" in r["sim_args"] for r in table)  # each row says how to rerun

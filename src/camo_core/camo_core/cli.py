@@ -18,6 +18,7 @@ from .animation import Snapshots, write_animation
 from .exceptions import UsageError, reported
 from .options import (
     Parser,
+    add_contrast_option,
     add_run_options,
     image_from,
     out_dir,
@@ -96,6 +97,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def add_sim_arguments(sim: Parser) -> Parser:
     """`./camo sim`'s options on `sim` (also the options a sweep's trials take)."""
     add_run_options(sim)
+    add_contrast_option(sim)
     for name, what in (("stripes", "horizontal and vertical stripes"), ("mottled", "mottled")):
         sim.add_argument(
             f"--w2-{name}",

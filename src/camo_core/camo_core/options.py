@@ -15,7 +15,7 @@ import numpy as np
 from .backgrounds import BACKGROUNDS, background
 from .exceptions import UsageError
 from .params import AUTO, PROFILES, CamoParams, auto_consensus_steps
-from .sensing import load_image
+from .sensing import load_image, with_contrast
 
 
 class Parser(argparse.ArgumentParser):
@@ -227,10 +227,26 @@ def params_from(args: argparse.Namespace) -> CamoParams:
 
 
 def image_from(args: argparse.Namespace) -> tuple[np.ndarray, str]:
+    """The background and its label; with a --contrast (sim's, errors'), at that contrast."""
     if args.image:
-        return load_image(args.image), str(args.image)
-    name = args.pattern or args.default_pattern
-    return background(name), f"built-in {name}"
+        image, label = load_image(args.image), str(args.image)
+    else:
+        name = args.pattern or args.default_pattern
+        image, label = background(name), f"built-in {name}"
+    contrast = getattr(args, "contrast", None)
+    if contrast is not None:
+        image, label = with_contrast(image, contrast), f"{label} at contrast {contrast:g}"
+    return image, label
+
+
+def add_contrast_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--contrast",
+        type=float,
+        default=None,
+        help="scale the background's contrast by this factor in (0, 1] first: each value "
+        "pulled toward the image's mean (default: as it is)",
+    )
 
 
 def new_folder_problem(path: Path, what: str = "folder") -> str | None:

@@ -40,6 +40,15 @@ def load_image(path: str | Path) -> np.ndarray:
     return image
 
 
+def with_contrast(image: np.ndarray, contrast: float) -> np.ndarray:
+    """The image with its contrast scaled by `contrast` (0 < contrast <= 1): every value pulled
+    toward the image's mean, v' = m + contrast * (v - m), rounded to uint8 by OpenCV."""
+    if not 0.0 < contrast <= 1.0:
+        raise ImageError(f"--contrast must be in (0, 1] (got {contrast:g})")
+    mean = float(image.mean())
+    return cv2.addWeighted(image, contrast, image, 0.0, (1.0 - contrast) * mean)
+
+
 def image_digest(image: np.ndarray) -> str:
     """A short fingerprint of an image's pixels (and shape): the run's setup lists its
     backgrounds' so that a process takes a background only if it is one of them."""

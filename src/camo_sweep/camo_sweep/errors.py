@@ -20,7 +20,14 @@ import yaml
 
 from camo_core import figures
 from camo_core.exceptions import UsageError, reported
-from camo_core.options import Parser, add_run_options, image_from, out_dir, params_from
+from camo_core.options import (
+    Parser,
+    add_contrast_option,
+    add_run_options,
+    image_from,
+    out_dir,
+    params_from,
+)
 
 from . import engines
 from .cli import SPEC_FILE, check_folder
@@ -61,7 +68,7 @@ def error_spec(args, rhos: list[float]) -> SweepSpec:
     options = {"image": args.image} if args.image else {"pattern": args.pattern or "forest"}
     options |= {"rows": args.rows, "cols": args.cols, "profile": args.profile}
     options["threshold"] = args.threshold
-    for name in ("consensus_steps", "formation_steps"):
+    for name in ("consensus_steps", "formation_steps", "contrast"):
         if getattr(args, name) is not None:
             options[name] = getattr(args, name)
     blocks = [{"rho_meas": rhos}, {"rho_comm": rhos}, {"rho_meas,rho_comm": rhos}]
@@ -132,6 +139,7 @@ def build_parser() -> Parser:
         "sweep's table (trials/) in --out",
     )
     add_run_options(parser)
+    add_contrast_option(parser)
     parser.add_argument("--trials", type=int, default=10, help="trials per point (default 10)")
     parser.add_argument(
         "--rhos",

@@ -68,11 +68,21 @@ def reference_options(options: dict[str, Any]) -> dict[str, Any]:
 
 
 @cache
-def _sensed(source: tuple[str | None, str | None], rows: int, cols: int, profile: str):
-    """The block means of a background, once per worker (a sweep reuses a few backgrounds)."""
-    args = argparse.Namespace(image=source[0], pattern=source[1], default_pattern="forest")
+def _sensed(
+    source: tuple[str | None, str | None, float | None], rows: int, cols: int, profile: str
+):
+    """The block means of a background (image, pattern, contrast), once per worker (a sweep
+    reuses a few backgrounds)."""
+    image, pattern, contrast = source
+    args = argparse.Namespace(
+        image=image, pattern=pattern, contrast=contrast, default_pattern="forest"
+    )
     image, _ = image_from(args)
     return sense_image(image, rows, cols, profile)
+
+
+def background_of(args: argparse.Namespace) -> tuple[str | None, str | None, float | None]:
+    return args.image, args.pattern, args.contrast
 
 
 def simulate_options(
@@ -82,7 +92,7 @@ def simulate_options(
     args = namespace(options, seed)
     params = params_from(args)
     if raw is None:
-        raw = _sensed((args.image, args.pattern), params.rows, params.cols, params.profile)
+        raw = _sensed(background_of(args), params.rows, params.cols, params.profile)
     _threads_for(params)
     return simulate(params, raw)
 
@@ -103,7 +113,7 @@ def _threads_for(params: CamoParams) -> None:
 def reference_of(options: dict[str, Any]) -> Reference:
     args = namespace(options, 0)
     params = params_from(args)
-    raw = _sensed((args.image, args.pattern), params.rows, params.cols, params.profile)
+    raw = _sensed(background_of(args), params.rows, params.cols, params.profile)
     result = simulate_options(reference_options(options), 0, raw)
     image = os.path.abspath(args.image) if args.image else None
     return Reference(result.majority_pattern, result.final.copy(), raw, image)
