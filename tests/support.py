@@ -240,3 +240,22 @@ def assert_like_sim(run: Path, sim: Path, attacked: bool = False) -> dict:
     if not attacked:
         assert ran["rejected_messages"] == {"total": 0, "by_reason": {}}
     return ran
+
+
+def brick_courses(
+    height: int = 256, width: int = 256, course: int = 13, seed: int = 1
+) -> np.ndarray:
+    """Brick courses: dark bricks of random shades between light mortar rows, and noise: a
+    texture whose block means differ by a few grey levels only."""
+    generator = np.random.default_rng(seed)
+    image = np.zeros((height, width))
+    for top in range(0, height, course):
+        offset = 14 * (top // course % 2)
+        for left in range(-29 + offset, width, 29):
+            image[top : top + course, max(0, left) : max(0, left + 29)] = generator.uniform(
+                90, 140
+            )
+            image[top : top + course, max(0, left) : max(0, left + 3)] = 170
+        image[top : top + 3, :] = 170
+    image += generator.normal(0, 12, image.shape)
+    return np.clip(image, 0, 255).astype(np.uint8)

@@ -54,3 +54,15 @@ def test_a_message_must_carry_its_kinds_phase():
     for kind, phase in phases.items():
         assert phase_problem(kind, phase) is None
         assert phase_problem(kind, phase + 1) == "phase does not match the kind"
+
+
+def test_energies_pass_only_in_a_run_with_threshold_auto_and_within_range():
+    auto = PARAMS.with_(threshold_auto=True)
+    assert message_problem(Message("energy", 3, 0, 19, (510.0, 8)), auto) is None
+    assert message_problem(Message("energy", 3, 0, 0, (12.5, 8)), PARAMS) == "step out of range"
+    assert message_problem(Message("energy", 3, 0, 20, (12.5, 8)), auto) == "step out of range"
+    for energy, degree in ((math.nan, 8), (-1.0, 8), (510.5, 8), (12.5, 9)):
+        assert message_problem(Message("energy", 3, 0, 0, (energy, degree)), auto) == (
+            "energy out of range"
+        )
+    assert phase_problem("energy", SENSING) is None and phase_problem("energy", CONSENSUS)

@@ -168,3 +168,11 @@ def test_bad_bridge_options_are_one_line_errors(tmp_path):
     ):
         out = camo_run("--rows", "4", "--cols", "4", *bad, "--out", str(tmp_path / "o"))
         assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, (bad, out.stderr)
+
+
+def test_monitor_mode_refuses_threshold_auto_which_the_firmware_does_not_have():
+    out = bridge("-p", "monitor:=true", "-p", "port:=/dev/null", "-p", "threshold_auto:=true")
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.strip().startswith(
+        "droplet_bridge: error: a Droplet's firmware has no threshold_auto"
+    )

@@ -580,3 +580,31 @@ def test_the_swarm_resolves_auto_before_its_robots_get_the_parameters(tmp_path):
     config = config_from(build_parser().parse_args(args))
     assert config.params.consensus_steps == 161
     assert config.setup()["params"]["consensus_steps"] == 161  # what /swarm/params says
+
+
+def test_the_swarm_with_threshold_auto_equals_the_simulator_and_its_bag_holds_the_energies(
+    tmp_path,
+):
+    import cv2
+    from support import bag_tool, brick_courses
+
+    image = tmp_path / "courses.png"
+    cv2.imwrite(str(image), brick_courses())
+    args = ["--image", str(image), "--rows", "16", "--cols", "16", "--rho-comm", "0.1"]
+    run = camo_run(*args, "--threshold", "auto", "--procs", "2", "--out", str(tmp_path / "run"),
+                   "--record", str(tmp_path / "bag"))  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "lacks" not in run.stderr
+    sim = run_camo("sim", *args, "--threshold", "auto", "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    ran = assert_like_sim(tmp_path / "run", tmp_path / "sim")
+    assert ran["pattern"] == "horizontal"  # faint courses: a fixed threshold sees none
+    fixed = run_camo("sim", *args, "--out", str(tmp_path / "fixed"))
+    assert fixed.returncode == 0, fixed.stderr
+    assert json.loads((tmp_path / "fixed" / "summary.json").read_text())["pattern"] == "mottled"
+    info = bag_tool("cli", "info", str(tmp_path / "bag"))
+    energies = [x for x in info.stdout.splitlines() if "/energy " in x]
+    assert energies and all("camo_msgs/msg/Energy" in x for x in energies)
+    rendered = bag_tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
+    assert rendered.returncode == 0, rendered.stderr
+    assert_like_sim(tmp_path / "rendered", tmp_path / "sim")

@@ -25,15 +25,8 @@ from camo_msgs.msg import RobotStatus
 from camo_nodes.topics import PARAMS_SUFFIX, result_from
 
 from .container import BagError, BagSummary, damaged, read_messages, read_summary
-from .ledger import Ledger
+from .ledger import ROBOT_KINDS, Ledger
 from .msgdefs import full_name, message_definition
-
-KINDS = {
-    "camo_msgs/msg/Hello": "hello",
-    "camo_msgs/msg/Color": "color",
-    "camo_msgs/msg/Vote": "vote",
-    "camo_msgs/msg/State": "state",
-}
 
 
 def message_fields(kind: str, data: bytes) -> tuple[int, int, int]:
@@ -104,7 +97,9 @@ def examine(path: str | Path) -> Ledger:
     params, status, background, result = run_topics_of(summary)
     run = params[1 : -len(PARAMS_SUFFIX)]
     kinds = {
-        t.name: KINDS[full_name(t.type)] for t in summary.topics if full_name(t.type) in KINDS
+        t.name: ROBOT_KINDS[full_name(t.type)]
+        for t in summary.topics
+        if full_name(t.type) in ROBOT_KINDS
     }
     decode_status = status_decoder(summary, status)
     ledger = Ledger()

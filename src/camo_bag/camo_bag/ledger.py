@@ -1,7 +1,8 @@
 """What a recording holds of a run, against what the run says it must hold.
 
-A robot that finished a round sent, in it, one hello, one colour, a vote per
-consensus step and a state per formation step, and reported done. The ledger
+A robot that finished a round sent, in it, one hello, one colour, (with
+--threshold auto) an energy per averaging step, a vote per consensus step and a
+state per formation step, and reported done. The ledger
 counts, per round and robot, the distinct steps recorded of each kind (a
 message heard twice, or a stranger's copy, counts once); a round is complete
 for a robot once all of it is there. What a bag must hold comes from the run's
@@ -21,6 +22,14 @@ from camo_core.params import CamoParams
 from camo_core.robot_io import messages_per_round
 
 MAX_STEP = 1_000_000  # before the run's parameters are known: no step of a run is beyond this
+# The robots' message types, and the kind of message each carries.
+ROBOT_KINDS = {
+    "camo_msgs/msg/Hello": "hello",
+    "camo_msgs/msg/Color": "color",
+    "camo_msgs/msg/Energy": "energy",
+    "camo_msgs/msg/Vote": "vote",
+    "camo_msgs/msg/State": "state",
+}
 
 
 @dataclass
@@ -132,9 +141,8 @@ def robots_lack(n: int) -> str:
 
 
 def plural(kind: str) -> str:
-    return {"hello": "hellos", "color": "colours", "vote": "votes", "state": "states"}.get(
-        kind, kind
-    )
+    names = {"hello": "hellos", "color": "colours", "energy": "energies", "vote": "votes"}
+    return {**names, "state": "states"}.get(kind, kind)
 
 
 def cells(ranges: list) -> list[int]:

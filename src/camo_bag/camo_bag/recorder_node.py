@@ -55,15 +55,9 @@ from camo_nodes.topics import (
 from . import msgdefs, qos_yaml
 from .container import BagWriter, TopicInfo
 from .graph_topics import new_topics, taking_qos
-from .ledger import Ledger
+from .ledger import ROBOT_KINDS, Ledger
 
 RESULT_GRACE = 10.0  # s a recorder waits, after the run's result, for what the result names
-ROBOT_KINDS = {
-    "camo_msgs/msg/Hello": "hello",
-    "camo_msgs/msg/Color": "color",
-    "camo_msgs/msg/Vote": "vote",
-    "camo_msgs/msg/State": "state",
-}
 
 
 def header_stamp_ns(data: bytes) -> int | None:

@@ -23,9 +23,9 @@ from .options import (
     image_from,
     out_dir,
     params_from,
-    write_params_file,
 )
 from .output import run_title
+from .params_file import write_params_file
 from .progress import ProgressBar
 from .result import write_summary
 from .sensing import sense_image

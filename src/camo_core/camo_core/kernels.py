@@ -176,8 +176,9 @@ def _counts_with_fill(state, known, i, j, pattern, prefix, rho, on_act, on_inh):
 
 
 @njit(cache=True, parallel=True)
-def vote_all(sensed, known, prefix, rho, paper_profile, threshold, votes):
-    """The local one-hot vote of every robot (docs/algorithm.md §2.2), as rules.vote has it."""
+def descriptors_all(sensed, known, prefix, rho, paper_profile, h_score, v_score, energy):
+    """Every robot's descriptor (docs/algorithm.md §2.2), as rules.descriptor has it: its
+    horizontal and vertical scores and its texture energy."""
     rows, cols = sensed.shape
     for i in prange(rows):
         side = np.empty(4)
@@ -198,21 +199,14 @@ def vote_all(sensed, known, prefix, rho, paper_profile, threshold, votes):
                 fill[s] = side[s] if got[s] else (side[o] if got[o] else own)
             top, right, bottom, left = fill[0], fill[1], fill[2], fill[3]
             if paper_profile:
-                px = left + right - 2 * own
-                py = top + bottom - 2 * own
-                h_score = abs(py) - abs(px)
-                v_score = abs(px) - abs(py)
+                across_x = abs(left + right - 2 * own)
+                across_y = abs(top + bottom - 2 * own)
             else:
-                dx = abs(own - right) + abs(own - left)
-                dy = abs(own - top) + abs(own - bottom)
-                h_score = dy - dx
-                v_score = dx - dy
-            if h_score > threshold:
-                votes[i, j] = HORIZONTAL
-            elif v_score > threshold:
-                votes[i, j] = VERTICAL
-            else:
-                votes[i, j] = MOTTLED
+                across_x = abs(own - right) + abs(own - left)
+                across_y = abs(own - top) + abs(own - bottom)
+            h_score[i, j] = across_y - across_x
+            v_score[i, j] = across_x - across_y
+            energy[i, j] = (across_x + across_y) / 2
 
 
 @njit(cache=True)

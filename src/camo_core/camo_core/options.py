@@ -56,94 +56,11 @@ class Parser(argparse.ArgumentParser):
         path = getattr(first, "params_file", None)
         if path is None:
             return super().parse_known_args(args, namespace)
+        from .params_file import options_from_file  # the YAML reader, only when a file is given
+
         # The file's values as defaults, so that what the command line gives wins.
         self.set_defaults(**options_from_file(self, path, first.params_node))
         return super().parse_known_args(args, namespace)
-
-
-# Options that name where a run writes, or that a parameters file must not repeat.
-NOT_PARAMETERS = {
-    *("help", "params_file", "params_node", "options_parser", "func", "command"),
-    *("out", "force", "record", "default_pattern"),
-}
-
-
-def _option_value(action: argparse.Action, name: str, value, path: Path):
-    """A parameters-file value as the option would have parsed it, or UsageError."""
-
-    def wrong(expected: str) -> UsageError:
-        return UsageError(f"{path}: {name} must be {expected} (got {value!r})")
-
-    if action.nargs == 0:  # a flag
-        if not isinstance(value, bool):
-            raise wrong("true or false")
-        return value
-    many = isinstance(action, argparse._AppendAction) or action.nargs in ("+", "*")
-    items = value if many else [value]
-    if not isinstance(items, list) or (many and not isinstance(value, list)):
-        raise wrong("a list")
-    parsed = []
-    for item in items:
-        if isinstance(item, bool | list | dict) or item is None:
-            raise wrong("a number or text")
-        if action.type is int and not isinstance(item, int):
-            raise wrong("an integer")
-        if action.type is float and not isinstance(item, int | float):
-            raise wrong("a number")
-        try:
-            item = action.type(item) if action.type else str(item)
-        except (TypeError, ValueError, UsageError, argparse.ArgumentTypeError):
-            raise wrong("a valid value") from None
-        if action.choices is not None and item not in action.choices:
-            raise wrong(f"one of {', '.join(map(str, action.choices))}")
-        parsed.append(item)
-    return parsed if many else parsed[0]
-
-
-def options_from_file(parser: argparse.ArgumentParser, path: Path, node: str) -> dict:
-    """The options a parameters file sets for `node`: dest -> value (UsageError if it names an
-    option the command does not have, or a value of the wrong kind)."""
-    from .params_file import parameters_for  # the YAML reader, only when a file is given
-
-    actions = {a.dest: a for a in parser._actions if a.dest not in NOT_PARAMETERS}
-    values = {}
-    for name, value in parameters_for(path, node).items():
-        action = actions.get(name)
-        if action is None:
-            raise UsageError(
-                f"{path}: {parser.prog} has no parameter {name} (it has: {', '.join(actions)})"
-            )
-        values[name] = _option_value(action, name, value, path)
-    return values
-
-
-def write_params_file(
-    parser: argparse.ArgumentParser, args: argparse.Namespace, folder: Path
-) -> Path:
-    """The options a command ran with, as a ROS 2 parameters file (folder/params.yaml) that
-    `--params-file` takes back: the run repeated."""
-    import yaml
-
-    values = {}
-    for action in parser._actions:
-        value = getattr(args, action.dest, None)
-        if action.dest in NOT_PARAMETERS or value is None or value == []:
-            continue  # an option not given (a repeatable one included) is left out
-        if isinstance(value, Path):
-            value = str(value)
-        elif isinstance(value, list | tuple):
-            value = [str(v) if isinstance(v, Path) else v for v in value]
-        values[action.dest] = value
-    default = getattr(args, "default_pattern", None)
-    if default and not {"pattern", "image"} & values.keys():
-        # the built-in background it ran on, named: a later default cannot change it
-        values = {"pattern": default, **values}
-    path = folder / "params.yaml"
-    path.write_text(
-        f"# {parser.prog}: repeat with --params-file {path}\n"
-        + yaml.safe_dump({"/**": {"ros__parameters": values}}, sort_keys=False)
-    )
-    return path
 
 
 def add_run_options(
@@ -171,7 +88,12 @@ def add_run_options(
     )
     parser.add_argument("--rho-comm", type=float, default=0.0, help="message loss probability")
     parser.add_argument(
-        "--threshold", type=float, default=50.0, help="descriptor threshold T (default 50)"
+        "--threshold",
+        type=threshold_or_auto,
+        default=50.0,
+        metavar="T|auto",
+        help="descriptor threshold T (default 50); auto: each robot's from the swarm's mean "
+        "texture energy",
     )
     parser.add_argument(
         "--consensus-steps",
@@ -207,15 +129,27 @@ def steps_or_auto(value) -> int | str:
     raise argparse.ArgumentTypeError(f"a whole number of steps or auto (got {value!r})")
 
 
+def threshold_or_auto(value) -> float | str:
+    """--threshold: a number, or auto (from the command line or a parameters file)."""
+    if value == AUTO:
+        return value
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise argparse.ArgumentTypeError(f"a number or auto (got {value!r})") from None
+
+
 def params_from(args: argparse.Namespace) -> CamoParams:
     steps = args.consensus_steps
     if steps == AUTO:
         steps = auto_consensus_steps(args.profile, args.rows, args.cols)
+    auto = args.threshold == AUTO
     return CamoParams(
         profile=args.profile,
         rows=args.rows,
         cols=args.cols,
-        threshold=args.threshold,
+        threshold=CamoParams.threshold if auto else args.threshold,
+        threshold_auto=auto,
         consensus_steps=steps,
         formation_steps=args.formation_steps,
         seed=args.seed,

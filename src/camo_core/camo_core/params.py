@@ -51,6 +51,9 @@ class CamoParams:
     seed: int = 0
     rho_meas: float = 0.0
     rho_comm: float = 0.0
+    # --threshold auto: each robot's threshold from the swarm's texture energy
+    # (docs/algorithm.md, "Threshold auto"); `threshold` is then not used.
+    threshold_auto: bool = False
     w1: float = field(default=1.0, init=False)
 
     def __post_init__(self) -> None:
@@ -71,6 +74,10 @@ class CamoParams:
         _float_in("rho_comm", self.rho_comm, 0.0, 1.0)
         _float_in("w2_stripes", self.w2_stripes, -100.0, 100.0)
         _float_in("w2_mottled", self.w2_mottled, -100.0, 100.0)
+        if not isinstance(self.threshold_auto, bool):
+            raise ParameterError(
+                f"threshold_auto must be true or false (got {self.threshold_auto!r})"
+            )
         for name in ("threshold", "rho_meas", "rho_comm", "w2_stripes", "w2_mottled"):
             object.__setattr__(self, name, float(getattr(self, name)))
 

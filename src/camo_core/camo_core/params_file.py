@@ -7,10 +7,14 @@ where: a file that is not YAML, or not a mapping of node names (namespaces
 nest, `/**` matches every node) down to `ros__parameters`, or a list that mixes
 kinds of values. What else rcl refuses, it reports itself
 (`camo_nodes.topics.init_ros` turns that into one line too).
+
+The options of camo's own commands come from such files too (`options_from_file`),
+and every run writes the options it ran with as one (`write_params_file`).
 """
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import yaml
@@ -136,3 +140,84 @@ def check_ros_args(args: list[str] | None) -> None:
             if k + 1 >= len(ros):
                 raise ParamsFileError("--params-file needs a FILE")
             check_params_file(ros[k + 1])
+
+
+# Options that name where a run writes, or that a parameters file must not repeat.
+NOT_PARAMETERS = {
+    *("help", "params_file", "params_node", "options_parser", "func", "command"),
+    *("out", "force", "record", "default_pattern"),
+}
+
+
+def _option_value(action: argparse.Action, name: str, value, path: Path):
+    """A parameters-file value as the option would have parsed it, or UsageError."""
+
+    def wrong(expected: str) -> UsageError:
+        return UsageError(f"{path}: {name} must be {expected} (got {value!r})")
+
+    if action.nargs == 0:  # a flag
+        if not isinstance(value, bool):
+            raise wrong("true or false")
+        return value
+    many = isinstance(action, argparse._AppendAction) or action.nargs in ("+", "*")
+    items = value if many else [value]
+    if not isinstance(items, list) or (many and not isinstance(value, list)):
+        raise wrong("a list")
+    parsed = []
+    for item in items:
+        if isinstance(item, bool | list | dict) or item is None:
+            raise wrong("a number or text")
+        if action.type is int and not isinstance(item, int):
+            raise wrong("an integer")
+        if action.type is float and not isinstance(item, int | float):
+            raise wrong("a number")
+        try:
+            item = action.type(item) if action.type else str(item)
+        except (TypeError, ValueError, UsageError, argparse.ArgumentTypeError):
+            raise wrong("a valid value") from None
+        if action.choices is not None and item not in action.choices:
+            raise wrong(f"one of {', '.join(map(str, action.choices))}")
+        parsed.append(item)
+    return parsed if many else parsed[0]
+
+
+def options_from_file(parser: argparse.ArgumentParser, path: Path, node: str) -> dict:
+    """The options a parameters file sets for `node`: dest -> value (UsageError if it names an
+    option the command does not have, or a value of the wrong kind)."""
+    actions = {a.dest: a for a in parser._actions if a.dest not in NOT_PARAMETERS}
+    values = {}
+    for name, value in parameters_for(path, node).items():
+        action = actions.get(name)
+        if action is None:
+            raise UsageError(
+                f"{path}: {parser.prog} has no parameter {name} (it has: {', '.join(actions)})"
+            )
+        values[name] = _option_value(action, name, value, path)
+    return values
+
+
+def write_params_file(
+    parser: argparse.ArgumentParser, args: argparse.Namespace, folder: Path
+) -> Path:
+    """The options a command ran with, as a ROS 2 parameters file (folder/params.yaml) that
+    `--params-file` takes back: the run repeated."""
+    values = {}
+    for action in parser._actions:
+        value = getattr(args, action.dest, None)
+        if action.dest in NOT_PARAMETERS or value is None or value == []:
+            continue  # an option not given (a repeatable one included) is left out
+        if isinstance(value, Path):
+            value = str(value)
+        elif isinstance(value, list | tuple):
+            value = [str(v) if isinstance(v, Path) else v for v in value]
+        values[action.dest] = value
+    default = getattr(args, "default_pattern", None)
+    if default and not {"pattern", "image"} & values.keys():
+        # the built-in background it ran on, named: a later default cannot change it
+        values = {"pattern": default, **values}
+    path = folder / "params.yaml"
+    path.write_text(
+        f"# {parser.prog}: repeat with --params-file {path}\n"
+        + yaml.safe_dump({"/**": {"ros__parameters": values}}, sort_keys=False)
+    )
+    return path

@@ -32,7 +32,16 @@ def run_per_robot(
             bool(exempt[robot.row, robot.col]) if exempt is not None else False,
         )
     for robot in robots:
-        robot.decide_vote([None if n is None else robots[n].sensed for n in robot.neighbors[:4]])
+        robot.describe([None if n is None else robots[n].sensed for n in robot.neighbors[:4]])
+    if params.threshold_auto:
+        for step in range(params.consensus_steps):
+            sent = [(r.energy, r.degree) for r in robots]
+            for robot in robots:
+                robot.average_energy(
+                    step, [None if n is None else sent[n] for n in robot.neighbors[:8]]
+                )
+    for robot in robots:
+        robot.cast_vote()
     votes = np.array([r.vote for r in robots]).reshape(rows, cols)
     initial = np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols)
 

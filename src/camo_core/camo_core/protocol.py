@@ -35,17 +35,32 @@ from .robot_io import NOTHING, Display, Message, NoDisplay, Output, Report, Sens
 
 DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = range(5)
 PHASE_NAMES = ("discovery", "sensing", "consensus", "formation", "done")
-KINDS = ("hello", "color", "vote", "state")
+# "energy": --threshold auto's averaging of texture energy, in the sensing phase.
+KINDS = ("hello", "color", "energy", "vote", "state")
 # Each kind is heard from the first LISTEN[kind] slots (docs/algorithm.md §1: vote 0-3,
 # consensus 0-7).
-LISTEN = {"hello": NUM_SLOTS, "color": 4, "vote": 8, "state": NUM_SLOTS}
+LISTEN = {"hello": NUM_SLOTS, "color": 4, "energy": 8, "vote": 8, "state": NUM_SLOTS}
 STREAM = {
     "hello": rng.STREAM_HELLO,
     "color": rng.STREAM_COLOR,
+    "energy": rng.STREAM_ENERGY,
     "vote": rng.STREAM_CONSENSUS,
     "state": rng.STREAM_STATE,
 }
-PHASE_OF = {"hello": DISCOVERY, "color": SENSING, "vote": CONSENSUS, "state": FORMATION}
+PHASE_OF = {
+    "hello": DISCOVERY,
+    "color": SENSING,
+    "energy": SENSING,
+    "vote": CONSENSUS,
+    "state": FORMATION,
+}
+
+
+def kinds_of(params: CamoParams) -> tuple[str, ...]:
+    """The kinds of message a run's robots exchange: energies only with --threshold auto."""
+    return KINDS if params.threshold_auto else tuple(k for k in KINDS if k != "energy")
+
+
 NO_PATTERN = 255  # RobotStatus.PATTERN_NONE
 TICK = 0.05  # s between the transport's calls to tick()
 STALL = 0.5  # s: a tick this late means the robot's own process stalled
@@ -97,6 +112,8 @@ class StepProtocol:
         self.started = False
         self.hardware_wait = False  # waiting for the sensor or display: ticks retry
         self.wait_started = 0.0
+        self.energy_step: int | None = None  # --threshold auto: the averaging step, once described
+        self.kinds = kinds_of(params)
         self.last_tick: float | None = None
         self._out = Output()
 
@@ -112,7 +129,7 @@ class StepProtocol:
         """(neighbour id, kind) of every message this robot needs."""
         for slot, neighbor in enumerate(self.core.neighbors):
             if neighbor is not None:
-                for kind in KINDS:
+                for kind in self.kinds:
                     if slot < LISTEN[kind]:
                         yield neighbor, kind
 
@@ -200,9 +217,29 @@ class StepProtocol:
                 core.sense(reading.value, reading.real)
                 self._send("color", 0, core.sensed)
                 self.wait_started = now
-            if not self._ready(self._waiting_for("color", 0, 4), self.step_timeout, now, ticking):
-                return False
-            core.decide_vote(self._take("color", 0, 4))
+            if self.energy_step is None:
+                if not self._ready(
+                    self._waiting_for("color", 0, 4), self.step_timeout, now, ticking
+                ):
+                    return False
+                core.describe(self._take("color", 0, 4))
+                self.energy_step = 0
+                if params.threshold_auto and params.consensus_steps:
+                    self._wait_anew(now)
+                    self._send_energy()
+                    return True
+            if params.threshold_auto and self.energy_step < params.consensus_steps:
+                step = self.energy_step
+                pending = self._waiting_for("energy", step, 8)
+                if not self._ready(pending, self.step_timeout, now, ticking):
+                    return False
+                core.average_energy(step, self._take("energy", step, 8))
+                self.energy_step += 1
+                self._wait_anew(now)
+                if self.energy_step < params.consensus_steps:
+                    self._send_energy()
+                return True
+            core.cast_vote()
             self.p_trace, self.state_trace, self.reported = list(core.p), [], (0, 0)
             self._next(CONSENSUS, 0, now)
             self._report(now, forced=True)
@@ -287,6 +324,10 @@ class StepProtocol:
 
     def _next(self, phase: int, step: int, now: float) -> None:
         self.phase, self.step = phase, step
+        self._wait_anew(now)
+
+    def _wait_anew(self, now: float) -> None:
+        """A new step's wait: its deadline counts from now."""
         self.wait_started = now
         self._awaiting = None
 
@@ -296,6 +337,7 @@ class StepProtocol:
         self.newer_background = False
         self.sensor.next_round()
         self.core = RobotCore(self.params, self.core.row, self.core.col)
+        self.energy_step = None
         self.deadlines = 0
         self.inbox = {key: value for key, value in self.inbox.items() if key[0] >= self.round}
         self._next(DISCOVERY, 0, now)
@@ -305,6 +347,9 @@ class StepProtocol:
 
     def _send(self, kind: str, step: int, value: Any) -> None:
         self._out.send.append(Message(kind, self.core.id, self.round, step, value))
+
+    def _send_energy(self) -> None:
+        self._send("energy", self.energy_step, (self.core.energy, self.core.degree))
 
     def _send_vote(self) -> None:
         self._send("vote", self.step, (tuple(self.core.p), self.core.degree))

@@ -32,6 +32,10 @@ class RobotCore:
     p: tuple[float, float, float] = (0.0, 0.0, 1.0)
     pattern: int | None = None
     state: int = 0
+    # The descriptor: scores, texture energy (averaged with --threshold auto), threshold used.
+    scores: tuple[float, float] = (0.0, 0.0)
+    energy: float = 0.0
+    threshold: float = float("nan")
 
     def __post_init__(self) -> None:
         if not (0 <= self.row < self.params.rows and 0 <= self.col < self.params.cols):
@@ -98,12 +102,35 @@ class RobotCore:
         self.state = rules.initial_state(self.sensed)
         return self.sensed
 
-    def decide_vote(self, colors: Sequence[float | None]) -> int:
-        """`colors[s]` for slots 0-3: the delivered neighbour values (None if none)."""
+    def describe(self, colors: Sequence[float | None]) -> float:
+        """`colors[s]` for slots 0-3: the delivered neighbour values (None if none). Keeps the
+        scores; the texture energy, which --threshold auto averages before the vote."""
         received = self._filter(rng.STREAM_COLOR, 0, colors, DESCRIPTOR_SLOTS)
-        self.vote = rules.vote(self.sensed, received, self.params)
+        horizontal, vertical, self.energy = rules.descriptor(
+            self.sensed, received, self.params.profile
+        )
+        self.scores = (horizontal, vertical)
+        return self.energy
+
+    def average_energy(self, step: int, energies: Sequence[tuple[float, int] | None]) -> float:
+        """`energies[s]` for slots 0-7: (energy, degree) delivered for `step`, or None."""
+        received = self._filter(rng.STREAM_ENERGY, step, energies, CONSENSUS_SLOTS)
+        self.energy = rules.energy_step(self.energy, self.degree, received)
+        return self.energy
+
+    def cast_vote(self) -> int:
+        """The vote, against the fixed threshold or (--threshold auto) the averaged energy's."""
+        params = self.params
+        auto = params.threshold_auto
+        self.threshold = rules.auto_threshold(self.energy) if auto else params.threshold
+        self.vote = rules.vote_from(*self.scores, self.threshold)
         self.p = rules.one_hot(self.vote)
         return self.vote
+
+    def decide_vote(self, colors: Sequence[float | None]) -> int:
+        """describe, then cast_vote: the paper's vote (a fixed threshold)."""
+        self.describe(colors)
+        return self.cast_vote()
 
     # ---- phase 2: consensus -------------------------------------------------
 

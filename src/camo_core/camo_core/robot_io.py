@@ -16,20 +16,19 @@ from .sensing import Reading
 
 
 def messages_per_round(params: CamoParams) -> dict[str, int]:
-    """What each robot sends in a round it finishes: one hello, one colour, a vote per consensus
-    step and a state per formation step (a recording of the run must hold them all)."""
-    return {
-        "hello": 1,
-        "color": 1,
-        "vote": params.consensus_steps,
-        "state": params.formation_steps,
-    }
+    """What each robot sends in a round it finishes: one hello, one colour, (--threshold auto)
+    an energy per averaging step, a vote per consensus step and a state per formation step (a
+    recording of the run must hold them all)."""
+    sent = {"hello": 1, "color": 1}
+    if params.threshold_auto:
+        sent["energy"] = params.consensus_steps
+    return {**sent, "vote": params.consensus_steps, "state": params.formation_steps}
 
 
 @dataclass(slots=True)
 class Message:
     """What one robot sends its neighbours. `value`: hello (row, col); colour the sensed grey;
-    vote (p, degree); state 0 or 1."""
+    energy (energy, degree); vote (p, degree); state 0 or 1."""
 
     kind: str
     sender: int

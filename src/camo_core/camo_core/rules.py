@@ -55,22 +55,59 @@ def reflect_four(
     return filled[0], filled[1], filled[2], filled[3]
 
 
-def vote(own: float, received: Sequence[float | None], params: CamoParams) -> int:
-    """The local pattern vote from the robot's value and slots 0-3's values."""
+def descriptor(
+    own: float, received: Sequence[float | None], profile: str
+) -> tuple[float, float, float]:
+    """(horizontal score, vertical score, texture energy) from the robot's value and slots
+    0-3's values. The energy is the mean of the two differences' sizes: what a threshold is
+    measured against."""
     top, right, bottom, left = reflect_four(own, received)
-    if params.profile == "paper":
-        px = left + right - 2 * own
-        py = top + bottom - 2 * own
-        horizontal_score, vertical_score = abs(py) - abs(px), abs(px) - abs(py)
+    if profile == "paper":
+        across_x = abs(left + right - 2 * own)  # |Px|
+        across_y = abs(top + bottom - 2 * own)  # |Py|
     else:
-        dx = abs(own - right) + abs(own - left)
-        dy = abs(own - top) + abs(own - bottom)
-        horizontal_score, vertical_score = dy - dx, dx - dy
-    if horizontal_score > params.threshold:
+        across_x = abs(own - right) + abs(own - left)
+        across_y = abs(own - top) + abs(own - bottom)
+    return across_y - across_x, across_x - across_y, (across_x + across_y) / 2
+
+
+def vote_from(horizontal_score: float, vertical_score: float, threshold: float) -> int:
+    if horizontal_score > threshold:
         return HORIZONTAL
-    if vertical_score > params.threshold:
+    if vertical_score > threshold:
         return VERTICAL
     return MOTTLED
+
+
+def vote(own: float, received: Sequence[float | None], params: CamoParams) -> int:
+    """The local pattern vote from the robot's value and slots 0-3's values."""
+    horizontal_score, vertical_score, _ = descriptor(own, received, params.profile)
+    return vote_from(horizontal_score, vertical_score, params.threshold)
+
+
+# --threshold auto: T_i = max(MIN_THRESHOLD, THRESHOLD_SHARE * the swarm's mean energy).
+MIN_THRESHOLD = 5.0
+THRESHOLD_SHARE = 0.5
+
+
+def auto_threshold(energy: float) -> float:
+    return max(MIN_THRESHOLD, THRESHOLD_SHARE * energy)
+
+
+def energy_step(energy: float, degree: int, received: Sequence[tuple[float, int] | None]) -> float:
+    """consensus_step's Metropolis rule for one number: `received[k]` is (energy, degree)
+    from slot k (0-7), or None; the same order of float64 operations."""
+    acc = 0.0
+    weight_sum = 0.0
+    for slot in range(8):
+        message = received[slot]
+        if message is None:
+            continue
+        other, degree_other = message
+        w = 1.0 / (1.0 + max(degree, degree_other))
+        acc = acc + w * other
+        weight_sum = weight_sum + w
+    return acc + (1.0 - weight_sum) * energy
 
 
 def one_hot(pattern: int) -> tuple[float, float, float]:

@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from . import kernels, rng
+from . import kernels, rng, rules
 from .grid import NEIGHBOR_OFFSETS, NUM_SLOTS
 from .params import CamoParams
 from .result import RunResult, p_stats
@@ -87,13 +87,17 @@ def simulate(
     for s in range(NUM_SLOTS):
         known_mask |= known[s].astype(np.uint16) << np.uint16(s)
 
+    degree = np.zeros((rows, cols), np.uint8)
+    for s in range(8):
+        degree += ((known_mask >> s) & 1).astype(np.uint8)
+
     # Phase 1: sensing and the local vote.
     sensed = apply_noise(raw_sensed, params.seed, params.rho_meas, exempt)
-    votes = _vote(params, sensed, known_mask)
+    votes = _vote(params, sensed, known_mask, degree)
     initial = (sensed < 127).astype(np.uint8)
 
     # Phase 2: consensus.
-    p, trace, spread = _consensus(grid, params, votes, known_mask, progress, observe)
+    p, trace, spread = _consensus(params, votes, known_mask, degree, progress, observe)
     selected = select_pattern(p)
 
     # Phase 3: pattern formation.
@@ -113,33 +117,53 @@ def simulate(
     )
 
 
-def _vote(params: CamoParams, sensed: np.ndarray, known_mask: np.ndarray) -> np.ndarray:
-    votes = np.empty(sensed.shape, np.int64)
+def _vote(
+    params: CamoParams, sensed: np.ndarray, known_mask: np.ndarray, degree: np.ndarray
+) -> np.ndarray:
+    shape = sensed.shape
+    scores = np.empty(shape), np.empty(shape)
+    energy = np.empty(shape)
     prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_COLOR, 0))
-    kernels.vote_all(
-        sensed,
-        known_mask,
-        prefix,
-        params.rho_comm,
-        params.profile == "paper",
-        params.threshold,
-        votes,
+    paper = params.profile == "paper"
+    kernels.descriptors_all(sensed, known_mask, prefix, params.rho_comm, paper, *scores, energy)
+    if params.threshold_auto:
+        energy = _average_energy(params, energy, known_mask, degree)
+        threshold = np.maximum(rules.MIN_THRESHOLD, rules.THRESHOLD_SHARE * energy)
+    else:
+        threshold = params.threshold
+    horizontal, vertical = scores
+    votes = np.where(
+        horizontal > threshold,
+        rules.HORIZONTAL,
+        np.where(vertical > threshold, rules.VERTICAL, rules.MOTTLED),
     )
-    return votes
+    return votes.astype(np.int64)
+
+
+def _average_energy(
+    params: CamoParams, energy: np.ndarray, known_mask: np.ndarray, degree: np.ndarray
+) -> np.ndarray:
+    """--threshold auto: consensus_steps Metropolis steps on the texture energy, by the
+    p-vector's kernel (in its first component; the rule is per component)."""
+    values = np.zeros((*energy.shape, 3))
+    values[:, :, 0] = energy
+    nxt = np.empty_like(values)
+    for step in range(params.consensus_steps):
+        prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_ENERGY, step))
+        kernels.consensus_step(values, nxt, known_mask, degree, prefix, params.rho_comm)
+        values, nxt = nxt, values
+    return values[:, :, 0].copy()
 
 
 def _consensus(
-    grid: Grid,
     params: CamoParams,
     votes: np.ndarray,
     known_mask: np.ndarray,
+    degree: np.ndarray,
     progress: Progress | None,
     observe: Observer | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    degree = np.zeros((grid.rows, grid.cols), np.uint8)
-    for s in range(8):
-        degree += ((known_mask >> s) & 1).astype(np.uint8)
-    p = np.zeros((grid.rows, grid.cols, 3))
+    p = np.zeros((*votes.shape, 3))
     for k in range(3):
         p[:, :, k] = votes == k
     nxt = np.empty_like(p)

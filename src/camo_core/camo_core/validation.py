@@ -22,6 +22,13 @@ TOLERANCE = 1e-9  # a consensus p sums to 1 up to rounding
 REPORT_TOLERANCE = 1e-3  # a Droplet's own firmware prints p with 4 decimals
 
 
+MAX_ENERGY = 510.0  # |Px| and |Py| are at most 2 x 255 grey levels, and so is their mean
+
+
+def _finite(value) -> bool:
+    return isinstance(value, float | int) and math.isfinite(value)
+
+
 def _grey(value: float) -> bool:
     return isinstance(value, float | int) and math.isfinite(value) and 0.0 <= value <= 255.0
 
@@ -47,6 +54,12 @@ def message_problem(message: Message, params: CamoParams) -> str | None:
     elif kind == "color":
         if step != 0 or not _grey(value):
             return "colour out of range"
+    elif kind == "energy":
+        energy, degree = value
+        if not params.threshold_auto or not 0 <= step < params.consensus_steps:
+            return "step out of range"
+        if not (_finite(energy) and 0.0 <= energy <= MAX_ENERGY) or not 0 <= degree <= 8:
+            return "energy out of range"
     elif kind == "vote":
         p, degree = value
         if not 0 <= step < params.consensus_steps:

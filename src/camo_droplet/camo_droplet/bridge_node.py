@@ -210,6 +210,12 @@ def check_bridge_values(values: dict) -> None:
     if values["port"] and not os.path.exists(values["port"]):
         # Said at once, not after waiting up to a minute for a run to join.
         raise ParameterError(f"no serial port {values['port']} (is the Droplet plugged in?)")
+    if (values["monitor"] or values["transcript"]) and values["threshold_auto"]:
+        # There the Droplet runs its own firmware's rules, whose vote has a fixed threshold.
+        raise ParameterError(
+            "a Droplet's firmware has no threshold_auto: monitor mode shows the firmware's own "
+            "rules (bridged, without monitor, the bridge runs camo's rules and can)"
+        )
     if not (values["serial_timeout"] > 0 and values["retries"] >= 0):
         raise ParameterError("serial_timeout must be positive and retries not negative")
 

@@ -27,7 +27,8 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
 from camo_core.exceptions import EXIT_USAGE, CamoError
-from camo_core.options import contiguous, write_params_file
+from camo_core.options import contiguous
+from camo_core.params_file import write_params_file
 from camo_core.shutdown import StopFlag
 
 from .launch_config import RunConfig, build_parser, config_from

@@ -161,7 +161,8 @@ class RunTopics:
         return f"/{self.run}/camo/hosts"
 
     def tile(self, tile: str, part: str, kind: str) -> str:
-        """A tile's robot messages: part is "edge" or "core", kind hello, color, vote or state."""
+        """A tile's robot messages: part is "edge" or "core", kind hello, color, energy (with
+        --threshold auto), vote or state."""
         return f"/{self.run}/camo/{tile}/{part}/{kind}"
 
 

@@ -31,17 +31,23 @@ from rclpy.serialization import deserialize_message
 
 from camo_core.grid import neighbor_ids
 from camo_core.params import CamoParams
-from camo_core.protocol import CONSENSUS, DISCOVERY, FORMATION, SENSING
+from camo_core.protocol import CONSENSUS, DISCOVERY, FORMATION, SENSING, kinds_of
 from camo_core.robot_io import Message, Report
 from camo_core.validation import message_problem, phase_problem
-from camo_msgs.msg import Color, Hello, Host, RobotStatus, State, Vote
+from camo_msgs.msg import Color, Energy, Hello, Host, RobotStatus, State, Vote
 
 from .polled import PolledTopics
 from .topics import LATCHED, LATCHED_READER, RunTopics, history_qos, tile_name
 from .trust import Hosts, Rejections
 
-MESSAGE_TYPES = {"hello": Hello, "color": Color, "vote": Vote, "state": State}
-PHASES = {"hello": DISCOVERY, "color": SENSING, "vote": CONSENSUS, "state": FORMATION}
+MESSAGE_TYPES = {"hello": Hello, "color": Color, "energy": Energy, "vote": Vote, "state": State}
+PHASES = {
+    "hello": DISCOVERY,
+    "color": SENSING,
+    "energy": SENSING,
+    "vote": CONSENSUS,
+    "state": FORMATION,
+}
 Receiver = Callable[[Message], None]
 Tile = tuple[int, int]  # first and last robot id, inclusive
 
@@ -60,6 +66,8 @@ def fill(msg, message: Message) -> None:
         msg.row, msg.col = message.value
     elif kind == "color":
         msg.value = message.value
+    elif kind == "energy":
+        msg.energy, msg.degree = message.value
     elif kind == "vote":
         p, msg.degree = message.value
         msg.p[0], msg.p[1], msg.p[2] = p
@@ -72,6 +80,8 @@ def from_ros(kind: str, msg) -> Message:
         value = (msg.row, msg.col)
     elif kind == "color":
         value = msg.value
+    elif kind == "energy":
+        value = (msg.energy, msg.degree)
     elif kind == "vote":
         value = (tuple(msg.p), msg.degree)
     else:
@@ -108,6 +118,7 @@ def messages_per_robot(params: CamoParams, kind: str) -> int:
     steps = {
         "hello": 1,
         "color": 1,
+        "energy": params.consensus_steps,
         "vote": params.consensus_steps,
         "state": params.formation_steps,
     }
@@ -161,6 +172,7 @@ class Transport:
         self.tiles = tiles
         self.hosted = {r for first, last in tiles for r in range(first, last + 1)}
         self.edge = edge_of(params, self.hosted, self.hosted)
+        self.kinds = kinds_of(params)  # the kinds of message this run's robots send
         self.writers: dict[tuple[int, str], object] = {}  # (robot, kind) -> its tile's writer
         for first, last in tiles:
             self._create_writers(first, last)
@@ -168,7 +180,7 @@ class Transport:
             RobotStatus, topics.status, history_qos(status_depth(params) * len(self.hosted))
         )
         # One message a kind, filled in for each send (cheaper than a new one each time).
-        self._reused = {kind: cls(phase=PHASES[kind]) for kind, cls in MESSAGE_TYPES.items()}
+        self._reused = {kind: MESSAGE_TYPES[kind](phase=PHASES[kind]) for kind in self.kinds}
         for msg in self._reused.values():
             msg.header.frame_id = "camo"
         self.receivers: dict[tuple[int, str], list[Receiver]] = defaultdict(list)
@@ -192,7 +204,8 @@ class Transport:
         for part, members in parts.items():
             if not members:
                 continue
-            for kind, msg_type in MESSAGE_TYPES.items():
+            for kind in self.kinds:
+                msg_type = MESSAGE_TYPES[kind]
                 depth = len(members) * messages_per_robot(self.params, kind)
                 writer = self.node.create_publisher(
                     msg_type, self.topics.tile(name, part, kind), history_qos(depth)
@@ -238,9 +251,9 @@ class Transport:
                 continue  # ours, or nothing there that this process's robots hear
             self.remote.add((first, last))
             name = tile_name(first, last)
-            for kind, msg_type in MESSAGE_TYPES.items():
+            for kind in self.kinds:
                 topic = self.topics.tile(name, "edge", kind)
-                self.listen(msg_type, topic, listener_qos(), self._robot_message(kind))
+                self.listen(MESSAGE_TYPES[kind], topic, listener_qos(), self._robot_message(kind))
 
     def _robot_message(self, kind: str):
         cls = MESSAGE_TYPES[kind]
