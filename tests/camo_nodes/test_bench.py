@@ -3,6 +3,7 @@
 import subprocess
 import sys
 
+import pytest
 from support import ROOT, domain
 
 
@@ -34,3 +35,14 @@ def test_the_cost_of_a_live_view_with_no_client_is_measured_against_plain_runs(t
     assert row["robots"] == "3x3" and row["plain_s"] > 0 and row["added_s"] > 0
     assert row["ratio"] == row["added_s"] / row["plain_s"]
     assert (tmp_path / "added_0" / "summary.json").exists()
+
+
+def test_grid_sides_take_a_list_where_0_or_nothing_means_none():
+    import argparse
+
+    from camo_nodes.bench import grid_sides
+
+    assert grid_sides("16,32") == [16, 32] and grid_sides("0") == grid_sides("") == []
+    for bad in ("x", "300", "-8"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            grid_sides(bad)

@@ -70,3 +70,36 @@ def test_a_swarm_split_across_two_hosts_equals_the_simulator(tmp_path, mode):
     sim = run_camo("sim", *OPTIONS, "--out", str(tmp_path / "sim"))
     assert sim.returncode == 0, sim.stderr
     assert_like_sim(tmp_path / "run", tmp_path / "sim")
+
+
+def test_the_discovery_server_stops_on_ctrl_c_even_with_sigint_ignored_by_its_starter():
+    """A script's background job inherits SIGINT ignored, and an ignored signal stays ignored
+    across the exec into the server binary: a Ctrl-C before the server has its own handler was
+    lost, and the server ran on."""
+    import signal
+    import subprocess
+
+    port = 12811 + os.getpid() % 1000
+    server = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "camo_nodes.discovery_server",
+            "--address",
+            "127.0.0.1",
+            "--port",
+            str(port),
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
+    )
+    try:
+        assert "listening on 127.0.0.1" in server.stderr.readline()
+        server.send_signal(signal.SIGINT)  # at once: the server binary is still starting
+        server.wait(timeout=20)
+    finally:
+        if server.poll() is None:
+            server.kill()
+            server.wait()
+            pytest.fail("the discovery server ran on after SIGINT")

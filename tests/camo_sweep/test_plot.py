@@ -66,3 +66,11 @@ def test_an_axis_the_sweep_does_not_have_is_one_line(swept):
     done = sweep("plot", str(swept), "--x", "rows")
     assert done.returncode == 2 and "'rows' is not an axis of this sweep" in done.stderr
     assert "rho_comm, threshold" in done.stderr
+
+
+def test_a_text_axis_of_numbers_and_words_is_ordered_as_numbers_then_words():
+    from camo_sweep.plot import _sort_key
+
+    assert sorted(["auto", "100.0", "5.0", None, "30.0"], key=_sort_key) == [
+        "5.0", "30.0", "100.0", "auto", None
+    ]  # fmt: skip

@@ -23,6 +23,8 @@ def test_a_range_includes_its_end_and_keeps_integers_integers():
         ("rho_com", "0,0.1", "unknown option or axis 'rho_com'"),
         ("rho_comm", "", "axis rho_comm is empty"),
         ("rho_comm", "0.1,x", "'x' is not a valid value"),
+        ("threshold", "30,high", "'high' is not a valid value"),
+        ("consensus_steps", "3,x", "'x' is not a valid value"),
         ("pattern", "forest,jungle", "not one of desert, forest, leopard"),
         ("rho_comm", "0.5:0:0.1", "needs FROM <= TO"),
         ("seed", "1,2", "seed is not an axis"),

@@ -22,7 +22,9 @@ TOLERANCE = 1e-9  # a consensus p sums to 1 up to rounding
 REPORT_TOLERANCE = 1e-3  # a Droplet's own firmware prints p with 4 decimals
 
 
-MAX_ENERGY = 510.0  # |Px| and |Py| are at most 2 x 255 grey levels, and so is their mean
+# |Px| and |Py| are at most 2 x 255 grey levels, and so is their mean; averaging 510s can give
+# 510 plus a rounding error.
+MAX_ENERGY = 510.0 * (1 + TOLERANCE)
 
 
 def _finite(value) -> bool:
@@ -56,7 +58,9 @@ def message_problem(message: Message, params: CamoParams) -> str | None:
             return "colour out of range"
     elif kind == "energy":
         energy, degree = value
-        if not params.threshold_auto or not 0 <= step < params.consensus_steps:
+        if not params.threshold_auto:
+            return "an energy in a run without --threshold auto"
+        if not 0 <= step < params.consensus_steps:
             return "step out of range"
         if not (_finite(energy) and 0.0 <= energy <= MAX_ENERGY) or not 0 <= degree <= 8:
             return "energy out of range"

@@ -212,16 +212,16 @@ def format_table(rows: list[dict]) -> str:
 
 
 def grid_sides(text: str) -> list[int]:
-    """--sides 16,32,64 (empty: none)."""
+    """--sides 16,32,64 (empty or 0: none)."""
     try:
         sides = [int(part) for part in text.split(",") if part.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"grid sides are integers, comma-separated: {text!r}"
         ) from None
-    if not all(1 <= side <= 256 for side in sides):
-        raise argparse.ArgumentTypeError(f"a grid side is in 1..256: {text!r}")
-    return sides
+    if not all(0 <= side <= 256 for side in sides):
+        raise argparse.ArgumentTypeError(f"a grid side is in 1..256 (0: none): {text!r}")
+    return [side for side in sides if side]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -233,13 +233,13 @@ def main(argv: list[str] | None = None) -> int:
         "--rate-sides",
         type=grid_sides,
         default="8",
-        help="grid sides of the long-run rate comparison (default 8; empty: none)",
+        help="grid sides of the long-run rate comparison (default 8; 0: none)",
     )
     parser.add_argument(
         "--sides",
         type=grid_sides,
         default="16,32,64",
-        help="grid sides of the whole-run comparison (default 16,32,64; empty: none)",
+        help="grid sides of the whole-run comparison (default 16,32,64; 0: none)",
     )
     parser.add_argument(
         "--record-side", type=int, default=16, help="side of the recording comparison (0: none)"

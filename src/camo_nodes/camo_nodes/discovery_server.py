@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import ipaddress
 import os
+import signal
 import sys
 from pathlib import Path
 
@@ -59,6 +60,10 @@ def main(argv: list[str] | None = None) -> int:
     except CamoError as exc:
         print(f"camo discovery-server: error: {exc}", file=sys.stderr)
         return 2
+    # Ctrl-C must stop the server even before it has its own handler (it execs below, and an
+    # ignored SIGINT, inherited from a script that started us in the background, would stay
+    # ignored across the exec: a Ctrl-C in that moment would be lost).
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
     print(
         f"camo discovery-server: listening on {args.address}:{args.port}; give clients "
         f"--discovery-server HOST:{args.port} (Ctrl-C to stop)",

@@ -82,12 +82,16 @@ def _groups(keys: list, values: np.ndarray) -> tuple[list, list[np.ndarray]]:
 
 
 def _sort_key(value):
-    """Numbers, then text, then unset values (None), each in their own order."""
+    """Numbers (also those of a text column: `consensus_steps=35,auto`), then text, then unset
+    values (None), each in their own order."""
     if value is None:
-        return (2, "")
+        return (2, 0.0, "")
     if isinstance(value, str):
-        return (1, value)
-    return (0, value)
+        try:
+            return (0, float(value), value)
+        except ValueError:
+            return (1, 0.0, value)
+    return (0, value, "")
 
 
 def plot(folder: Path, x: str, y: str, by: str | None, heat: str | None, out: Path) -> Path:

@@ -80,7 +80,7 @@ def typed(name: str, value: Any) -> Any:
     convert = action.type or str
     try:
         out = convert(text)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, argparse.ArgumentTypeError):
         raise UsageError(f"{name}: {value!r} is not a valid value") from None
     if action.choices is not None and out not in action.choices:
         choices = ", ".join(map(str, action.choices))
