@@ -567,6 +567,13 @@ def test_the_runs_own_recorder_is_waited_for_before_discovery_shows_it(tmp_path,
             session.executor.add_node(recorder)
             session.recording_holds(0, NothingFailed(), limit=30.0)
             assert "lack" not in capfd.readouterr().err
+            # Once the run's own recorder is known, another's report does not stand for it.
+            session.own_recorder = "here:1"
+            session.recording_holds(0, NothingFailed(), limit=1.0)
+            assert "1 recordings lack round 0" in capfd.readouterr().err
+            publisher.publish(String(data=json.dumps({**report, "recorder": "here:1"})))
+            session.recording_holds(0, NothingFailed(), limit=30.0)
+            assert "lack" not in capfd.readouterr().err
         finally:
             session.executor.remove_node(recorder)
             recorder.destroy_node()

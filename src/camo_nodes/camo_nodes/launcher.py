@@ -14,6 +14,7 @@ from __future__ import annotations
 import faulthandler
 import json
 import os
+import socket
 import sys
 import time
 from pathlib import Path
@@ -100,6 +101,7 @@ class Session:
         # Ours is counted before discovery shows it: on a loaded machine that can take longer
         # than a short round, and the robots must not stop before it has their messages.
         self.own_recorders = 1 if config.record else 0
+        self.own_recorder: str | None = None  # its report's "recorder", once started
         self.node.create_subscription(String, topics.recorded, self._on_recorded, LATCHED_READER)
         # Created now, written at the end: recorders subscribe to it while the run goes on.
         self.result_pub = self.node.create_publisher(String, topics.result, LATCHED)
@@ -149,7 +151,7 @@ class Session:
         def short() -> list[dict]:
             """The reports of recorders that do not hold the round yet."""
             reports = list(self.recorders.values())
-            if len(reports) < self.recorder_count():
+            if len(reports) < self.recorder_count() or not self.own_recorder_heard():
                 return [{}]  # a recorder not heard from yet
             return [r for r in reports if not holds(r, round_index, finished)]
 
@@ -184,6 +186,10 @@ class Session:
                 return
             self.spin()
 
+    def own_recorder_heard(self) -> bool:
+        """Whether our own recorder has reported (one started by hand may be seen first)."""
+        return self.own_recorder is None or self.own_recorder in self.recorders
+
     def recorder_count(self) -> int:
         """The recorders the graph shows, and at least our own."""
         return max(self.own_recorders, self.node.count_publishers(self.topics.recorded))
@@ -208,7 +214,8 @@ class Session:
         while time.monotonic() < deadline:
             reports = list(self.recorders.values())
             present = self.recorder_count()
-            if not present or (len(reports) >= present and all(r["result"] for r in reports)):
+            heard = len(reports) >= present and self.own_recorder_heard()
+            if not present or (heard and all(r["result"] for r in reports)):
                 break  # every recorder has it (one that stopped by itself had it)
             self.executor.spin_once(timeout_sec=0.1)  # even after Ctrl-C: it is quick
         self.result_pub.wait_for_all_acked(Duration(seconds=max(0.1, deadline - time.monotonic())))
@@ -291,7 +298,8 @@ def run(config: RunConfig) -> int:
     try:
         if config.record:
             # It starts with the swarm: the robots' topics keep their history for it.
-            group.start_recorder(str(config.record), config.topics.run)
+            recorder = group.start_recorder(str(config.record), config.topics.run)
+            session.own_recorder = f"{socket.gethostname()}:{recorder.pid}"  # as it names itself
             print(f"camo run: recording every topic to {config.record}/", file=sys.stderr)
         if config.foxglove is not None:
             group.start_view(config.topics.run, config.foxglove)  # it says where it serves
