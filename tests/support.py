@@ -196,7 +196,8 @@ class FixedSensor:
 
 
 class Bus:
-    """An in-memory transport that delivers every message in a random order."""
+    """An in-memory transport that delivers every message in a random order, and keeps every
+    report its robots make (`reports`, in the order made)."""
 
     def __init__(self, params: CamoParams, image_grid: np.ndarray, seed: int) -> None:
         self.random = random.Random(seed)
@@ -210,8 +211,10 @@ class Bus:
             for key in p.listens_to():
                 self.listeners.setdefault(key, []).append(p)
         self.pending: list[tuple[StepProtocol, Message]] = []
+        self.reports: list = []
 
     def post(self, out) -> None:
+        self.reports.extend(out.reports)
         for message in out.send:
             for p in self.listeners.get((message.sender, message.kind), ()):
                 self.pending.append((p, message))

@@ -31,14 +31,13 @@ from . import rng
 from .grid import NUM_SLOTS
 from .params import CamoParams
 from .robot import RobotCore
-from .robot_io import NOTHING, Display, Message, NoDisplay, Output, Report, Sensor
+from .robot_io import NOTHING, Display, Message, NoDisplay, Output, Report, Sensor, kinds_of
 
 DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = range(5)
 PHASE_NAMES = ("discovery", "sensing", "consensus", "formation", "done")
-# "energy": --threshold auto's averaging of texture energy, in the sensing phase.
-KINDS = ("hello", "color", "energy", "vote", "state")
-# Each kind is heard from the first LISTEN[kind] slots (docs/algorithm.md §1: vote 0-3,
-# consensus 0-7).
+# The kinds of message (kinds_of): "energy" is --threshold auto's averaging of texture energy,
+# in the sensing phase. Each kind is heard from the first LISTEN[kind] slots
+# (docs/algorithm.md §1: vote 0-3, consensus 0-7).
 LISTEN = {"hello": NUM_SLOTS, "color": 4, "energy": 8, "vote": 8, "state": NUM_SLOTS}
 STREAM = {
     "hello": rng.STREAM_HELLO,
@@ -54,11 +53,6 @@ PHASE_OF = {
     "vote": CONSENSUS,
     "state": FORMATION,
 }
-
-
-def kinds_of(params: CamoParams) -> tuple[str, ...]:
-    """The kinds of message a run's robots exchange: energies only with --threshold auto."""
-    return KINDS if params.threshold_auto else tuple(k for k in KINDS if k != "energy")
 
 
 NO_PATTERN = 255  # RobotStatus.PATTERN_NONE

@@ -32,10 +32,9 @@ class RobotCore:
     p: tuple[float, float, float] = (0.0, 0.0, 1.0)
     pattern: int | None = None
     state: int = 0
-    # The descriptor: scores, texture energy (averaged with --threshold auto), threshold used.
+    # The descriptor: scores, and texture energy (averaged with --threshold auto).
     scores: tuple[float, float] = (0.0, 0.0)
     energy: float = 0.0
-    threshold: float = float("nan")
 
     def __post_init__(self) -> None:
         if not (0 <= self.row < self.params.rows and 0 <= self.col < self.params.cols):
@@ -122,15 +121,10 @@ class RobotCore:
         """The vote, against the fixed threshold or (--threshold auto) the averaged energy's."""
         params = self.params
         auto = params.threshold_auto
-        self.threshold = rules.auto_threshold(self.energy) if auto else params.threshold
-        self.vote = rules.vote_from(*self.scores, self.threshold)
+        threshold = rules.auto_threshold(self.energy) if auto else params.threshold
+        self.vote = rules.vote_from(*self.scores, threshold)
         self.p = rules.one_hot(self.vote)
         return self.vote
-
-    def decide_vote(self, colors: Sequence[float | None]) -> int:
-        """describe, then cast_vote: the paper's vote (a fixed threshold)."""
-        self.describe(colors)
-        return self.cast_vote()
 
     # ---- phase 2: consensus -------------------------------------------------
 

@@ -25,6 +25,11 @@ def messages_per_round(params: CamoParams) -> dict[str, int]:
     return {**sent, "vote": params.consensus_steps, "state": params.formation_steps}
 
 
+def kinds_of(params: CamoParams) -> tuple[str, ...]:
+    """The kinds of message a run's robots exchange (energies only with --threshold auto)."""
+    return tuple(messages_per_round(params))
+
+
 @dataclass(slots=True)
 class Message:
     """What one robot sends its neighbours. `value`: hello (row, col); colour the sensed grey;

@@ -94,22 +94,6 @@ def auto_threshold(energy: float) -> float:
     return max(MIN_THRESHOLD, THRESHOLD_SHARE * energy)
 
 
-def energy_step(energy: float, degree: int, received: Sequence[tuple[float, int] | None]) -> float:
-    """consensus_step's Metropolis rule for one number: `received[k]` is (energy, degree)
-    from slot k (0-7), or None; the same order of float64 operations."""
-    acc = 0.0
-    weight_sum = 0.0
-    for slot in range(8):
-        message = received[slot]
-        if message is None:
-            continue
-        other, degree_other = message
-        w = 1.0 / (1.0 + max(degree, degree_other))
-        acc = acc + w * other
-        weight_sum = weight_sum + w
-    return acc + (1.0 - weight_sum) * energy
-
-
 def one_hot(pattern: int) -> tuple[float, float, float]:
     p = [0.0, 0.0, 0.0]
     p[pattern] = 1.0
@@ -142,6 +126,14 @@ def consensus_step(
         weight_sum = weight_sum + w
     keep = 1.0 - weight_sum
     return acc[0] + keep * p_own[0], acc[1] + keep * p_own[1], acc[2] + keep * p_own[2]
+
+
+def energy_step(energy: float, degree: int, received: Sequence[tuple[float, int] | None]) -> float:
+    """consensus_step on one number: `received[k]` is (energy, degree) from slot k (0-7), or
+    None. Carried in p's first component, as the simulator's kernel carries it (the rule is the
+    same for each component)."""
+    as_p = [None if m is None else ((m[0], 0.0, 0.0), m[1]) for m in received[:8]]
+    return consensus_step((energy, 0.0, 0.0), degree, as_p)[0]
 
 
 def select_pattern(p: Sequence[float] | np.ndarray) -> int | np.ndarray:

@@ -98,10 +98,7 @@ class Session:
         )
         # Every recorder of the run (ours, or one started by hand) reports what its bag holds.
         self.recorders: dict[str, dict] = {}
-        # Ours is counted before discovery shows it: on a loaded machine that can take longer
-        # than a short round, and the robots must not stop before it has their messages.
-        self.own_recorders = 1 if config.record else 0
-        self.own_recorder: str | None = None  # its report's "recorder", once started
+        self.own_recorder: str | None = None  # our recorder's report's "recorder", once started
         self.node.create_subscription(String, topics.recorded, self._on_recorded, LATCHED_READER)
         # Created now, written at the end: recorders subscribe to it while the run goes on.
         self.result_pub = self.node.create_publisher(String, topics.result, LATCHED)
@@ -191,14 +188,17 @@ class Session:
         return self.own_recorder is None or self.own_recorder in self.recorders
 
     def recorder_count(self) -> int:
-        """The recorders the graph shows, and at least our own."""
-        return max(self.own_recorders, self.node.count_publishers(self.topics.recorded))
+        """The recorders the graph shows, and at least our own: on a loaded machine discovery
+        can show it later than a short round ends, and the robots must not stop before it has
+        their messages."""
+        own = 1 if self.config.record else 0
+        return max(own, self.node.count_publishers(self.topics.recorded))
 
     def recorders_present(self) -> bool:
         """Whether a recorder records the run. A recorder waiting for a run finds it within
         about a discovery announcement period (fastdds.xml) of its parameters' appearing: a
         run shorter than that gives it the time."""
-        if self.own_recorders:
+        if self.config.record:
             return True
         settle = RECORDER_SETTLE - (time.monotonic() - self.started)
         if settle > 0:

@@ -31,8 +31,8 @@ from rclpy.serialization import deserialize_message
 
 from camo_core.grid import neighbor_ids
 from camo_core.params import CamoParams
-from camo_core.protocol import CONSENSUS, DISCOVERY, FORMATION, SENSING, kinds_of
-from camo_core.robot_io import Message, Report
+from camo_core.protocol import PHASE_OF
+from camo_core.robot_io import Message, Report, kinds_of, messages_per_round
 from camo_core.validation import message_problem, phase_problem
 from camo_msgs.msg import Color, Energy, Hello, Host, RobotStatus, State, Vote
 
@@ -41,13 +41,6 @@ from .topics import LATCHED, LATCHED_READER, RunTopics, history_qos, tile_name
 from .trust import Hosts, Rejections
 
 MESSAGE_TYPES = {"hello": Hello, "color": Color, "energy": Energy, "vote": Vote, "state": State}
-PHASES = {
-    "hello": DISCOVERY,
-    "color": SENSING,
-    "energy": SENSING,
-    "vote": CONSENSUS,
-    "state": FORMATION,
-}
 Receiver = Callable[[Message], None]
 Tile = tuple[int, int]  # first and last robot id, inclusive
 
@@ -115,14 +108,7 @@ def status_msg(report: Report) -> RobotStatus:
 def messages_per_robot(params: CamoParams, kind: str) -> int:
     """History a topic keeps per robot on it: a whole phase, so that a process (or a recorder)
     that joins late still gets every message of the round."""
-    steps = {
-        "hello": 1,
-        "color": 1,
-        "energy": params.consensus_steps,
-        "vote": params.consensus_steps,
-        "state": params.formation_steps,
-    }
-    return steps[kind] + 4
+    return messages_per_round(params)[kind] + 4
 
 
 def status_depth(params: CamoParams) -> int:
@@ -180,7 +166,7 @@ class Transport:
             RobotStatus, topics.status, history_qos(status_depth(params) * len(self.hosted))
         )
         # One message a kind, filled in for each send (cheaper than a new one each time).
-        self._reused = {kind: MESSAGE_TYPES[kind](phase=PHASES[kind]) for kind in self.kinds}
+        self._reused = {kind: MESSAGE_TYPES[kind](phase=PHASE_OF[kind]) for kind in self.kinds}
         for msg in self._reused.values():
             msg.header.frame_id = "camo"
         self.receivers: dict[tuple[int, str], list[Receiver]] = defaultdict(list)
