@@ -262,3 +262,26 @@ def brick_courses(
         image[top : top + 3, :] = 170
     image += generator.normal(0, 12, image.shape)
     return np.clip(image, 0, 255).astype(np.uint8)
+
+
+def oriented_stripes(
+    degrees: float, period: float = 32, size: int = 256, noise: float = 40, seed: int = 0
+) -> np.ndarray:
+    """Noisy square-wave stripes running at `degrees`, counter-clockwise from horizontal with y
+    up, `period` pixels apart (a dark and a light band each)."""
+    y, x = np.mgrid[0:size, 0:size].astype(float)
+    t = np.radians(degrees)
+    across = -x * np.sin(t) - y * np.cos(t)  # distance across the stripes (rows point down)
+    image = np.where((across / period) % 1 < 0.5, 60.0, 200.0)
+    image += np.random.default_rng(seed).normal(0, noise, image.shape)
+    return np.clip(image, 0, 255).astype(np.uint8)
+
+
+def drawn_direction(states: np.ndarray) -> float:
+    """The direction of the stripes a grid of states draws (degrees in [0, 180), as
+    --orientation any counts them): across the strongest wave of its 2-D Fourier transform."""
+    spectrum = np.abs(np.fft.fft2(states - states.mean()))
+    rows, cols = states.shape
+    i, j = np.unravel_index(np.argmax(spectrum), spectrum.shape)
+    ky, kx = (i if i <= rows // 2 else i - rows), (j if j <= cols // 2 else j - cols)
+    return float(-(np.degrees(np.arctan2(ky, kx)) + 90) % 180)

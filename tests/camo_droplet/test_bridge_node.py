@@ -7,6 +7,7 @@ import sys
 
 import cv2
 import numpy as np
+import pytest
 from support import ROOT, StatusListener, assert_like_sim, camo_run, domain, run_camo
 
 from camo_core.backgrounds import background
@@ -170,9 +171,19 @@ def test_bad_bridge_options_are_one_line_errors(tmp_path):
         assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, (bad, out.stderr)
 
 
-def test_monitor_mode_refuses_threshold_auto_which_the_firmware_does_not_have():
-    out = bridge("-p", "monitor:=true", "-p", "port:=/dev/null", "-p", "threshold_auto:=true")
+@pytest.mark.parametrize(
+    "options, named",
+    [
+        (["threshold_auto:=true"], "threshold_auto (--threshold auto)"),
+        (["orientation:=any"], "orientation any (--orientation any)"),
+        (["threshold_auto:=true", "orientation:=any"], "threshold_auto (--threshold auto) or"),
+    ],
+)
+def test_monitor_mode_names_the_options_the_firmware_does_not_have(options, named):
+    settings = [x for option in options for x in ("-p", option)]
+    out = bridge("-p", "monitor:=true", "-p", "port:=/dev/null", *settings)
     assert out.returncode == 2, out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
     assert out.stderr.strip().startswith(
-        "droplet_bridge: error: a Droplet's firmware has no threshold_auto"
+        f"droplet_bridge: error: a Droplet's firmware cannot run {named}"
     )

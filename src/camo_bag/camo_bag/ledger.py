@@ -29,6 +29,7 @@ ROBOT_KINDS = {
     "camo_msgs/msg/Energy": "energy",
     "camo_msgs/msg/Vote": "vote",
     "camo_msgs/msg/State": "state",
+    "camo_msgs/msg/Relay": "relay",
 }
 
 
@@ -142,7 +143,7 @@ def robots_lack(n: int) -> str:
 
 def plural(kind: str) -> str:
     names = {"hello": "hellos", "color": "colours", "energy": "energies", "vote": "votes"}
-    return {**names, "state": "states"}.get(kind, kind)
+    return {**names, "state": "states", "relay": "relays"}.get(kind, kind)
 
 
 def cells(ranges: list) -> list[int]:

@@ -81,7 +81,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
     write_animation(snapshots, result.sensed, dead, folder / "run.gif", title, marks)
     counts = ", ".join(f"{k} {v}" for k, v in result.selection_counts.items())
     print(
-        f"pattern: {result.majority_pattern} ({counts}); wrote {folder}/summary.json, "
+        f"pattern: {result.majority_label} ({counts}); wrote {folder}/summary.json, "
         f"figure.png and run.gif; simulated in {result.elapsed_s:.3f} s"
     )
     return 0

@@ -96,7 +96,7 @@ def run_plot(
     _consensus_panel(axes[2], result)
     for ax, states, label in (
         (axes[3], result.initial, "initial state (dark: sensed < 127)"),
-        (axes[4], result.final, f"generated pattern ({result.majority_pattern})"),
+        (axes[4], result.final, f"generated pattern ({result.majority_label})"),
     ):
         shown = np.where(states == 1, 0, 255).astype(float)
         if result.alive is not None:
@@ -138,7 +138,7 @@ def _consensus_panel(ax, result: RunResult) -> None:
     ax.set_xlabel("consensus step")
     ax.set_ylabel("p over robots")
     ax.legend(fontsize=6.5, loc="best")
-    ax.set_title(f"consensus: {result.majority_pattern}")
+    ax.set_title(f"consensus: {result.majority_label}")
 
 
 def mark(ax, marks: dict[str, np.ndarray]) -> list:

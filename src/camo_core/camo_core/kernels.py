@@ -13,30 +13,25 @@ import hashlib
 import numpy as np
 from numba import njit, prange
 
-from . import rng
-from .grid import NEIGHBOR_OFFSETS
-from .rules import (
-    ACTIVATORS,
-    DIAGONAL_FALLBACKS,
-    HORIZONTAL,
-    INHIBITORS,
-    MOTTLED,
-    OPPOSITE_CARDINAL,
-    VERTICAL,
-)
+from . import orientation, rng
+from .orientation import KNIGHT_FALLBACKS, OFFSETS, ORIENTED, RELAY_PATHS
+from .rules import DIAGONAL_FALLBACKS, HORIZONTAL, MOTTLED, OPPOSITE_CARDINAL, VERTICAL
 
-DI = np.array([o[0] for o in NEIGHBOR_OFFSETS], dtype=np.int64)
-DJ = np.array([o[1] for o in NEIGHBOR_OFFSETS], dtype=np.int64)
+# Offsets 0-11 are the slots, 12-19 the knight cells of --orientation any (orientation.OFFSETS).
+DI = np.array([o[0] for o in OFFSETS], dtype=np.int64)
+DJ = np.array([o[1] for o in OFFSETS], dtype=np.int64)
+SLOTS = 12
 # Fallback slots per slot (-1: none), in the order docs/algorithm.md §2.4 tries them.
 FALLBACK = np.full((12, 3), -1, dtype=np.int64)
 for _s in range(12):
     _chain = DIAGONAL_FALLBACKS.get(_s) or (OPPOSITE_CARDINAL[_s],)
     FALLBACK[_s, : len(_chain)] = _chain
-# ROLE[pattern, slot]: 1 activator, -1 inhibitor, 0 unused.
-ROLE = np.zeros((3, 12), dtype=np.int64)
-for _k in range(3):
-    ROLE[_k, list(ACTIVATORS[_k])] = 1
-    ROLE[_k, list(INHIBITORS[_k])] = -1
+# ROLE[pattern code, offset]: 1 activator, -1 inhibitor, 0 unused.
+ROLE = orientation.ROLES
+# Per knight cell: the (neighbour slot, its slot of the cell) pairs that relay it, and the knight
+# cells that stand in for it.
+RELAY = np.array(RELAY_PATHS, dtype=np.int64)
+KNIGHT_FALLBACK = np.array(KNIGHT_FALLBACKS, dtype=np.int64)
 
 # docs/algorithm.md §3's SplitMix64, with rng.py's constants (numba freezes module globals).
 _GOLDEN = np.uint64(rng.GOLDEN)
@@ -53,8 +48,8 @@ def _fingerprint() -> int:
     """A hash of every value the kernels freeze from other modules. numba's cache is keyed on
     this file alone: after a change to rules.py, grid.py or rng.py (a `git pull`, say), cached
     kernels would run the old tables, and the simulator would part from the per-robot rules."""
-    frozen = (DI, DJ, FALLBACK, ROLE, METROPOLIS)
-    numbers = (HORIZONTAL, VERTICAL, MOTTLED, rng.GOLDEN, rng.M1, rng.M2, rng.INV_2_53)
+    frozen = (DI, DJ, FALLBACK, ROLE, RELAY, KNIGHT_FALLBACK, METROPOLIS)
+    numbers = (HORIZONTAL, VERTICAL, MOTTLED, ORIENTED, rng.GOLDEN, rng.M1, rng.M2, rng.INV_2_53)
     text = repr(([a.tolist() for a in frozen], numbers)).encode()
     return int.from_bytes(hashlib.sha256(text).digest()[:7], "little")  # an int64
 
@@ -123,19 +118,20 @@ def _state_in(state, known, i, j, s, prefix, rho):
 
 
 @njit(cache=True, parallel=True)
-def formation_step(
-    state, out, known, selected, prefix, rho, w1, w2_stripes, w2_mottled, keep_on_zero
-):
-    """One step of Young's rule for every robot: state (rows x cols uint8) -> out."""
+def formation_step(state, out, known, selected, prefix, relay_prefix, rho, w1, w2, keep_on_zero):
+    """One step of Young's rule for every robot: state (rows x cols uint8) -> out. `w2`: the
+    inhibitor weight per pattern code; the knight cells (stripes at an angle) come relayed."""
     rows, cols = state.shape
     for i in prange(rows):
         for j in range(cols):
             pattern = selected[i, j]
+            offsets = SLOTS if pattern < ORIENTED else SLOTS + 8
             on_act = np.int64(state[i, j])
             on_inh = np.int64(0)
             if rho <= 0.0 and known[i, j] == ALL_SLOTS:
-                # Fast path: every slot known and nothing lost, so no slot needs filling.
-                for s in range(12):
+                # Fast path: every slot known and nothing lost, so no slot needs filling (and
+                # every knight cell is relayed, as its relays are two cells from any edge too).
+                for s in range(offsets):
                     role = ROLE[pattern, s]
                     if role > 0:
                         on_act += state[i + DI[s], j + DJ[s]]
@@ -145,8 +141,11 @@ def formation_step(
                 on_act, on_inh = _counts_with_fill(
                     state, known, i, j, pattern, prefix, rho, on_act, on_inh
                 )
-            w2 = w2_mottled if pattern == MOTTLED else w2_stripes
-            strength = w1 * on_act + w2 * on_inh
+                if offsets > SLOTS:
+                    on_act, on_inh = _knight_counts(
+                        state, known, i, j, pattern, prefix, relay_prefix, rho, on_act, on_inh
+                    )
+            strength = w1 * on_act + w2[pattern] * on_inh
             if strength > 0:
                 out[i, j] = 1
             elif keep_on_zero and strength == 0:
@@ -158,14 +157,58 @@ def formation_step(
 @njit(cache=True, inline="always")
 def _counts_with_fill(state, known, i, j, pattern, prefix, rho, on_act, on_inh):
     """Activator and inhibitor counts where slots may be missing (docs/algorithm.md §2.4)."""
-    for s in range(12):
+    for s in range(SLOTS):
         role = ROLE[pattern, s]
         if role == 0:
             continue
         v = _state_in(state, known, i, j, s, prefix, rho)
         f = 0
         while v < 0 and f < 3 and FALLBACK[s, f] >= 0:
-            v = _state_in(state, known, i, j, FALLBACK[s, f], prefix, rho)
+            # A stand-in of another role is passed over (orientation.formation_step); in the
+            # paper's kernels every stand-in has its cell's role.
+            if ROLE[pattern, FALLBACK[s, f]] == role:
+                v = _state_in(state, known, i, j, FALLBACK[s, f], prefix, rho)
+            f += 1
+        if v > 0:
+            if role > 0:
+                on_act += v
+            else:
+                on_inh += v
+    return on_act, on_inh
+
+
+@njit(cache=True, inline="always")
+def _relayed(state, known, i, j, k, prefix, relay_prefix, rho):
+    """Knight cell k's state as relayed to robot (i, j), or -1 (orientation.knight_states)."""
+    cols = state.shape[1]
+    for path in range(2):
+        mid = RELAY[k, path, 0]
+        sub = RELAY[k, path, 1]
+        if (known[i, j] >> mid) & 1 == 0:
+            continue
+        mi = i + DI[mid]
+        mj = j + DJ[mid]
+        if not _arrives(relay_prefix, mi * cols + mj, i * cols + j, rho):
+            continue
+        v = _state_in(state, known, mi, mj, sub, prefix, rho)
+        if v >= 0:
+            return v
+    return -1
+
+
+@njit(cache=True, inline="always")
+def _knight_counts(state, known, i, j, pattern, prefix, relay_prefix, rho, on_act, on_inh):
+    """The knight cells' share of the counts, with their stand-ins (orientation.STAND_INS)."""
+    for k in range(8):
+        role = ROLE[pattern, SLOTS + k]
+        if role == 0:
+            continue
+        v = _relayed(state, known, i, j, k, prefix, relay_prefix, rho)
+        f = 0
+        while v < 0 and f < 3:
+            other = KNIGHT_FALLBACK[k, f]
+            if ROLE[pattern, SLOTS + other] == role:
+                v = _relayed(state, known, i, j, other, prefix, relay_prefix, rho)
             f += 1
         if v > 0:
             if role > 0:
@@ -207,6 +250,40 @@ def descriptors_all(sensed, known, prefix, rho, paper_profile, h_score, v_score,
             h_score[i, j] = across_y - across_x
             v_score[i, j] = across_x - across_y
             energy[i, j] = (across_x + across_y) / 2
+
+
+_tensor_of = njit(cache=True, inline="always")(orientation.tensor_of)
+
+
+@njit(cache=True, parallel=True)
+def tensors_all(sensed, known, prefix, rho, jxx, jyy, jxy):
+    """Every robot's structure tensor (--orientation any), as orientation.raw_tensor has it:
+    from slots 0-7's colours, a missing one taking the opposite one's, else the robot's own."""
+    rows, cols = sensed.shape
+    for i in prange(rows):
+        side = np.empty(8)
+        got = np.zeros(8, dtype=np.bool_)
+        fill = np.empty(8)
+        for j in range(cols):
+            own = sensed[i, j]
+            me = i * cols + j
+            for s in range(8):
+                got[s] = False
+                if (known[i, j] >> s) & 1:
+                    ni = i + DI[s]
+                    nj = j + DJ[s]
+                    if _arrives(prefix, ni * cols + nj, me, rho):
+                        got[s] = True
+                        side[s] = sensed[ni, nj]
+            for s in range(8):
+                o = (s + 2) % 4 if s < 4 else 4 + (s - 2) % 4  # the opposite neighbour
+                fill[s] = side[s] if got[s] else (side[o] if got[o] else own)
+            a, b, c = _tensor_of(
+                own, fill[0], fill[1], fill[2], fill[3], fill[4], fill[5], fill[6], fill[7]
+            )
+            jxx[i, j] = a
+            jyy[i, j] = b
+            jxy[i, j] = c
 
 
 @njit(cache=True)

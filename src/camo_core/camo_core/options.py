@@ -14,7 +14,7 @@ import numpy as np
 
 from .backgrounds import BACKGROUNDS, background
 from .exceptions import UsageError
-from .params import AUTO, PROFILES, CamoParams, auto_consensus_steps
+from .params import AUTO, ORIENTATIONS, PROFILES, CamoParams, auto_consensus_steps
 from .sensing import load_image, with_contrast
 
 
@@ -96,6 +96,13 @@ def add_run_options(
         "texture energy",
     )
     parser.add_argument(
+        "--orientation",
+        choices=ORIENTATIONS,
+        default="axes",
+        help="axes: the paper's horizontal and vertical stripes; any: stripes at any multiple "
+        "of 15 degrees",
+    )
+    parser.add_argument(
         "--consensus-steps",
         type=steps_or_auto,
         default=None,
@@ -150,6 +157,7 @@ def params_from(args: argparse.Namespace) -> CamoParams:
         cols=args.cols,
         threshold=CamoParams.threshold if auto else args.threshold,
         threshold_auto=auto,
+        orientation=args.orientation,
         consensus_steps=steps,
         formation_steps=args.formation_steps,
         seed=args.seed,

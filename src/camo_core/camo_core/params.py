@@ -9,6 +9,8 @@ from typing import Any
 from .exceptions import CamoError
 
 PROFILES = ("paper", "droplet")
+# --orientation: the paper's two stripe directions (axes), or stripes at any angle (any).
+ORIENTATIONS = ("axes", "any")
 
 # docs/algorithm.md §2: steps per phase and Young's inhibitor weight, per profile.
 PROFILE_DEFAULTS: dict[str, dict[str, Any]] = {
@@ -54,6 +56,9 @@ class CamoParams:
     # --threshold auto: each robot's threshold from the swarm's texture energy
     # (docs/algorithm.md, "Threshold auto"); `threshold` is then not used.
     threshold_auto: bool = False
+    # --orientation any: a structure tensor instead of the vote, stripes at multiples of 15
+    # degrees (docs/algorithm.md, "Orientation any").
+    orientation: str = "axes"
     w1: float = field(default=1.0, init=False)
 
     def __post_init__(self) -> None:
@@ -64,6 +69,10 @@ class CamoParams:
         for name, value in PROFILE_DEFAULTS[self.profile].items():
             if getattr(self, name) is None:
                 object.__setattr__(self, name, value)
+        if self.orientation not in ORIENTATIONS:
+            raise ParameterError(
+                f"orientation must be one of {', '.join(ORIENTATIONS)} (got {self.orientation!r})"
+            )
         _int_in("rows", self.rows, 1, MAX_SIDE)
         _int_in("cols", self.cols, 1, MAX_SIDE)
         _int_in("consensus_steps", self.consensus_steps, 0, MAX_STEPS)
@@ -80,6 +89,10 @@ class CamoParams:
             )
         for name in ("threshold", "rho_meas", "rho_comm", "w2_stripes", "w2_mottled"):
             object.__setattr__(self, name, float(getattr(self, name)))
+
+    @property
+    def orientation_any(self) -> bool:
+        return self.orientation == "any"
 
     @property
     def count(self) -> int:

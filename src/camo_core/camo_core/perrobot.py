@@ -32,7 +32,7 @@ def run_per_robot(
             bool(exempt[robot.row, robot.col]) if exempt is not None else False,
         )
     for robot in robots:
-        robot.describe([None if n is None else robots[n].sensed for n in robot.neighbors[:4]])
+        robot.describe([None if n is None else robots[n].sensed for n in robot.neighbors[:8]])
     if params.threshold_auto:
         for step in range(params.consensus_steps):
             sent = [(r.energy, r.degree) for r in robots]
@@ -56,8 +56,11 @@ def run_per_robot(
 
     for step in range(params.formation_steps):
         sent_states = [r.state for r in robots]
-        for robot in robots:
-            robot.form(step, [None if n is None else sent_states[n] for n in robot.neighbors])
+        heard = [[None if n is None else sent_states[n] for n in r.neighbors] for r in robots]
+        relays = [r.relay(step, h) for r, h in zip(robots, heard, strict=True)]
+        for robot, states in zip(robots, heard, strict=True):
+            from_relays = [None if n is None else relays[n] for n in robot.neighbors[:8]]
+            robot.form(step, states, from_relays)
 
     return RunResult(
         params=params,

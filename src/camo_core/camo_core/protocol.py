@@ -27,35 +27,29 @@ import math
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from . import rng
 from .grid import NUM_SLOTS
 from .params import CamoParams
 from .robot import RobotCore
-from .robot_io import NOTHING, Display, Message, NoDisplay, Output, Report, Sensor, kinds_of
+from .robot_io import (
+    CONSENSUS,
+    DISCOVERY,
+    DONE,
+    FORMATION,
+    NO_PATTERN,
+    NOTHING,
+    SENSING,
+    STREAM,
+    Display,
+    Message,
+    NoDisplay,
+    Output,
+    Report,
+    Sensor,
+    Traces,
+    kinds_of,
+    listen_slots,
+)
 
-DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = range(5)
-PHASE_NAMES = ("discovery", "sensing", "consensus", "formation", "done")
-# The kinds of message (kinds_of): "energy" is --threshold auto's averaging of texture energy,
-# in the sensing phase. Each kind is heard from the first LISTEN[kind] slots
-# (docs/algorithm.md §1: vote 0-3, consensus 0-7).
-LISTEN = {"hello": NUM_SLOTS, "color": 4, "energy": 8, "vote": 8, "state": NUM_SLOTS}
-STREAM = {
-    "hello": rng.STREAM_HELLO,
-    "color": rng.STREAM_COLOR,
-    "energy": rng.STREAM_ENERGY,
-    "vote": rng.STREAM_CONSENSUS,
-    "state": rng.STREAM_STATE,
-}
-PHASE_OF = {
-    "hello": DISCOVERY,
-    "color": SENSING,
-    "energy": SENSING,
-    "vote": CONSENSUS,
-    "state": FORMATION,
-}
-
-
-NO_PATTERN = 255  # RobotStatus.PATTERN_NONE
 TICK = 0.05  # s between the transport's calls to tick()
 STALL = 0.5  # s: a tick this late means the robot's own process stalled
 
@@ -82,9 +76,7 @@ class StepProtocol:
         # fast swarm's statuses would otherwise outnumber its messages.
         self.report_period = report_period
         self.last_report = -math.inf
-        self.p_trace: list[float] = []  # p before consensus step 0, 1, ... (flattened)
-        self.state_trace: list[int] = []  # the state before formation step 0, 1, ...
-        self.reported = (0, 0)  # how many p values and states went into reports already
+        self.traces = Traces()
         self._awaiting: set[int] | None = None  # slots still awaited for _awaiting_key's step
         self._awaiting_key: tuple[int, str, int] | None = None
         self.core = RobotCore(params, row, col)
@@ -108,6 +100,10 @@ class StepProtocol:
         self.wait_started = 0.0
         self.energy_step: int | None = None  # --threshold auto: the averaging step, once described
         self.kinds = kinds_of(params)
+        self.listen = listen_slots(params)
+        self.colors = self.listen["color"]
+        # --orientation any: the formation step whose states were taken and relayed, and them.
+        self.relayed: tuple[int, list] | None = None
         self.last_tick: float | None = None
         self._out = Output()
 
@@ -124,7 +120,7 @@ class StepProtocol:
         for slot, neighbor in enumerate(self.core.neighbors):
             if neighbor is not None:
                 for kind in self.kinds:
-                    if slot < LISTEN[kind]:
+                    if slot < self.listen[kind]:
                         yield neighbor, kind
 
     # ---- events ---------------------------------------------------------------------
@@ -139,7 +135,7 @@ class StepProtocol:
 
     def deliver(self, message: Message, now: float) -> Output:
         slot = self.slot_of.get(message.sender)
-        if slot is None or slot >= LISTEN[message.kind]:
+        if slot is None or slot >= self.listen.get(message.kind, 0):
             return NOTHING  # not a neighbour this robot listens to for that kind
         if slot in self.silent:
             self.silent.discard(slot)  # it speaks again: wait for it again
@@ -213,10 +209,10 @@ class StepProtocol:
                 self.wait_started = now
             if self.energy_step is None:
                 if not self._ready(
-                    self._waiting_for("color", 0, 4), self.step_timeout, now, ticking
+                    self._waiting_for("color", 0, self.colors), self.step_timeout, now, ticking
                 ):
                     return False
-                core.describe(self._take("color", 0, 4))
+                core.describe(self._take("color", 0, self.colors))
                 self.energy_step = 0
                 if params.threshold_auto and params.consensus_steps:
                     self._wait_anew(now)
@@ -234,14 +230,14 @@ class StepProtocol:
                     self._send_energy()
                 return True
             core.cast_vote()
-            self.p_trace, self.state_trace, self.reported = list(core.p), [], (0, 0)
+            self.traces = Traces(p=list(core.p))
             self._next(CONSENSUS, 0, now)
             self._report(now, forced=True)
             self._send_vote()
         elif self.phase == CONSENSUS:
             if self.step == params.consensus_steps:
                 core.finish_consensus()
-                self.state_trace = [core.state]
+                self.traces.states = [core.state]
                 self._next(FORMATION, 0, now)
                 self._report(now, forced=True)
                 self._send("state", 0, core.state)
@@ -250,7 +246,7 @@ class StepProtocol:
             if not self._ready(pending, self.step_timeout, now, ticking):
                 return False
             core.consensus(self.step, self._take("vote", self.step, 8))
-            self.p_trace.extend(core.p)
+            self.traces.p.extend(core.p)
             self._next(CONSENSUS, self.step + 1, now)
             self._report(now)
             if self.step < params.consensus_steps:
@@ -263,11 +259,9 @@ class StepProtocol:
                 self._next(DONE, self.step, now)
                 self._report(now, forced=True)
                 return True
-            pending = self._waiting_for("state", self.step, NUM_SLOTS)
-            if not self._ready(pending, self.step_timeout, now, ticking):
+            if not self._formed(now, ticking):
                 return False
-            core.form(self.step, self._take("state", self.step, NUM_SLOTS))
-            self.state_trace.append(core.state)
+            self.traces.states.append(core.state)
             self._next(FORMATION, self.step + 1, now)
             self._report(now)
             if self.step < params.formation_steps:
@@ -276,6 +270,27 @@ class StepProtocol:
             self._start_next_round(now)
         else:
             return False
+        return True
+
+    def _formed(self, now: float, ticking: bool) -> bool:
+        """Take the formation step if its states (and, with --orientation any, after relaying
+        them, the neighbours' relays) are in; False while waiting."""
+        step, core = self.step, self.core
+        if self.relayed is None or self.relayed[0] != step:
+            pending = self._waiting_for("state", step, NUM_SLOTS)
+            if not self._ready(pending, self.step_timeout, now, ticking):
+                return False
+            states = self._take("state", step, NUM_SLOTS)
+            if not self.params.orientation_any:
+                core.form(step, states)
+                return True
+            self.relayed = (step, states)
+            self._send("relay", step, core.relay(step, states))
+            self._wait_anew(now)
+        pending = self._waiting_for("relay", step, 8)
+        if not self._ready(pending, self.step_timeout, now, ticking):
+            return False
+        core.form(step, self.relayed[1], self._take("relay", step, 8))
         return True
 
     def _waiting_for(self, kind: str, step: int, slots: int, known_only: bool = True) -> set[int]:
@@ -332,6 +347,7 @@ class StepProtocol:
         self.sensor.next_round()
         self.core = RobotCore(self.params, self.core.row, self.core.col)
         self.energy_step = None
+        self.relayed = None
         self.deadlines = 0
         self.inbox = {key: value for key, value in self.inbox.items() if key[0] >= self.round}
         self._next(DISCOVERY, 0, now)
@@ -357,8 +373,6 @@ class StepProtocol:
         if not forced and now - self.last_report < self.report_period:
             return
         self.last_report = now
-        p_from, state_from = self.reported
-        self.reported = (len(self.p_trace), len(self.state_trace))
         self._out.reports.append(
             Report(
                 sender_id=core.id,
@@ -375,10 +389,7 @@ class StepProtocol:
                 known_slots=core.known_mask,
                 deadlines=self.deadlines,
                 silent=tuple(sorted(core.neighbors[s] for s in self.silent)),
-                p_from=p_from // 3,
-                p_trace=tuple(self.p_trace[p_from:]),
-                state_from=state_from,
-                state_trace=tuple(self.state_trace[state_from:]),
+                **self.traces.unreported(),
             )
         )
 

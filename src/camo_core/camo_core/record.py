@@ -12,10 +12,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .orientation import selector
 from .params import CamoParams
-from .protocol import CONSENSUS, DONE, FORMATION
 from .result import RunResult, mean_p, p_stats
-from .rules import select_pattern
+from .robot_io import CONSENSUS, DONE, FORMATION
 
 
 @dataclass
@@ -26,6 +26,7 @@ class RoundRecord:
     started: float = field(default_factory=time.monotonic)
 
     def __post_init__(self) -> None:
+        self.select = selector(self.params)  # a robot's choice from its p
         n, steps = self.params.count, self.params.consensus_steps
         self.sensed = np.full(n, np.nan)
         self.p_trace = np.full((steps + 1, n, 3), np.nan)
@@ -121,7 +122,7 @@ class RoundRecord:
         frames = []
         for step, p in enumerate(self.p_trace):
             unknown = np.isnan(p).any(axis=1)
-            chosen = select_pattern(np.nan_to_num(p))
+            chosen = self.select(np.nan_to_num(p))
             frames.append((f"c{step}", np.where(unknown, -1, chosen).reshape(shape)))
         frames += [(f"f{step}", s.reshape(shape)) for step, s in enumerate(self.state_trace)]
         return frames
@@ -137,7 +138,7 @@ class RoundRecord:
             alive = ~dead & (self.phase >= CONSENSUS)
             # A robot still in consensus shows what its current p would select.
             selected = np.where(
-                self.selected < 0, select_pattern(np.nan_to_num(self.p_latest)), self.selected
+                self.selected < 0, self.select(np.nan_to_num(self.p_latest)), self.selected
             )
         else:
             alive = self.finished & ~dead
@@ -153,7 +154,7 @@ class RoundRecord:
             else:
                 trace.append(mean_p(step[alive]))
         first = self.p_trace[0]
-        votes = np.where(np.isnan(first).any(axis=1), -1, np.argmax(np.nan_to_num(first), axis=1))
+        votes = np.where(np.isnan(first).any(axis=1), -1, self.select(np.nan_to_num(first)))
         return RunResult(
             params=self.params,
             sensed=self.sensed.reshape(shape),

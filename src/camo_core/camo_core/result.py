@@ -16,6 +16,7 @@ except ImportError:
     orjson = None
 
 from . import kernels
+from .orientation import CODES, ORIENTED, angle_of, pattern_name
 from .params import CamoParams
 from .rules import MOTTLED, PATTERN_NAMES
 
@@ -35,6 +36,13 @@ SUMMARY_KEYS = (
     "consensus_trace",
     "elapsed_s",
 )
+
+
+def pattern_of(summary: dict) -> str:
+    """A summary's pattern with its direction, as sweeps compare them: horizontal, vertical or
+    mottled; with --orientation any mottled or stripes_<degrees>."""
+    angle = summary.get("orientation_deg")
+    return summary["pattern"] if angle is None else f"{summary['pattern']}_{angle}"
 
 
 def mean_p(p: np.ndarray) -> np.ndarray:
@@ -64,17 +72,40 @@ class RunResult:
     consensus_range: np.ndarray | None = None
 
     @property
-    def selection_counts(self) -> dict[str, int]:
-        chosen = self.selected if self.alive is None else self.selected[self.alive]
-        return {name: int(np.count_nonzero(chosen == k)) for k, name in enumerate(PATTERN_NAMES)}
+    def codes(self) -> range:
+        """The pattern codes a robot of this run can select: the paper's three, or mottled and
+        the twelve stripe directions of --orientation any."""
+        return range(MOTTLED, CODES) if self.params.orientation_any else range(MOTTLED + 1)
 
     @property
-    def majority_pattern(self) -> str:
+    def selection_counts(self) -> dict[str, int]:
+        chosen = self.selected if self.alive is None else self.selected[self.alive]
+        return {pattern_name(k): int(np.count_nonzero(chosen == k)) for k in self.codes}
+
+    @property
+    def majority_code(self) -> int:
         """The selection most robots made; a tie for the most goes to mottled."""
         counts = list(self.selection_counts.values())
         best = max(counts)
-        winners = [k for k, c in enumerate(counts) if c == best]
-        return PATTERN_NAMES[winners[0] if len(winners) == 1 else MOTTLED]
+        winners = [k for k, c in zip(self.codes, counts, strict=True) if c == best]
+        return winners[0] if len(winners) == 1 else MOTTLED
+
+    @property
+    def majority_pattern(self) -> str:
+        """horizontal, vertical or mottled; with --orientation any stripes or mottled."""
+        code = self.majority_code
+        return "stripes" if code >= ORIENTED else PATTERN_NAMES[code]
+
+    @property
+    def orientation_deg(self) -> int | None:
+        """The majority's stripe direction (--orientation any), None for mottled."""
+        return angle_of(self.majority_code)
+
+    @property
+    def majority_label(self) -> str:
+        """The majority pattern as a figure or a console names it ("stripes at 45°")."""
+        angle = self.orientation_deg
+        return self.majority_pattern if angle is None else f"stripes at {angle}°"
 
     def summary(self, arrays: bool = False) -> dict[str, Any]:
         """The summary.json document. arrays: the sensed, initial and final grids stay NumPy
@@ -91,6 +122,7 @@ class RunResult:
             "rho_meas": params.rho_meas,
             "rho_comm": params.rho_comm,
             "pattern": self.majority_pattern,
+            **({"orientation_deg": self.orientation_deg} if params.orientation_any else {}),
             "votes": self.selection_counts,
             "mean_p": mean_p(p).tolist(),
             "sensed": grid(np.asarray(self.sensed, dtype=np.float64)),

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from . import rng, rules
+from . import orientation, rng, rules
 from .grid import CONSENSUS_SLOTS, DESCRIPTOR_SLOTS, NUM_SLOTS, neighbor_ids, robot_id
 from .params import CamoParams, ParameterError
 from .sensing import noisy_value
@@ -50,6 +50,8 @@ class RobotCore:
         # A lossless link delivers every neighbour's message: no draw needed.
         self._everyone = tuple(n is not None for n in self.neighbors)
         self._known_counts()
+        self.tensor = (0.0, 0.0, 0.0)  # --orientation any: (Jxx, Jyy, Jxy) before normalising
+        self._w2 = orientation.inhibitor_weights(self.params)
 
     # ---- the simulated link -------------------------------------------------
 
@@ -102,13 +104,17 @@ class RobotCore:
         return self.sensed
 
     def describe(self, colors: Sequence[float | None]) -> float:
-        """`colors[s]` for slots 0-3: the delivered neighbour values (None if none). Keeps the
-        scores; the texture energy, which --threshold auto averages before the vote."""
+        """`colors[s]` for slots 0-3 (0-7 with --orientation any): the delivered neighbour
+        values (None if none). Keeps the scores (or the structure tensor); the texture energy,
+        which --threshold auto averages before the vote."""
         received = self._filter(rng.STREAM_COLOR, 0, colors, DESCRIPTOR_SLOTS)
         horizontal, vertical, self.energy = rules.descriptor(
             self.sensed, received, self.params.profile
         )
         self.scores = (horizontal, vertical)
+        if self.params.orientation_any:
+            around = self._filter(rng.STREAM_COLOR, 0, colors, CONSENSUS_SLOTS)
+            self.tensor = orientation.raw_tensor(self.sensed, around)
         return self.energy
 
     def average_energy(self, step: int, energies: Sequence[tuple[float, int] | None]) -> float:
@@ -120,6 +126,11 @@ class RobotCore:
     def cast_vote(self) -> int:
         """The vote, against the fixed threshold or (--threshold auto) the averaged energy's."""
         params = self.params
+        if params.orientation_any:
+            reg = orientation.regulariser(params, self.energy)
+            self.p = orientation.normalised(*self.tensor, reg)
+            self.vote = orientation.choose(self.p)
+            return self.vote
         auto = params.threshold_auto
         threshold = rules.auto_threshold(self.energy) if auto else params.threshold
         self.vote = rules.vote_from(*self.scores, threshold)
@@ -135,15 +146,36 @@ class RobotCore:
         return self.p
 
     def finish_consensus(self) -> int:
-        self.pattern = rules.select_pattern(self.p)
+        if self.params.orientation_any:
+            self.pattern = orientation.choose(self.p)
+        else:
+            self.pattern = rules.select_pattern(self.p)
         return self.pattern
 
     # ---- phase 3: pattern formation ------------------------------------------
 
-    def form(self, step: int, states: Sequence[int | None]) -> int:
-        """`states[s]` for slots 0-11: neighbour states delivered for `step`, or None."""
+    def relay(self, step: int, states: Sequence[int | None]) -> tuple[int | None, ...]:
+        """--orientation any: what this robot passes on of `step`'s states from slots 0-7 (the
+        same `states` form takes): those that reached it, None for the others."""
+        return tuple(self._filter(rng.STREAM_STATE, step, states, CONSENSUS_SLOTS))
+
+    def form(
+        self,
+        step: int,
+        states: Sequence[int | None],
+        relays: Sequence[Sequence[int | None] | None] = (),
+    ) -> int:
+        """`states[s]` for slots 0-11: neighbour states delivered for `step`, or None;
+        (--orientation any) `relays[s]` for slots 0-7: their relays for `step`, or None."""
         if self.pattern is None:
             self.finish_consensus()
         received = self._filter(rng.STREAM_STATE, step, states, range(NUM_SLOTS))
-        self.state = rules.formation_step(self.state, self.pattern, received, self.params)
+        if not self.params.orientation_any:
+            self.state = rules.formation_step(self.state, self.pattern, received, self.params)
+            return self.state
+        relayed = self._filter(rng.STREAM_RELAY, step, relays, CONSENSUS_SLOTS)
+        knights = orientation.knight_states(relayed)
+        self.state = orientation.formation_step(
+            self.state, self.pattern, received, knights, self.params, self._w2
+        )
         return self.state

@@ -11,29 +11,68 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from . import rng
+from .grid import NUM_SLOTS
 from .params import CamoParams
 from .sensing import Reading
+
+DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = range(5)
+PHASE_NAMES = ("discovery", "sensing", "consensus", "formation", "done")
+# The kinds of message (kinds_of): "energy" is --threshold auto's averaging of texture energy,
+# in the sensing phase; "relay" --orientation any's passing on of states, in formation. Each
+# kind is heard from the first LISTEN[kind] slots (docs/algorithm.md §1: vote 0-3, consensus
+# 0-7; colours from 0-7 with --orientation any).
+LISTEN = {"hello": NUM_SLOTS, "color": 4, "energy": 8, "vote": 8, "state": NUM_SLOTS, "relay": 8}
+STREAM = {
+    "hello": rng.STREAM_HELLO,
+    "color": rng.STREAM_COLOR,
+    "energy": rng.STREAM_ENERGY,
+    "vote": rng.STREAM_CONSENSUS,
+    "state": rng.STREAM_STATE,
+    "relay": rng.STREAM_RELAY,
+}
+PHASE_OF = {
+    "hello": DISCOVERY,
+    "color": SENSING,
+    "energy": SENSING,
+    "vote": CONSENSUS,
+    "state": FORMATION,
+    "relay": FORMATION,
+}
+
+
+def listen_slots(params: CamoParams) -> dict[str, int]:
+    """How many slots each kind is heard from in a run with these parameters."""
+    return {**LISTEN, "color": 8} if params.orientation_any else LISTEN
+
+
+NO_PATTERN = 255  # RobotStatus.PATTERN_NONE
 
 
 def messages_per_round(params: CamoParams) -> dict[str, int]:
     """What each robot sends in a round it finishes: one hello, one colour, (--threshold auto)
-    an energy per averaging step, a vote per consensus step and a state per formation step (a
-    recording of the run must hold them all)."""
+    an energy per averaging step, a vote per consensus step, a state and (--orientation any) a
+    relay per formation step (a recording of the run must hold them all)."""
     sent = {"hello": 1, "color": 1}
     if params.threshold_auto:
         sent["energy"] = params.consensus_steps
-    return {**sent, "vote": params.consensus_steps, "state": params.formation_steps}
+    sent |= {"vote": params.consensus_steps, "state": params.formation_steps}
+    if params.orientation_any:
+        sent["relay"] = params.formation_steps
+    return sent
 
 
 def kinds_of(params: CamoParams) -> tuple[str, ...]:
-    """The kinds of message a run's robots exchange (energies only with --threshold auto)."""
+    """The kinds of message a run's robots exchange (energies only with --threshold auto,
+    relays only with --orientation any)."""
     return tuple(messages_per_round(params))
 
 
 @dataclass(slots=True)
 class Message:
     """What one robot sends its neighbours. `value`: hello (row, col); colour the sensed grey;
-    energy (energy, degree); vote (p, degree); state 0 or 1."""
+    energy (energy, degree); vote (p, degree); state 0 or 1; relay the states of slots 0-7
+    for the same step as they reached the sender (None: did not)."""
 
     kind: str
     sender: int
@@ -67,6 +106,27 @@ class Report:
     # The state before formation step state_from, state_from + 1, ..., likewise.
     state_from: int = 0
     state_trace: tuple[int, ...] = ()
+
+
+@dataclass
+class Traces:
+    """A robot's p before consensus step 0, 1, ... (flattened, 3 a step) and state before
+    formation step 0, 1, ..., and how many of each went into reports already."""
+
+    p: list[float] = field(default_factory=list)
+    states: list[int] = field(default_factory=list)
+    reported: tuple[int, int] = (0, 0)
+
+    def unreported(self) -> dict[str, Any]:
+        """A Report's trace fields: every p and state not reported yet (now they are)."""
+        p_from, state_from = self.reported
+        self.reported = (len(self.p), len(self.states))
+        return {
+            "p_from": p_from // 3,
+            "p_trace": tuple(self.p[p_from:]),
+            "state_from": state_from,
+            "state_trace": tuple(self.states[state_from:]),
+        }
 
 
 @dataclass

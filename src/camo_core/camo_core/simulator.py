@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from . import kernels, rng, rules
+from . import kernels, orientation, rng, rules
 from .grid import NEIGHBOR_OFFSETS, NUM_SLOTS
 from .params import CamoParams
 from .result import RunResult, p_stats
@@ -93,12 +93,12 @@ def simulate(
 
     # Phase 1: sensing and the local vote.
     sensed = apply_noise(raw_sensed, params.seed, params.rho_meas, exempt)
-    votes = _vote(params, sensed, known_mask, degree)
+    votes, p0 = _vote(params, sensed, known_mask, degree)
     initial = (sensed < 127).astype(np.uint8)
 
     # Phase 2: consensus.
-    p, trace, spread = _consensus(params, votes, known_mask, degree, progress, observe)
-    selected = select_pattern(p)
+    p, trace, spread = _consensus(params, p0, known_mask, degree, progress, observe)
+    selected = orientation.choose(p) if params.orientation_any else select_pattern(p)
 
     # Phase 3: pattern formation.
     final = _formation(grid, params, initial, selected, known_mask, progress, observe)
@@ -119,7 +119,9 @@ def simulate(
 
 def _vote(
     params: CamoParams, sensed: np.ndarray, known_mask: np.ndarray, degree: np.ndarray
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each robot's vote (pattern code) and the p it starts consensus with: the one-hot vote,
+    or with --orientation any its normalised structure tensor (and the vote that tensor says)."""
     shape = sensed.shape
     scores = np.empty(shape), np.empty(shape)
     energy = np.empty(shape)
@@ -131,13 +133,26 @@ def _vote(
         threshold = np.maximum(rules.MIN_THRESHOLD, rules.THRESHOLD_SHARE * energy)
     else:
         threshold = params.threshold
+    if params.orientation_any:
+        tensor = np.empty(shape), np.empty(shape), np.empty(shape)
+        kernels.tensors_all(sensed, known_mask, prefix, params.rho_comm, *tensor)
+        if params.threshold_auto:
+            scale = threshold / rules.MIN_THRESHOLD
+            reg = orientation.REGULARISER * scale * scale  # orientation.regulariser's order
+        else:
+            reg = orientation.REGULARISER
+        p0 = np.stack(orientation.normalised(*tensor, reg), axis=-1)
+        return orientation.choose(p0), p0
     horizontal, vertical = scores
     votes = np.where(
         horizontal > threshold,
         rules.HORIZONTAL,
         np.where(vertical > threshold, rules.VERTICAL, rules.MOTTLED),
-    )
-    return votes.astype(np.int64)
+    ).astype(np.int64)
+    p0 = np.zeros((*shape, 3))
+    for k in range(3):
+        p0[:, :, k] = votes == k
+    return votes, p0
 
 
 def _average_energy(
@@ -157,15 +172,13 @@ def _average_energy(
 
 def _consensus(
     params: CamoParams,
-    votes: np.ndarray,
+    p0: np.ndarray,
     known_mask: np.ndarray,
     degree: np.ndarray,
     progress: Progress | None,
     observe: Observer | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    p = np.zeros((*votes.shape, 3))
-    for k in range(3):
-        p[:, :, k] = votes == k
+    p = p0
     nxt = np.empty_like(p)
     mean, least_greatest = p_stats(p)
     trace, spread = [mean], [least_greatest]
@@ -196,20 +209,22 @@ def _formation(
 ) -> np.ndarray:
     state = initial.copy()
     nxt = np.empty_like(state)
+    w2 = np.array(orientation.inhibitor_weights(params))
     if observe:
         observe("formation", 0, state)
     for step in range(params.formation_steps):
         prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_STATE, step))
+        relay_prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_RELAY, step))
         kernels.formation_step(
             state,
             nxt,
             known_mask,
             selected,
             prefix,
+            relay_prefix,
             params.rho_comm,
             params.w1,
-            params.w2_stripes,
-            params.w2_mottled,
+            w2,
             params.profile == "droplet",
         )
         state, nxt = nxt, state

@@ -13,9 +13,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from .orientation import CODES
 from .params import CamoParams
-from .protocol import CONSENSUS, DONE, FORMATION, NO_PATTERN, PHASE_OF, SENSING
-from .robot_io import Message
+from .robot_io import CONSENSUS, DONE, FORMATION, NO_PATTERN, PHASE_OF, SENSING, Message
 from .rules import MOTTLED
 
 TOLERANCE = 1e-9  # a consensus p sums to 1 up to rounding
@@ -43,6 +43,27 @@ def probability_vector(p: Sequence[float], tolerance: float = TOLERANCE) -> bool
     )
 
 
+def tensor_vector(p: Sequence[float], tolerance: float = TOLERANCE) -> bool:
+    """A normalised structure tensor (--orientation any) or an average of them: Jxx, Jyy >= 0,
+    Jxx + Jyy < 1 (the regulariser is positive) and |Jxy| <= (Jxx + Jyy) / 2."""
+    if len(p) != 3 or not all(math.isfinite(x) for x in p):
+        return False
+    jxx, jyy, jxy = p
+    trace = jxx + jyy
+    return (
+        jxx >= -tolerance
+        and jyy >= -tolerance
+        and trace <= 1.0 + tolerance
+        and (abs(jxy) <= trace / 2 + tolerance)
+    )
+
+
+def vote_vector(params: CamoParams, tolerance: float = TOLERANCE):
+    """The check of what a run's robots average: p, or with --orientation any the tensor."""
+    check = tensor_vector if params.orientation_any else probability_vector
+    return lambda p: check(p, tolerance)
+
+
 def message_problem(message: Message, params: CamoParams) -> str | None:
     """Why a robot must not use this message, or None."""
     if not 0 <= message.sender < params.count:
@@ -68,13 +89,20 @@ def message_problem(message: Message, params: CamoParams) -> str | None:
         p, degree = value
         if not 0 <= step < params.consensus_steps:
             return "step out of range"
-        if not probability_vector(p) or not 0 <= degree <= 8:
+        if not vote_vector(params)(p) or not 0 <= degree <= 8:
             return "vote out of range"
     elif kind == "state":
         if not 0 <= step < params.formation_steps:
             return "step out of range"
         if value not in (0, 1):
             return "state out of range"
+    elif kind == "relay":
+        if not params.orientation_any:
+            return "a relay in a run without --orientation any"
+        if not 0 <= step < params.formation_steps:
+            return "step out of range"
+        if len(value) != 8 or any(v not in (0, 1, None) for v in value):
+            return "relay out of range"
     else:
         return "unknown kind"
     return None
@@ -96,15 +124,15 @@ def report_problem(status, params: CamoParams) -> str | None:
     limit = {CONSENSUS: params.consensus_steps, FORMATION: params.formation_steps}
     if not SENSING <= phase <= DONE or step < 0 or step > limit.get(phase, step):
         return "phase or step out of range"
+    good_p = vote_vector(params, REPORT_TOLERANCE)
+    codes = range(MOTTLED, CODES) if params.orientation_any else range(MOTTLED + 1)
     if phase >= CONSENSUS:
-        if not _grey(status.sensed) or not probability_vector(list(status.p), REPORT_TOLERANCE):
+        if not _grey(status.sensed) or not good_p(list(status.p)):
             return "status values out of range"
-        if status.state not in (0, 1) or status.pattern not in (*range(MOTTLED + 1), NO_PATTERN):
+        if status.state not in (0, 1) or status.pattern not in (*codes, NO_PATTERN):
             return "status values out of range"
     p_trace = list(getattr(status, "p_trace", ()))
-    if len(p_trace) % 3 or not all(
-        probability_vector(p_trace[k : k + 3], REPORT_TOLERANCE) for k in range(0, len(p_trace), 3)
-    ):
+    if len(p_trace) % 3 or not all(good_p(p_trace[k : k + 3]) for k in range(0, len(p_trace), 3)):
         return "status trace out of range"
     if any(s not in (0, 1) for s in getattr(status, "state_trace", ())):
         return "status trace out of range"

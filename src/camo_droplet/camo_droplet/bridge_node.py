@@ -204,17 +204,29 @@ def run_monitor(
     return 0
 
 
+def firmware_lacks(values: dict) -> list[str]:
+    """The options of a run that a Droplet's own firmware has no rules for."""
+    lacks = ["threshold_auto (--threshold auto)"] if values["threshold_auto"] else []
+    if values["orientation"] != "axes":
+        lacks.append(
+            f"orientation {values['orientation']} (--orientation {values['orientation']})"
+        )
+    return lacks
+
+
 def check_bridge_values(values: dict) -> None:
     if not values["port"] and not values["transcript"]:
         raise ParameterError("give the Droplet's serial port: -p port:=/dev/ttyUSB0")
     if values["port"] and not os.path.exists(values["port"]):
         # Said at once, not after waiting up to a minute for a run to join.
         raise ParameterError(f"no serial port {values['port']} (is the Droplet plugged in?)")
-    if (values["monitor"] or values["transcript"]) and values["threshold_auto"]:
-        # There the Droplet runs its own firmware's rules, whose vote has a fixed threshold.
+    beyond = firmware_lacks(values)
+    if (values["monitor"] or values["transcript"]) and beyond:
+        # There the Droplet runs its own firmware's rules: the paper's, with a fixed threshold
+        # and two stripe directions.
         raise ParameterError(
-            "a Droplet's firmware has no threshold_auto: monitor mode shows the firmware's own "
-            "rules (bridged, without monitor, the bridge runs camo's rules and can)"
+            f"a Droplet's firmware cannot run {' or '.join(beyond)}: monitor mode shows the "
+            "firmware's own rules (bridged, without monitor, the bridge runs camo's rules and can)"
         )
     if not (values["serial_timeout"] > 0 and values["retries"] >= 0):
         raise ParameterError("serial_timeout must be positive and retries not negative")

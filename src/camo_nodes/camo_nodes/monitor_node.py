@@ -41,9 +41,9 @@ from camo_core.options import (
 )
 from camo_core.output import run_title, write_round
 from camo_core.params import CamoParams
-from camo_core.protocol import CONSENSUS, PHASE_NAMES
 from camo_core.record import Backgrounds, RoundRecord, Rounds
 from camo_core.result import RunResult
+from camo_core.robot_io import CONSENSUS, PHASE_NAMES
 from camo_core.sensing import image_digest
 from camo_core.shutdown import StopFlag
 from camo_core.validation import report_problem

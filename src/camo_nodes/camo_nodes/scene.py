@@ -23,8 +23,8 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from camo_core.protocol import PHASE_NAMES
 from camo_core.record import RoundRecord
+from camo_core.robot_io import PHASE_NAMES
 
 FRAME = "map"
 SPACING = 0.1  # m between robot centres (a Droplet is 4.4 cm across)

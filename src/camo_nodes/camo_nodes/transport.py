@@ -31,16 +31,23 @@ from rclpy.serialization import deserialize_message
 
 from camo_core.grid import neighbor_ids
 from camo_core.params import CamoParams
-from camo_core.protocol import PHASE_OF
-from camo_core.robot_io import Message, Report, kinds_of, messages_per_round
+from camo_core.robot_io import PHASE_OF, Message, Report, kinds_of, messages_per_round
 from camo_core.validation import message_problem, phase_problem
-from camo_msgs.msg import Color, Energy, Hello, Host, RobotStatus, State, Vote
+from camo_msgs.msg import Color, Energy, Hello, Host, Relay, RobotStatus, State, Vote
 
 from .polled import PolledTopics
 from .topics import LATCHED, LATCHED_READER, RunTopics, history_qos, tile_name
 from .trust import Hosts, Rejections
 
-MESSAGE_TYPES = {"hello": Hello, "color": Color, "energy": Energy, "vote": Vote, "state": State}
+MESSAGE_TYPES = {
+    "hello": Hello,
+    "color": Color,
+    "energy": Energy,
+    "vote": Vote,
+    "state": State,
+    "relay": Relay,
+}
+NOT_RECEIVED = Relay.NOT_RECEIVED
 Receiver = Callable[[Message], None]
 Tile = tuple[int, int]  # first and last robot id, inclusive
 
@@ -64,6 +71,8 @@ def fill(msg, message: Message) -> None:
     elif kind == "vote":
         p, msg.degree = message.value
         msg.p[0], msg.p[1], msg.p[2] = p
+    elif kind == "relay":
+        msg.states = [NOT_RECEIVED if v is None else v for v in message.value]
     else:
         msg.state = message.value
 
@@ -77,6 +86,8 @@ def from_ros(kind: str, msg) -> Message:
         value = (msg.energy, msg.degree)
     elif kind == "vote":
         value = (tuple(msg.p), msg.degree)
+    elif kind == "relay":
+        value = tuple(None if v == NOT_RECEIVED else int(v) for v in msg.states)
     else:
         value = msg.state
     return Message(kind, msg.sender_id, msg.round, msg.step, value)

@@ -68,6 +68,8 @@ def error_spec(args, rhos: list[float]) -> SweepSpec:
     options = {"image": args.image} if args.image else {"pattern": args.pattern or "forest"}
     options |= {"rows": args.rows, "cols": args.cols, "profile": args.profile}
     options["threshold"] = args.threshold
+    if args.orientation != "axes":
+        options["orientation"] = args.orientation
     for name in ("consensus_steps", "formation_steps", "contrast"):
         if getattr(args, name) is not None:
             options[name] = getattr(args, name)

@@ -20,7 +20,7 @@ import pyarrow as pa
 from camo_core.exceptions import CamoError
 from camo_core.options import image_from, params_from
 from camo_core.params import CamoParams
-from camo_core.result import SUMMARY_KEYS, RunResult, mean_p, summary_bytes
+from camo_core.result import SUMMARY_KEYS, RunResult, mean_p, pattern_of, summary_bytes
 from camo_core.rules import PATTERN_NAMES
 from camo_core.sensing import sense_image
 from camo_core.simulator import simulate
@@ -116,7 +116,10 @@ def reference_of(options: dict[str, Any]) -> Reference:
     raw = _sensed(background_of(args), params.rows, params.cols, params.profile)
     result = simulate_options(reference_options(options), 0, raw)
     image = os.path.abspath(args.image) if args.image else None
-    return Reference(result.majority_pattern, result.final.copy(), raw, image)
+    label = pattern_of(
+        {"pattern": result.majority_pattern, "orientation_deg": result.orientation_deg}
+    )
+    return Reference(label, result.final.copy(), raw, image)
 
 
 def result_columns(summary: dict, reference: Reference) -> dict[str, Any]:
@@ -125,12 +128,12 @@ def result_columns(summary: dict, reference: Reference) -> dict[str, Any]:
     if not isinstance(final, np.ndarray):  # a summary.json's, where a dead robot is null
         final = np.array([[-1 if v is None else v for v in row] for row in final], np.int64)
     row = {
-        "chosen_pattern": summary["pattern"],
-        "correct": summary["pattern"] == reference.pattern,
+        "chosen_pattern": pattern_of(summary),
+        "correct": pattern_of(summary) == reference.pattern,
         "diff_cells": int(np.count_nonzero(final != reference.final)),
     }
     for k, name in enumerate(PATTERN_NAMES):
-        row[f"votes_{name}"] = int(summary["votes"][name])
+        row[f"votes_{name}"] = int(summary["votes"].get(name, 0))  # --orientation any: none
         row[f"mean_p_{name}"] = float(summary["mean_p"][k])
     return row
 
@@ -150,6 +153,7 @@ def sim_row(trial: Trial, reference: Reference) -> dict[str, Any]:
         return {**failed(said), "run_s": time.perf_counter() - start}
     summary = {
         "pattern": result.majority_pattern,
+        "orientation_deg": result.orientation_deg,
         "votes": result.selection_counts,
         "mean_p": mean_p(result.p).tolist(),
         "final": result.final,
