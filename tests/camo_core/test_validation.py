@@ -76,3 +76,31 @@ def test_energies_pass_only_in_a_run_with_threshold_auto_and_within_range():
             "energy out of range"
         )
     assert phase_problem("energy", SENSING) is None and phase_problem("energy", CONSENSUS)
+
+
+def test_relays_and_tensors_pass_only_in_a_run_with_orientation_any():
+    oriented = PARAMS.with_(orientation="any")
+    relay = Message("relay", 3, 0, 5, (1, 0, None, None, 1, 1, 0, None))
+    assert message_problem(relay, oriented) is None
+    assert message_problem(relay, PARAMS) == "a relay in a run without --orientation any"
+    for bad, reason in (
+        ((1, 0, 2, None, 1, 1, 0, None), "relay out of range"),
+        ((1, 0), "relay out of range"),
+    ):
+        assert message_problem(Message("relay", 3, 0, 0, bad), oriented) == reason
+    assert message_problem(Message("relay", 3, 0, 6, relay.value), oriented) == "step out of range"
+    # What the robots average is a normalised tensor, not a probability vector.
+    tensor = Message("vote", 3, 0, 0, ((0.5, 0.2, -0.3), 4))
+    assert message_problem(tensor, oriented) is None
+    assert message_problem(tensor, PARAMS) == "vote out of range"
+    for bad in ((0.7, 0.5, 0.0), (-0.1, 0.5, 0.0), (0.2, 0.2, 0.3), (math.inf, 0.0, 0.0)):
+        vote = Message("vote", 3, 0, 0, (bad, 4))
+        assert message_problem(vote, oriented) == "vote out of range", bad
+    # And every tensor a robot can make passes, however strong or faint its texture.
+    from camo_core import orientation
+
+    for greys in ([0.0] * 8, [255.0, 0.0] * 4, [0.0, 255.0, 0.0, 255.0, 255.0, 0.0, 0.0, 255.0]):
+        for own in (0.0, 128.0, 255.0):
+            raw = orientation.raw_tensor(own, greys)
+            p = orientation.normalised(*raw, orientation.REGULARISER)
+            assert message_problem(Message("vote", 3, 0, 0, (p, 8)), oriented) is None

@@ -615,3 +615,34 @@ def test_the_swarm_with_threshold_auto_equals_the_simulator_and_its_bag_holds_th
     rendered = bag_tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
     assert rendered.returncode == 0, rendered.stderr
     assert_like_sim(tmp_path / "rendered", tmp_path / "sim")
+
+
+def test_the_swarm_with_orientation_any_and_threshold_auto_equals_the_simulator(tmp_path):
+    import cv2
+    from support import bag_tool, oriented_stripes
+
+    image = tmp_path / "stripes.png"
+    cv2.imwrite(str(image), oriented_stripes(30, period=64))
+    args = ["--image", str(image), "--rows", "16", "--cols", "16", "--rho-comm", "0.2",
+            "--orientation", "any", "--threshold", "auto"]  # fmt: skip
+    run = camo_run(*args, "--procs", "2", "--out", str(tmp_path / "run"),
+                   "--record", str(tmp_path / "bag"))  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "lacks" not in run.stderr
+    sim = run_camo("sim", *args, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    ran = assert_like_sim(tmp_path / "run", tmp_path / "sim")
+    assert ran["pattern"] == "stripes" and abs(ran["orientation_deg"] - 30) <= 15
+    assert "pattern: stripes at" in run.stdout
+    info = bag_tool("cli", "info", str(tmp_path / "bag"))
+    relays = [x for x in info.stdout.splitlines() if "/relay " in x]
+    assert relays and all("camo_msgs/msg/Relay" in x for x in relays)
+    rendered = bag_tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
+    assert rendered.returncode == 0, rendered.stderr
+    assert_like_sim(tmp_path / "rendered", tmp_path / "sim")
+    # Replay publishes the relays again, typed from the bag (16 x 16 robots, 10 steps each).
+    topics = [next(w for w in x.split() if w.endswith("/relay")) for x in relays]
+    replay = bag_tool("replay", str(tmp_path / "bag"), "--rate", "50", "--topics", *topics,
+                      "--domain-id", str(domain()))  # fmt: skip
+    assert replay.returncode == 0, replay.stderr
+    assert f"published {16 * 16 * 10} messages on {len(topics)} topics" in replay.stderr

@@ -1,7 +1,8 @@
 """run.gif: a round of the swarm step by step (drawn by matplotlib, written by Pillow).
 
 Left, what the robots sensed (grey). Right, each consensus step with every robot coloured by
-its p-vector (the mix of the three pattern colours it currently holds), then each formation
+its p-vector (the mix of the three pattern colours it currently holds; with --orientation any
+the direction its tensor says, pale where it says little), then each formation
 step with every robot's state (dark = on). Dead, silent and bridged robots carry the marks
 of figure.png.
 
@@ -24,7 +25,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from PIL import Image
 
-from .figures import PATTERN_COLORS, mark
+from .figures import PATTERN_COLORS, direction_legend, mark, tensor_rgb
 from .params import CamoParams
 
 MAX_FRAMES = 80
@@ -69,7 +70,8 @@ class Snapshots:
         if phase == "consensus":
             p = self.cells(values)
             known = ~np.isnan(p).any(axis=-1)
-            rgb = np.where(known[..., None], np.nan_to_num(p) @ PALETTE, UNKNOWN)
+            colours = tensor_rgb if self.params.orientation_any else (lambda p: p @ PALETTE)
+            rgb = np.where(known[..., None], colours(np.nan_to_num(p)), UNKNOWN)
             total, order = self.params.consensus_steps, 0
         else:
             state = self.cells(values)
@@ -120,7 +122,10 @@ def write_animation(
     on_top = [caption, *right.collections]  # drawn again over each frame's image
     for artist in on_top:
         artist.set_animated(True)
-    handles += [matplotlib.patches.Patch(color=c, label=n) for n, c in PATTERN_COLORS.items()]
+    if snapshots.params.orientation_any:
+        handles += direction_legend()
+    else:
+        handles += [matplotlib.patches.Patch(color=c, label=n) for n, c in PATTERN_COLORS.items()]
     handles += [
         matplotlib.patches.Patch(facecolor="black", edgecolor="grey", label="formation: on"),
         matplotlib.patches.Patch(facecolor="white", edgecolor="grey", label="formation: off"),

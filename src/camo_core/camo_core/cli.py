@@ -27,7 +27,7 @@ from .options import (
 from .output import run_title
 from .params_file import write_params_file
 from .progress import ProgressBar
-from .result import write_summary
+from .result import pattern_said, write_summary
 from .sensing import sense_image
 from .simulator import simulate
 
@@ -72,16 +72,16 @@ def cmd_sim(args: argparse.Namespace) -> int:
     progress = (lambda phase, step, total: bar.update(note=phase)) if bar else None
     snapshots = Snapshots(params)
     result = simulate(params, raw, exempt=exempt, progress=progress, observe=snapshots)
-    write_summary(result.summary(arrays=True), folder)
+    summary = result.summary(arrays=True)
+    write_summary(summary, folder)
     write_params_file(args.options_parser, args, folder)
     title = run_title(label, params)
     marks = None if exempt is None else {"real reading": exempt}
     figures.run_figure(result, image, folder / "figure.png", title=title, marks=marks)
     dead = np.zeros(params.count, bool)  # the simulator loses messages, never robots
     write_animation(snapshots, result.sensed, dead, folder / "run.gif", title, marks)
-    counts = ", ".join(f"{k} {v}" for k, v in result.selection_counts.items())
     print(
-        f"pattern: {result.majority_label} ({counts}); wrote {folder}/summary.json, "
+        f"pattern: {pattern_said(summary)}; wrote {folder}/summary.json, "
         f"figure.png and run.gif; simulated in {result.elapsed_s:.3f} s"
     )
     return 0

@@ -8,14 +8,18 @@ import cv2
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.colors
 import matplotlib.figure
 import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 
+from .orientation import CODES, COHERENCE_MIN, ORIENTED, STEP_DEG
 from .result import RunResult
+from .rules import MOTTLED
 
 PATTERN_COLORS = {"horizontal": "tab:blue", "vertical": "tab:green", "mottled": "tab:orange"}
+TENSOR_COLORS = {"Jxx": "tab:blue", "Jyy": "tab:green", "Jxy": "tab:purple"}
 
 # A panel is about 260 px wide in the saved figure; a grid or image with a side above this is
 # drawn from a copy resized to it (imshow of a 1024x1024 grid takes 0.3 s, and shows no more of
@@ -104,6 +108,8 @@ def run_plot(
         shown, extent = _shown(shown, nearest=True)
         ax.imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
         ax.set_title(label)
+    if result.orientation_deg is not None:
+        _direction(axes[4], result.orientation_deg, result.params.rows, result.params.cols)
     all_marks = dict(marks or {})
     if result.alive is not None:
         all_marks["dead"] = ~result.alive
@@ -120,9 +126,21 @@ def run_plot(
     return fig
 
 
+def _direction(ax, degrees: int, rows: int, cols: int) -> None:
+    """The chosen stripe direction, as a line through the grid's centre (y up on the page)."""
+    half = 0.42 * min(rows, cols)
+    dx, dy = half * np.cos(np.radians(degrees)), half * np.sin(np.radians(degrees))
+    x, y = (cols - 1) / 2, (rows - 1) / 2
+    ax.plot([x - dx, x + dx], [y + dy, y - dy], color="red", linewidth=2, alpha=0.8)
+    ax.annotate(f"{degrees}°", (x + dx, y - dy), color="red", fontsize=9, fontweight="bold")
+
+
 def _consensus_panel(ax, result: RunResult) -> None:
     """Each pattern's mean p over robots by consensus step, the band from the least to the
     greatest robot's p around it, and the p = 0.5 line the paper draws."""
+    if result.params.orientation_any:
+        _tensor_panel(ax, result)
+        return
     trace = result.consensus_trace
     steps = range(len(trace))
     spread = result.consensus_range
@@ -139,6 +157,57 @@ def _consensus_panel(ax, result: RunResult) -> None:
     ax.set_ylabel("p over robots")
     ax.legend(fontsize=6.5, loc="best")
     ax.set_title(f"consensus: {result.majority_label}")
+
+
+def _tensor_panel(ax, result: RunResult) -> None:
+    """--orientation any: the mean tensor's entries by consensus step (with the robots' band),
+    and its coherence against the line below which the swarm says mottled."""
+    trace = result.consensus_trace
+    steps = range(len(trace))
+    spread = result.consensus_range
+    for k, (name, color) in enumerate(TENSOR_COLORS.items()):
+        ax.plot(steps, trace[:, k], label=f"{name}, mean", color=color)
+        if spread is not None and len(spread) == len(trace):
+            ax.fill_between(steps, spread[:, k, 0], spread[:, k, 1], color=color, alpha=0.15)
+    jxx, jyy, jxy = trace[:, 0], trace[:, 1], trace[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        coherence = np.sqrt((jxx - jyy) ** 2 + 4 * jxy**2) / (jxx + jyy)
+    ax.plot(steps, coherence, color="black", label="coherence of the mean")
+    ax.axhline(COHERENCE_MIN, color="red", linewidth=1.2, label="below: mottled")
+    ax.set_ylim(-0.52, 1.02)
+    ax.set_xlabel("consensus step")
+    ax.set_ylabel("structure tensor over robots")
+    ax.legend(fontsize=6.5, loc="best")
+    ax.set_title(f"consensus: {result.majority_label}")
+
+
+def tensor_rgb(p: np.ndarray) -> np.ndarray:
+    """Tensors (... x 3) as colours: the hue is the stripe direction (0 to 180 degrees round
+    the colour wheel), the saturation the coherence (white: no direction)."""
+    jxx, jyy, jxy = p[..., 0], p[..., 1], p[..., 2]
+    x, y = jxx - jyy, 2 * jxy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        coherence = np.nan_to_num(np.sqrt(x * x + y * y) / (jxx + jyy))
+    hue = ((90 - np.degrees(np.arctan2(y, x)) / 2) % 180) / 180
+    hsv = np.stack([hue, np.clip(coherence / 0.5, 0, 1), np.full(hue.shape, 0.95)], axis=-1)
+    return matplotlib.colors.hsv_to_rgb(hsv)
+
+
+def direction_legend() -> list:
+    """Legend patches for tensor_rgb's colours."""
+    angles = (0, 45, 90, 135)
+    patches = [
+        matplotlib.patches.Patch(color=tensor_rgb(np.array(_tensor_at(a))), label=f"{a}°")
+        for a in angles
+    ]
+    return [*patches, matplotlib.patches.Patch(facecolor="white", edgecolor="grey",
+                                                label="no direction")]  # fmt: skip
+
+
+def _tensor_at(degrees: float) -> tuple[float, float, float]:
+    """A fully coherent tensor of stripes at `degrees` (double angle 180 - 2 degrees)."""
+    double = np.radians(180 - 2 * degrees)
+    return 0.5 + 0.5 * np.cos(double), 0.5 - 0.5 * np.cos(double), 0.5 * np.sin(double)
 
 
 def mark(ax, marks: dict[str, np.ndarray]) -> list:
@@ -240,8 +309,9 @@ def timeline_figure(
     """A strip of small grids: selected pattern at each consensus step (c<k>), state at each
     formation step (f<k>).
 
-    Consensus frames hold 0/1/2 (horizontal/vertical/mottled), formation frames 0/1 (off/on); -1 is
-    a robot that did not report that step (grey).
+    Consensus frames hold 0/1/2 (horizontal/vertical/mottled) or, with --orientation any, the
+    stripe codes (orientation.ORIENTED + k, in their direction's colour); formation frames 0/1
+    (off/on); -1 is a robot that did not report that step (grey).
     """
     consensus = [f for f in frames if f[0].startswith("c")]
     formation = [f for f in frames if f[0].startswith("f")]
@@ -252,13 +322,13 @@ def timeline_figure(
     )
     for ax in axes.flat:
         ax.axis("off")
-    colors = np.array(
-        [matplotlib.colors.to_rgb(c) for c in PATTERN_COLORS.values()] + [(0.5, 0.5, 0.5)]
-    )
+    paper = [matplotlib.colors.to_rgb(c) for c in PATTERN_COLORS.values()]
+    angles = [tensor_rgb(np.array(_tensor_at(k * STEP_DEG))) for k in range(CODES - ORIENTED)]
+    colors = np.array([*paper, *angles, (0.5, 0.5, 0.5)])
     grey = {0: 1.0, 1: 0.0, -1: 0.5}
     row = 0
     for group, paint in (
-        (consensus, lambda g: colors[np.where(g < 0, 3, g)]),
+        (consensus, lambda g: colors[np.where(g < 0, CODES, g)]),
         (formation, lambda g: np.vectorize(grey.get)(g).astype(float)[..., None].repeat(3, -1)),
     ):
         for k, (label, grid) in enumerate(group):
@@ -270,6 +340,8 @@ def timeline_figure(
             ax.set_yticks([])
         row += -(-len(group) // per_row)
     handles = [matplotlib.patches.Patch(color=c, label=n) for n, c in PATTERN_COLORS.items()]
+    if any((np.asarray(g) >= ORIENTED).any() for _, g in consensus):
+        handles = [handles[MOTTLED], *direction_legend()[:-1]]
     fig.legend(handles=handles, loc="upper right", fontsize=7, ncol=3)
     fig.suptitle(
         title or "consensus steps (c: selected pattern), then formation steps (f: dark = on)",

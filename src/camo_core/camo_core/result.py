@@ -45,6 +45,17 @@ def pattern_of(summary: dict) -> str:
     return summary["pattern"] if angle is None else f"{summary['pattern']}_{angle}"
 
 
+def pattern_said(summary: dict) -> str:
+    """How a console line names a summary's pattern: "vertical (horizontal 3, vertical 61,
+    mottled 0)"; with --orientation any "stripes at 30° (stripes_15 110, stripes_30 146)", the
+    selections no robot made left out."""
+    angle = summary.get("orientation_deg")
+    label = summary["pattern"] if angle is None else f"stripes at {angle}°"
+    oriented = "orientation_deg" in summary
+    counts = ", ".join(f"{k} {v}" for k, v in summary["votes"].items() if v or not oriented)
+    return f"{label} ({counts})"
+
+
 def mean_p(p: np.ndarray) -> np.ndarray:
     """Mean p over robots (p: ... x 3), summed in robot-id order by every driver."""
     return kernels.mean_p(np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3))

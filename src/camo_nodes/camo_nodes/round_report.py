@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from camo_core.options import contiguous
-from camo_core.protocol import CONSENSUS
+from camo_core.result import pattern_said
+from camo_core.robot_io import CONSENSUS
 
 from .launch_config import RunConfig
 from .monitor_node import MonitorNode
@@ -56,7 +57,6 @@ def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dic
         "deadlines": missed,
     }
     (folder / "timing.json").write_text(json.dumps(timing) + "\n")
-    counts = ", ".join(f"{k} {v}" for k, v in summary["votes"].items())
     notes = ""
     dead = summary.get("dead", [])
     if dead:
@@ -74,7 +74,7 @@ def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dic
             f"the result can differ from ./camo sim)"
         )
     print(
-        f"pattern: {summary['pattern']} ({counts}){notes}; "
+        f"pattern: {pattern_said(summary)}{notes}; "
         f"wrote {folder}/summary.json, figure.png and run.gif"
     )
     return summary
