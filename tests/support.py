@@ -264,19 +264,6 @@ def brick_courses(
     return np.clip(image, 0, 255).astype(np.uint8)
 
 
-def oriented_stripes(
-    degrees: float, period: float = 32, size: int = 256, noise: float = 40, seed: int = 0
-) -> np.ndarray:
-    """Noisy square-wave stripes running at `degrees`, counter-clockwise from horizontal with y
-    up, `period` pixels apart (a dark and a light band each)."""
-    y, x = np.mgrid[0:size, 0:size].astype(float)
-    t = np.radians(degrees)
-    across = -x * np.sin(t) - y * np.cos(t)  # distance across the stripes (rows point down)
-    image = np.where((across / period) % 1 < 0.5, 60.0, 200.0)
-    image += np.random.default_rng(seed).normal(0, noise, image.shape)
-    return np.clip(image, 0, 255).astype(np.uint8)
-
-
 def drawn_direction(states: np.ndarray) -> float:
     """The direction of the stripes a grid of states draws (degrees in [0, 180), as
     --orientation any counts them): across the strongest wave of its 2-D Fourier transform."""

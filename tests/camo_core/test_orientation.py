@@ -4,9 +4,10 @@ import json
 
 import numpy as np
 import pytest
-from support import Bus, brick_courses, drawn_direction, oriented_stripes, run_camo
+from support import Bus, brick_courses, drawn_direction, run_camo
 
 from camo_core import orientation, rules
+from camo_core.backgrounds import stripes
 from camo_core.orientation import ORIENTED, ROLES, choose, raw_tensor
 from camo_core.params import CamoParams, ParameterError
 from camo_core.perrobot import run_per_robot
@@ -36,7 +37,7 @@ def test_the_drivers_agree_on_stripes_at_every_angle_with_loss():
     # relayed knight cells, lost or not) is exercised.
     for degrees in range(0, 180, 15):
         params = CamoParams(rows=12, cols=12, rho_comm=0.25, seed=degrees, orientation="any")
-        raw = sense_image(oriented_stripes(degrees, period=100, noise=10), 12, 12, "paper")
+        raw = sense_image(stripes(degrees, period=100, noise=10), 12, 12, "paper")
         fast, slow = simulate(params, raw), run_per_robot(params, raw)
         assert (fast.selected >= ORIENTED).any(), degrees
         for field in FIELDS:
@@ -139,7 +140,7 @@ def test_the_step_protocol_in_any_delivery_order_equals_the_simulator_with_orien
                                          (1, 1, 0.0, False, 0)]:  # fmt: skip
         params = CamoParams(rows=rows, cols=cols, rho_comm=rho, rho_meas=rho, seed=4,
                             threshold_auto=auto, orientation="any")  # fmt: skip
-        grid = sense_image(oriented_stripes(30 * order, period=40), rows, cols, "paper")
+        grid = sense_image(stripes(30 * order, period=40), rows, cols, "paper")
         bus = Bus(params, grid, seed=order)
         bus.run()
         assert all(p.phase == DONE and p.deadlines == 0 for p in bus.robots.values())
@@ -159,7 +160,7 @@ def run_32(image: np.ndarray, **options) -> tuple:
 
 @pytest.mark.parametrize("degrees", [45, 135])
 def test_diagonal_stripes_are_drawn_as_they_are(degrees):
-    image = oriented_stripes(degrees, seed=degrees)
+    image = stripes(degrees, seed=degrees)
     result, agreement = run_32(image, orientation="any")
     assert result.majority_label == f"stripes at {degrees}°"
     assert agreement >= 0.85
@@ -169,7 +170,7 @@ def test_diagonal_stripes_are_drawn_as_they_are(degrees):
 
 
 def test_stripes_at_30_degrees_are_chosen_and_drawn_near_30():
-    result, agreement = run_32(oriented_stripes(30, seed=5), orientation="any")
+    result, agreement = run_32(stripes(30, seed=5), orientation="any")
     assert abs(result.orientation_deg - 30) <= 15
     assert abs(drawn_direction(result.final.astype(float)) - 30) <= 20
     assert agreement >= 0.65
@@ -194,7 +195,7 @@ def test_sim_writes_stripes_and_their_direction_to_summary_json(tmp_path):
     image = tmp_path / "stripes.png"
     import cv2
 
-    cv2.imwrite(str(image), oriented_stripes(135))
+    cv2.imwrite(str(image), stripes(135))
     out = run_camo("sim", "--image", str(image), "--rows", "16", "--cols", "16",
                    "--orientation", "any", "--out", str(tmp_path / "a"))  # fmt: skip
     assert out.returncode == 0, out.stderr

@@ -619,10 +619,12 @@ def test_the_swarm_with_threshold_auto_equals_the_simulator_and_its_bag_holds_th
 
 def test_the_swarm_with_orientation_any_and_threshold_auto_equals_the_simulator(tmp_path):
     import cv2
-    from support import bag_tool, oriented_stripes
+    from support import bag_tool
+
+    from camo_core.backgrounds import stripes
 
     image = tmp_path / "stripes.png"
-    cv2.imwrite(str(image), oriented_stripes(30, period=64))
+    cv2.imwrite(str(image), stripes(30, period=64))
     args = ["--image", str(image), "--rows", "16", "--cols", "16", "--rho-comm", "0.2",
             "--orientation", "any", "--threshold", "auto"]  # fmt: skip
     run = camo_run(*args, "--procs", "2", "--out", str(tmp_path / "run"),

@@ -59,6 +59,20 @@ def leopard(size: int = SIZE) -> np.ndarray:
     return _to_uint8(cv2.GaussianBlur(image, (3, 3), 0))
 
 
+def stripes(
+    degrees: float, period: float = 32, size: int = 256, noise: float = 40, seed: int = 0
+) -> np.ndarray:
+    """Noisy square-wave stripes running at `degrees` (counter-clockwise from horizontal, y up,
+    as --orientation any counts them), `period` pixels from one dark band to the next: the test
+    card of the orientation figures and tests."""
+    y, x = np.mgrid[0:size, 0:size].astype(np.float64)
+    t = np.radians(degrees)
+    across = -x * np.sin(t) - y * np.cos(t)  # distance across the stripes (rows point down)
+    image = np.where((across / period) % 1 < 0.5, 60.0, 200.0)
+    image += np.random.default_rng(seed).normal(0, noise, image.shape)
+    return _to_uint8(image)
+
+
 def background(name: str) -> np.ndarray:
     try:
         return {"desert": desert, "forest": forest, "leopard": leopard}[name]()
