@@ -129,3 +129,13 @@ def test_a_swarm_round_marks_its_bridged_robots_and_those_given_up_on():
     marks = record.marks(dead, bridged={2, 99})  # 99: not a robot of this swarm
     assert np.flatnonzero(marks["silent"]).tolist() == [4]
     assert np.flatnonzero(marks["bridged"]).tolist() == [2]
+
+
+def test_the_error_figure_draws_the_grey_distance_when_the_rows_have_it(error_rows):
+    rows = [{**r, "mean_grey_distance": 10 + 100 * r["rho"]} for r in error_rows]
+    fig = figures.errors_plot(rows, 32, cells=64)
+    assert len(fig.axes) == 3
+    lines = {line.get_label(): list(line.get_ydata()) for line in fig.axes[2].get_lines()}
+    measured = [r["mean_grey_distance"] for r in rows if r["mode"] == "measurement"]
+    assert lines["measurement error only"] == measured
+    plt.close(fig)

@@ -177,6 +177,7 @@ def test_bad_bridge_options_are_one_line_errors(tmp_path):
         (["threshold_auto:=true"], "threshold_auto (--threshold auto)"),
         (["orientation:=any"], "orientation any (--orientation any)"),
         (["threshold_auto:=true", "orientation:=any"], "threshold_auto (--threshold auto) or"),
+        (["levels:=4"], "levels 4 (--levels 4)"),
     ],
 )
 def test_monitor_mode_names_the_options_the_firmware_does_not_have(options, named):

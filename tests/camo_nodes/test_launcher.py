@@ -617,7 +617,7 @@ def test_the_swarm_with_threshold_auto_equals_the_simulator_and_its_bag_holds_th
     assert_like_sim(tmp_path / "rendered", tmp_path / "sim")
 
 
-def test_the_swarm_with_orientation_any_and_threshold_auto_equals_the_simulator(tmp_path):
+def test_the_swarm_with_orientation_any_threshold_auto_and_levels_equals_the_simulator(tmp_path):
     import cv2
     from support import bag_tool
 
@@ -626,7 +626,7 @@ def test_the_swarm_with_orientation_any_and_threshold_auto_equals_the_simulator(
     image = tmp_path / "stripes.png"
     cv2.imwrite(str(image), stripes(30, period=64))
     args = ["--image", str(image), "--rows", "16", "--cols", "16", "--rho-comm", "0.2",
-            "--orientation", "any", "--threshold", "auto"]  # fmt: skip
+            "--orientation", "any", "--threshold", "auto", "--levels", "3"]  # fmt: skip
     run = camo_run(*args, "--procs", "2", "--out", str(tmp_path / "run"),
                    "--record", str(tmp_path / "bag"))  # fmt: skip
     assert run.returncode == 0, run.stderr[-2000:]
@@ -635,6 +635,7 @@ def test_the_swarm_with_orientation_any_and_threshold_auto_equals_the_simulator(
     assert sim.returncode == 0, sim.stderr
     ran = assert_like_sim(tmp_path / "run", tmp_path / "sim")
     assert ran["pattern"] == "stripes" and abs(ran["orientation_deg"] - 30) <= 15
+    assert len({g for row in ran["display"] for g in row}) > 2  # more than black and white
     assert "pattern: stripes at" in run.stdout
     info = bag_tool("cli", "info", str(tmp_path / "bag"))
     relays = [x for x in info.stdout.splitlines() if "/relay " in x]

@@ -25,6 +25,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from PIL import Image
 
+from . import levels
 from .figures import PATTERN_COLORS, direction_legend, mark, tensor_rgb
 from .params import CamoParams
 
@@ -74,8 +75,11 @@ class Snapshots:
             rgb = np.where(known[..., None], colours(np.nan_to_num(p)), UNKNOWN)
             total, order = self.params.consensus_steps, 0
         else:
-            state = self.cells(values)
-            grey = np.where(state < 0, 0.5, np.where(state == 1, 0.0, 1.0))
+            cells = self.cells(values)
+            if self.params.levels:  # the greys the robots show (-1: unknown)
+                grey = np.where(cells < 0, 0.5, cells.astype(float) / 255)
+            else:
+                grey = np.where(cells < 0, 0.5, np.where(cells == 1, 0.0, 1.0))
             rgb = np.repeat(grey[..., None], 3, axis=-1)
             total, order = self.params.formation_steps, 1
         self.frames[(order, step)] = (f"{phase} step {step}/{total}", rgb)
@@ -87,7 +91,11 @@ class Snapshots:
         for step in sorted(snapshots.wanted["consensus"]):
             snapshots("consensus", step, record.p_trace[step])
         for step in sorted(snapshots.wanted["formation"]):
-            snapshots("formation", step, record.state_trace[step])
+            states = record.state_trace[step]
+            if record.params.levels:
+                shown = levels.shown_grid(np.maximum(states, 0), record.palette)
+                states = np.where(states < 0, -1, shown)
+            snapshots("formation", step, states)
         return snapshots
 
     def shown(self) -> list[tuple[str, np.ndarray]]:

@@ -14,6 +14,7 @@ import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 
+from . import levels
 from .orientation import CODES, COHERENCE_MIN, ORIENTED, STEP_DEG
 from .result import RunResult
 from .rules import MOTTLED
@@ -103,6 +104,12 @@ def run_plot(
         (axes[4], result.final, f"generated pattern ({result.majority_label})"),
     ):
         shown = np.where(states == 1, 0, 255).astype(float)
+        if result.palette is not None:  # --levels: the greys shown, from the layers on
+            shown = levels.shown_grid(states, result.palette).astype(float)
+            if ax is axes[4]:
+                label = f"shown greys ({result.majority_label}), {result.params.levels} levels"
+            else:
+                label = "initial greys (each robot's class)"
         if result.alive is not None:
             shown[~result.alive] = 128
         shown, extent = _shown(shown, nearest=True)
@@ -246,7 +253,9 @@ def errors_plot(
     probability, with the 10th-90th percentile band of the trials (a count: never below zero);
     right: the rate of trials that chose the error-free run's pattern. What the paper reports is
     overlaid (its random-pattern level only for an 8x8 swarm, `cells` = 64)."""
-    fig, (diff_ax, rate_ax) = plt.subplots(1, 2, figsize=(12, 4.8))
+    greys = all("mean_grey_distance" in r for r in rows)
+    fig, axes = plt.subplots(1, 3 if greys else 2, figsize=(18 if greys else 12, 4.8))
+    diff_ax, rate_ax = axes[0], axes[1]
     for mode, label, color in ERROR_MODES:
         data = sorted((r for r in rows if r["mode"] == mode), key=lambda r: r["rho"])
         if not data:
@@ -262,6 +271,15 @@ def errors_plot(
                 alpha=0.15,
             )
         rate_ax.plot(rho, [r["correct_rate"] for r in data], marker="o", color=color, label=label)
+        if greys:
+            shown = [r["mean_grey_distance"] for r in data]
+            axes[2].plot(rho, shown, marker="o", color=color, label=label)
+    if greys:
+        axes[2].set_ylim(bottom=0)
+        axes[2].set_xlabel("error probability")
+        axes[2].set_ylabel("grey levels (mean over trials)")
+        axes[2].set_title("grey distance: greys shown to greys sensed")
+        axes[2].legend(fontsize=7.5)
     diff_ax.fill_between([], [], [], color="grey", alpha=0.3, label="band: 10th-90th percentile")
     diff_ax.axhline(
         random_level,

@@ -104,6 +104,36 @@ def consensus_step(p, out, known, degree, prefix, rho):
             out[i, j, 2] = a2 + keep * p[i, j, 2]
 
 
+@njit(cache=True, parallel=True)
+def consensus_step_n(p, out, known, degree, prefix, rho):
+    """consensus_step for vectors of any length (--levels: p and the grey histogram)."""
+    rows, cols = degree.shape
+    size = p.shape[2]
+    for i in prange(rows):
+        acc = np.empty(size)
+        for j in range(cols):
+            me = i * cols + j
+            for k in range(size):
+                acc[k] = 0.0
+            w_sum = 0.0
+            d = degree[i, j]
+            for s in range(8):
+                if (known[i, j] >> s) & 1 == 0:
+                    continue
+                ni = i + DI[s]
+                nj = j + DJ[s]
+                if not _arrives(prefix, ni * cols + nj, me, rho):
+                    continue
+                dn = degree[ni, nj]
+                w = METROPOLIS[d if d > dn else dn]
+                for k in range(size):
+                    acc[k] = acc[k] + w * p[ni, nj, k]
+                w_sum = w_sum + w
+            keep = 1.0 - w_sum
+            for k in range(size):
+                out[i, j, k] = acc[k] + keep * p[i, j, k]
+
+
 @njit(cache=True, inline="always")
 def _state_in(state, known, i, j, s, prefix, rho):
     """State received from slot s of robot (i, j), or -1 if nothing arrived."""

@@ -103,6 +103,14 @@ def add_run_options(
         "of 15 degrees",
     )
     parser.add_argument(
+        "--levels",
+        type=int,
+        default=0,
+        metavar="K",
+        help="show K greys (2 to 8) the swarm chooses from its averaged histogram, instead of "
+        "black and white (default: the paper's two)",
+    )
+    parser.add_argument(
         "--consensus-steps",
         type=steps_or_auto,
         default=None,
@@ -158,6 +166,7 @@ def params_from(args: argparse.Namespace) -> CamoParams:
         threshold=CamoParams.threshold if auto else args.threshold,
         threshold_auto=auto,
         orientation=args.orientation,
+        levels=args.levels,
         consensus_steps=steps,
         formation_steps=args.formation_steps,
         seed=args.seed,

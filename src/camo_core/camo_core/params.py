@@ -28,6 +28,7 @@ PROFILE_DEFAULTS: dict[str, dict[str, Any]] = {
     },
 }
 
+MAX_LEVELS = 8  # levels.MAX_LEVELS: K - 1 layers fit a state's uint8 and leave 255 free
 MAX_SIDE = 8192  # robots per row or column; ids stay far inside uint32
 MAX_STEPS = 100_000
 AUTO = "auto"
@@ -59,6 +60,9 @@ class CamoParams:
     # --orientation any: a structure tensor instead of the vote, stripes at multiples of 15
     # degrees (docs/algorithm.md, "Orientation any").
     orientation: str = "axes"
+    # --levels K: K greys of the swarm's choosing instead of black and white (0: the paper's);
+    # docs/algorithm.md, "Levels".
+    levels: int = 0
     w1: float = field(default=1.0, init=False)
 
     def __post_init__(self) -> None:
@@ -73,6 +77,8 @@ class CamoParams:
             raise ParameterError(
                 f"orientation must be one of {', '.join(ORIENTATIONS)} (got {self.orientation!r})"
             )
+        if self.levels != 0:
+            _int_in("levels", self.levels, 2, MAX_LEVELS)
         _int_in("rows", self.rows, 1, MAX_SIDE)
         _int_in("cols", self.cols, 1, MAX_SIDE)
         _int_in("consensus_steps", self.consensus_steps, 0, MAX_STEPS)

@@ -43,16 +43,16 @@ def run_per_robot(
     for robot in robots:
         robot.cast_vote()
     votes = np.array([r.vote for r in robots]).reshape(rows, cols)
-    initial = np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols)
 
-    trace = [mean_p(np.array([r.p for r in robots]))]
+    trace = [mean_p(np.array([r.pattern_p for r in robots]))]
     for step in range(params.consensus_steps):
         sent = [(r.p, r.degree) for r in robots]
         for robot in robots:
             robot.consensus(step, [None if n is None else sent[n] for n in robot.neighbors[:8]])
-        trace.append(mean_p(np.array([r.p for r in robots])))
+        trace.append(mean_p(np.array([r.pattern_p for r in robots])))
     for robot in robots:
         robot.finish_consensus()
+    initial = np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols)
 
     for step in range(params.formation_steps):
         sent_states = [r.state for r in robots]
@@ -66,10 +66,13 @@ def run_per_robot(
         params=params,
         sensed=np.array([r.sensed for r in robots]).reshape(rows, cols),
         votes=votes,
-        p=np.array([r.p for r in robots]).reshape(rows, cols, 3),
+        p=np.array([r.pattern_p for r in robots]).reshape(rows, cols, 3),
         selected=np.array([r.pattern for r in robots]).reshape(rows, cols),
         initial=initial,
         final=np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols),
         consensus_trace=np.array(trace),
         elapsed_s=time.perf_counter() - start,
+        palette=np.array([r.palette for r in robots]).reshape(rows, cols, -1)
+        if params.levels
+        else None,
     )

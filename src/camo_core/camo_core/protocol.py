@@ -230,7 +230,7 @@ class StepProtocol:
                     self._send_energy()
                 return True
             core.cast_vote()
-            self.traces = Traces(p=list(core.p))
+            self.traces = Traces(p=list(core.pattern_p))
             self._next(CONSENSUS, 0, now)
             self._report(now, forced=True)
             self._send_vote()
@@ -246,7 +246,7 @@ class StepProtocol:
             if not self._ready(pending, self.step_timeout, now, ticking):
                 return False
             core.consensus(self.step, self._take("vote", self.step, 8))
-            self.traces.p.extend(core.p)
+            self.traces.p.extend(core.pattern_p)
             self._next(CONSENSUS, self.step + 1, now)
             self._report(now)
             if self.step < params.consensus_steps:
@@ -382,13 +382,14 @@ class StepProtocol:
                 step=self.step,
                 round=self.round,
                 sensed=core.sensed,
-                p=tuple(core.p),
+                p=core.pattern_p,
                 pattern=NO_PATTERN if core.pattern is None else core.pattern,
                 state=core.state,
                 alive=self.sensor.ok() and self.display.ok(),
                 known_slots=core.known_mask,
                 deadlines=self.deadlines,
                 silent=tuple(sorted(core.neighbors[s] for s in self.silent)),
+                palette=core.palette,
                 **self.traces.unreported(),
             )
         )

@@ -42,6 +42,8 @@ class RoundRecord:
         self.given_up: dict[int, frozenset[int]] = {}  # reporter -> neighbours it gave up on
         # When each robot voted and finished, by its own clock (s since the epoch): a monitor
         # that hears a report late still times the swarm right.
+        # --levels: each robot's palette (the K greys it can show), as it reported it.
+        self.palette = np.zeros((n, max(self.params.levels, 1)), np.int64)
         self.voted_at = np.full(n, np.nan)
         self.done_at = np.full(n, np.nan)
 
@@ -68,6 +70,8 @@ class RoundRecord:
             self.initial[i] = report.state
         elif report.phase == FORMATION:
             self.state_trace[report.step, i] = report.state
+        if self.params.levels and len(getattr(report, "palette", ())) == self.params.levels:
+            self.palette[i] = report.palette
         # The steps since the robot's last report (statuses of an older camo have none: they came
         # one a step).
         p_trace = getattr(report, "p_trace", ())
@@ -161,11 +165,13 @@ class RoundRecord:
             votes=votes.reshape(shape),
             p=self.p_latest.reshape((*shape, 3)),
             selected=selected.reshape(shape),
-            initial=self.initial.reshape(shape),
+            # With --levels the layers are set once the palette is known: formation's start.
+            initial=(self.state_trace[0] if self.params.levels else self.initial).reshape(shape),
             final=self.state.reshape(shape),
             consensus_trace=np.array(trace).reshape(-1, 3),
             elapsed_s=time.monotonic() - self.started,
             alive=None if alive.all() else alive.reshape(shape),
+            palette=self.palette.reshape((*shape, -1)) if self.params.levels else None,
             consensus_range=np.array(spread).reshape(-1, 3, 2) if spread else None,
         )
 

@@ -15,7 +15,7 @@ try:  # pinned in requirements.txt; without it (the Docker image) every summary 
 except ImportError:
     orjson = None
 
-from . import kernels
+from . import kernels, levels
 from .orientation import CODES, ORIENTED, angle_of, pattern_name
 from .params import CamoParams
 from .rules import MOTTLED, PATTERN_NAMES
@@ -33,6 +33,8 @@ SUMMARY_KEYS = (
     "sensed",
     "initial",
     "final",
+    "display",
+    "grey_distance",
     "consensus_trace",
     "elapsed_s",
 )
@@ -81,6 +83,30 @@ class RunResult:
     # (consensus_steps + 1) x 3 x 2: the least and the greatest p over robots at each step, the
     # spread the figure draws around the mean; None where a driver did not keep it.
     consensus_range: np.ndarray | None = None
+    # --levels: rows x cols x K, the greys each robot's palette holds, darkest first.
+    palette: np.ndarray | None = None
+
+    @property
+    def display(self) -> np.ndarray:
+        """rows x cols, the grey (0-255) each robot shows: black on, white off; with --levels
+        its palette's grey for the layers it has on."""
+        if self.palette is None:
+            return np.where(self.final == 1, 0, 255).astype(np.int64)
+        return levels.shown_grid(self.final, self.palette)
+
+    @property
+    def grey_distance(self) -> float:
+        """How far the greys shown are from the greys sensed: the Wasserstein-1 distance between
+        the two sets (the mean gap between them sorted), over the robots that took part."""
+        shown, sensed = self.display, np.asarray(self.sensed, dtype=np.float64)
+        took_part = np.isfinite(sensed)  # a partial run's robots that never sensed hold NaN
+        if self.alive is not None:
+            took_part &= self.alive
+        shown, sensed = shown[took_part], sensed[took_part]
+        if shown.size == 0:
+            return 0.0
+        gaps = np.abs(np.sort(shown.ravel()) - np.sort(sensed.ravel()))
+        return float(np.mean(gaps))
 
     @property
     def codes(self) -> range:
@@ -139,14 +165,16 @@ class RunResult:
             "sensed": grid(np.asarray(self.sensed, dtype=np.float64)),
             "initial": grid(self.initial.astype(int)),
             "final": grid(self.final.astype(int)),
+            "display": grid(self.display),
+            "grey_distance": round(self.grey_distance, 6),
             "consensus_trace": self.consensus_trace.tolist(),
             "elapsed_s": round(float(self.elapsed_s), 6),
         }
         if self.alive is not None:
             # A swarm run in which robots died: their cells hold null, and they are listed.
             dead = ~self.alive
-            for key in ("initial", "final"):
-                cells = getattr(self, key).astype(int).astype(object)  # Python ints
+            for key in ("initial", "final", "display"):
+                cells = np.asarray(getattr(self, key)).astype(int).astype(object)  # Python ints
                 cells[dead] = None
                 summary[key] = cells.tolist()
             summary["dead"] = [[int(i), int(j)] for i, j in zip(*np.nonzero(dead), strict=True)]

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from . import orientation, rng, rules
+from . import levels, orientation, rng, rules
 from .grid import CONSENSUS_SLOTS, DESCRIPTOR_SLOTS, NUM_SLOTS, neighbor_ids, robot_id
 from .params import CamoParams, ParameterError
 from .sensing import noisy_value
@@ -51,6 +51,7 @@ class RobotCore:
         self._everyone = tuple(n is not None for n in self.neighbors)
         self._known_counts()
         self.tensor = (0.0, 0.0, 0.0)  # --orientation any: (Jxx, Jyy, Jxy) before normalising
+        self.palette: tuple[int, ...] = ()  # --levels: the greys it can show, darkest first
         self._w2 = orientation.inhibitor_weights(self.params)
 
     # ---- the simulated link -------------------------------------------------
@@ -130,11 +131,13 @@ class RobotCore:
             reg = orientation.regulariser(params, self.energy)
             self.p = orientation.normalised(*self.tensor, reg)
             self.vote = orientation.choose(self.p)
-            return self.vote
-        auto = params.threshold_auto
-        threshold = rules.auto_threshold(self.energy) if auto else params.threshold
-        self.vote = rules.vote_from(*self.scores, threshold)
-        self.p = rules.one_hot(self.vote)
+        else:
+            auto = params.threshold_auto
+            threshold = rules.auto_threshold(self.energy) if auto else params.threshold
+            self.vote = rules.vote_from(*self.scores, threshold)
+            self.p = rules.one_hot(self.vote)
+        if params.levels:  # the grey histogram, averaged with p
+            self.p = (*self.p, *levels.start_vector(self.sensed))
         return self.vote
 
     # ---- phase 2: consensus -------------------------------------------------
@@ -145,12 +148,25 @@ class RobotCore:
         self.p = rules.consensus_step(self.p, self.degree, received)
         return self.p
 
+    @property
+    def pattern_p(self) -> tuple[float, float, float]:
+        """p without --levels' histogram: what a robot reports and chooses its pattern from."""
+        return self.p[0], self.p[1], self.p[2]
+
     def finish_consensus(self) -> int:
-        if self.params.orientation_any:
-            self.pattern = orientation.choose(self.p)
-        else:
-            self.pattern = rules.select_pattern(self.p)
+        params = self.params
+        self.pattern = orientation.selector(params)(self.pattern_p)
+        if params.levels:
+            cuts, self.palette = levels.palette(self.p[3:], params.levels)
+            self.state = levels.initial_layers(self.sensed, cuts)
         return self.pattern
+
+    @property
+    def display(self) -> int:
+        """The grey this robot shows: black on, white off; with --levels its palette's."""
+        if self.palette:
+            return levels.shown(self.state, self.palette)
+        return 0 if self.state == 1 else 255
 
     # ---- phase 3: pattern formation ------------------------------------------
 
@@ -170,12 +186,30 @@ class RobotCore:
         if self.pattern is None:
             self.finish_consensus()
         received = self._filter(rng.STREAM_STATE, step, states, range(NUM_SLOTS))
-        if not self.params.orientation_any:
-            self.state = rules.formation_step(self.state, self.pattern, received, self.params)
+        knights = [None] * 8
+        if self.params.orientation_any:
+            relayed = self._filter(rng.STREAM_RELAY, step, relays, CONSENSUS_SLOTS)
+            knights = orientation.knight_states(relayed)
+        if not self.params.levels:
+            self.state = self._form_layer(self.state, received, knights)
             return self.state
-        relayed = self._filter(rng.STREAM_RELAY, step, relays, CONSENSUS_SLOTS)
-        knights = orientation.knight_states(relayed)
-        self.state = orientation.formation_step(
-            self.state, self.pattern, received, knights, self.params, self._w2
-        )
+        # --levels: each layer is one bit of the states, formed on its own.
+        state = 0
+        for k in range(self.params.levels - 1):
+
+            def bit(v, k=k):
+                return None if v is None else (v >> k) & 1
+
+            layer = self._form_layer(
+                (self.state >> k) & 1, [bit(v) for v in received], [bit(v) for v in knights]
+            )
+            state |= layer << k
+        self.state = state
         return self.state
+
+    def _form_layer(self, state: int, received: list, knights: list) -> int:
+        if not self.params.orientation_any:
+            return rules.formation_step(state, self.pattern, received, self.params)
+        return orientation.formation_step(
+            state, self.pattern, received, knights, self.params, self._w2
+        )

@@ -106,6 +106,7 @@ class Report:
     # The state before formation step state_from, state_from + 1, ..., likewise.
     state_from: int = 0
     state_trace: tuple[int, ...] = ()
+    palette: tuple[int, ...] = ()  # --levels: the greys it can show, darkest first
 
 
 @dataclass

@@ -107,13 +107,15 @@ def consensus_step(
     p_own: Sequence[float],
     degree: int,
     received: Sequence[tuple[Sequence[float], int] | None],
-) -> tuple[float, float, float]:
-    """One Metropolis step. `received[k]` is (p, degree) from slot k (0-7), or None.
+) -> tuple[float, ...]:
+    """One Metropolis step. `received[k]` is (p, degree) from slot k (0-7), or None; p has 3
+    entries (35 with --levels: p, then the grey histogram and sums).
 
     Float64 accumulation order is part of the spec: neighbour terms and weights in
     slot order, then the self term last; a lost message's weight stays home.
     """
-    acc = [0.0, 0.0, 0.0]
+    size = len(p_own)
+    acc = [0.0] * size
     weight_sum = 0.0
     for slot in range(8):
         message = received[slot]
@@ -121,11 +123,11 @@ def consensus_step(
             continue
         p_other, degree_other = message
         w = 1.0 / (1.0 + max(degree, degree_other))
-        for k in range(3):
+        for k in range(size):
             acc[k] = acc[k] + w * p_other[k]
         weight_sum = weight_sum + w
     keep = 1.0 - weight_sum
-    return acc[0] + keep * p_own[0], acc[1] + keep * p_own[1], acc[2] + keep * p_own[2]
+    return tuple(acc[k] + keep * p_own[k] for k in range(size))
 
 
 def energy_step(energy: float, degree: int, received: Sequence[tuple[float, int] | None]) -> float:

@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from . import kernels, orientation, rng, rules
+from . import kernels, levels, orientation, rng, rules
 from .grid import NEIGHBOR_OFFSETS, NUM_SLOTS
 from .params import CamoParams
 from .result import RunResult, p_stats
@@ -95,13 +95,22 @@ def simulate(
     sensed = apply_noise(raw_sensed, params.seed, params.rho_meas, exempt)
     votes, p0 = _vote(params, sensed, known_mask, degree)
     initial = (sensed < 127).astype(np.uint8)
+    if params.levels:  # the grey histogram is averaged with p, in the same messages
+        p0 = np.concatenate([p0, levels.start_vectors(sensed)], axis=-1)
 
     # Phase 2: consensus.
     p, trace, spread = _consensus(params, p0, known_mask, degree, progress, observe)
+    p, histogram = p[..., :3], p[..., 3:]
     selected = orientation.choose(p) if params.orientation_any else select_pattern(p)
+    greys = None
+    if params.levels:
+        cuts, greys = levels.palettes(histogram, params.levels)
+        initial = np.zeros((rows, cols), np.uint8)
+        for k in range(params.levels - 1):
+            initial |= (sensed < cuts[..., k]).astype(np.uint8) << np.uint8(k)
 
     # Phase 3: pattern formation.
-    final = _formation(grid, params, initial, selected, known_mask, progress, observe)
+    final = _formation(grid, params, initial, selected, known_mask, progress, observe, greys)
 
     return RunResult(
         params=params,
@@ -114,6 +123,7 @@ def simulate(
         consensus_trace=trace,
         elapsed_s=time.perf_counter() - start,
         consensus_range=spread,
+        palette=greys,
     )
 
 
@@ -180,19 +190,20 @@ def _consensus(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     p = p0
     nxt = np.empty_like(p)
-    mean, least_greatest = p_stats(p)
+    mean, least_greatest = p_stats(p[..., :3])
     trace, spread = [mean], [least_greatest]
     if observe:
-        observe("consensus", 0, p)
+        observe("consensus", 0, p[..., :3])
+    step_kernel = kernels.consensus_step if p.shape[-1] == 3 else kernels.consensus_step_n
     for step in range(params.consensus_steps):
         prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_CONSENSUS, step))
-        kernels.consensus_step(p, nxt, known_mask, degree, prefix, params.rho_comm)
+        step_kernel(p, nxt, known_mask, degree, prefix, params.rho_comm)
         p, nxt = nxt, p
-        mean, least_greatest = p_stats(p)
+        mean, least_greatest = p_stats(p[..., :3])
         trace.append(mean)
         spread.append(least_greatest)
         if observe:
-            observe("consensus", step + 1, p)
+            observe("consensus", step + 1, p[..., :3])
         if progress:
             progress("consensus", step + 1, params.consensus_steps)
     return p, np.array(trace), np.array(spread)
@@ -206,18 +217,23 @@ def _formation(
     known_mask: np.ndarray,
     progress: Progress | None,
     observe: Observer | None,
+    greys: np.ndarray | None = None,
 ) -> np.ndarray:
+    """Formation steps; with --levels (`greys`: each robot's palette) on every layer of the
+    state's bits, each with the same losses (one state message carries them all), and the
+    observer sees the greys shown."""
     state = initial.copy()
     nxt = np.empty_like(state)
+    layer, layer_next = np.empty_like(state), np.empty_like(state)
     w2 = np.array(orientation.inhibitor_weights(params))
+    layers = max(1, params.levels - 1)
+    shown = (lambda s: s) if greys is None else (lambda s: levels.shown_grid(s, greys))
     if observe:
-        observe("formation", 0, state)
+        observe("formation", 0, shown(state))
     for step in range(params.formation_steps):
         prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_STATE, step))
         relay_prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_RELAY, step))
-        kernels.formation_step(
-            state,
-            nxt,
+        rule = (
             known_mask,
             selected,
             prefix,
@@ -227,9 +243,17 @@ def _formation(
             w2,
             params.profile == "droplet",
         )
+        if not params.levels:
+            kernels.formation_step(state, nxt, *rule)
+        else:
+            nxt[:] = 0
+            for k in range(layers):
+                np.bitwise_and(state >> np.uint8(k), 1, out=layer)
+                kernels.formation_step(layer, layer_next, *rule)
+                nxt |= layer_next << np.uint8(k)
         state, nxt = nxt, state
         if observe:
-            observe("formation", step + 1, state)
+            observe("formation", step + 1, shown(state))
         if progress:
             progress("formation", step + 1, params.formation_steps)
     return state

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from .levels import BIN_WIDTH, BINS
 from .orientation import CODES
 from .params import CamoParams
 from .robot_io import CONSENSUS, DONE, FORMATION, NO_PATTERN, PHASE_OF, SENSING, Message
@@ -58,10 +59,36 @@ def tensor_vector(p: Sequence[float], tolerance: float = TOLERANCE) -> bool:
     )
 
 
+def histogram_vector(v: Sequence[float], tolerance: float = TOLERANCE) -> bool:
+    """--levels' averaged histogram: 16 shares summing to 1, then per bin a sum of greys that
+    lies between the bin's least and greatest grey times its share."""
+    if len(v) != 2 * BINS or not all(math.isfinite(x) for x in v):
+        return False
+    shares, sums = v[:BINS], v[BINS:]
+    if not probability_vector_of(shares, tolerance):
+        return False
+    return all(
+        BIN_WIDTH * b * h - tolerance * 256 <= s <= 256 * h + tolerance * 256
+        for b, (h, s) in enumerate(zip(shares, sums, strict=True))
+    )
+
+
+def probability_vector_of(p: Sequence[float], tolerance: float) -> bool:
+    return all(-tolerance <= x <= 1.0 + tolerance for x in p) and abs(sum(p) - 1.0) <= tolerance
+
+
 def vote_vector(params: CamoParams, tolerance: float = TOLERANCE):
-    """The check of what a run's robots average: p, or with --orientation any the tensor."""
+    """The check of what a run's robots average: p, or with --orientation any the tensor; with
+    --levels followed by the histogram."""
     check = tensor_vector if params.orientation_any else probability_vector
-    return lambda p: check(p, tolerance)
+    if not params.levels:
+        return lambda p: check(p, tolerance)
+    return lambda p: check(p[:3], tolerance) and histogram_vector(p[3:], tolerance)
+
+
+def states_of(params: CamoParams) -> range:
+    """The values a state can take: 0 and 1, or with --levels K any K - 1 layer bits."""
+    return range(2 ** (params.levels - 1)) if params.levels else range(2)
 
 
 def message_problem(message: Message, params: CamoParams) -> str | None:
@@ -94,14 +121,14 @@ def message_problem(message: Message, params: CamoParams) -> str | None:
     elif kind == "state":
         if not 0 <= step < params.formation_steps:
             return "step out of range"
-        if value not in (0, 1):
+        if value not in states_of(params):
             return "state out of range"
     elif kind == "relay":
         if not params.orientation_any:
             return "a relay in a run without --orientation any"
         if not 0 <= step < params.formation_steps:
             return "step out of range"
-        if len(value) != 8 or any(v not in (0, 1, None) for v in value):
+        if len(value) != 8 or any(v is not None and v not in states_of(params) for v in value):
             return "relay out of range"
     else:
         return "unknown kind"
@@ -124,18 +151,26 @@ def report_problem(status, params: CamoParams) -> str | None:
     limit = {CONSENSUS: params.consensus_steps, FORMATION: params.formation_steps}
     if not SENSING <= phase <= DONE or step < 0 or step > limit.get(phase, step):
         return "phase or step out of range"
-    good_p = vote_vector(params, REPORT_TOLERANCE)
+    check = tensor_vector if params.orientation_any else probability_vector
+    states = states_of(params)
+
+    def good_p(p):
+        return check(p, REPORT_TOLERANCE)
+
     codes = range(MOTTLED, CODES) if params.orientation_any else range(MOTTLED + 1)
     if phase >= CONSENSUS:
         if not _grey(status.sensed) or not good_p(list(status.p)):
             return "status values out of range"
-        if status.state not in (0, 1) or status.pattern not in (*codes, NO_PATTERN):
+        if status.state not in states or status.pattern not in (*codes, NO_PATTERN):
             return "status values out of range"
     p_trace = list(getattr(status, "p_trace", ()))
     if len(p_trace) % 3 or not all(good_p(p_trace[k : k + 3]) for k in range(0, len(p_trace), 3)):
         return "status trace out of range"
-    if any(s not in (0, 1) for s in getattr(status, "state_trace", ())):
+    if any(s not in states for s in getattr(status, "state_trace", ())):
         return "status trace out of range"
+    palette = list(getattr(status, "palette", ()))
+    if palette and (len(palette) != params.levels or palette != sorted(palette)):
+        return "status palette out of range"
     if any(not 0 <= n < params.count for n in getattr(status, "silent", ())):
         return "status names a robot not of the grid"
     return None

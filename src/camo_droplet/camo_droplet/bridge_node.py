@@ -211,6 +211,8 @@ def firmware_lacks(values: dict) -> list[str]:
         lacks.append(
             f"orientation {values['orientation']} (--orientation {values['orientation']})"
         )
+    if values["levels"]:
+        lacks.append(f"levels {values['levels']} (--levels {values['levels']})")
     return lacks
 
 

@@ -56,6 +56,7 @@ def robot_parameters(config: RunConfig, robot: int) -> list[str]:
         "threshold": float(params.threshold),
         "threshold_auto": str(params.threshold_auto).lower(),
         "orientation": params.orientation,
+        "levels": params.levels,
         "consensus_steps": params.consensus_steps,
         "formation_steps": params.formation_steps,
         "step_timeout": float(config.step_timeout),

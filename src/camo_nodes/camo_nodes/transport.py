@@ -70,7 +70,9 @@ def fill(msg, message: Message) -> None:
         msg.energy, msg.degree = message.value
     elif kind == "vote":
         p, msg.degree = message.value
-        msg.p[0], msg.p[1], msg.p[2] = p
+        msg.p[0], msg.p[1], msg.p[2] = p[0], p[1], p[2]
+        if len(p) > 3:  # --levels: the grey histogram averaged with p
+            msg.histogram = p[3:]
     elif kind == "relay":
         msg.states = [NOT_RECEIVED if v is None else v for v in message.value]
     else:
@@ -85,7 +87,7 @@ def from_ros(kind: str, msg) -> Message:
     elif kind == "energy":
         value = (msg.energy, msg.degree)
     elif kind == "vote":
-        value = (tuple(msg.p), msg.degree)
+        value = ((*msg.p, *msg.histogram), msg.degree)
     elif kind == "relay":
         value = tuple(None if v == NOT_RECEIVED else int(v) for v in msg.states)
     else:
@@ -113,6 +115,7 @@ def status_msg(report: Report) -> RobotStatus:
         p_trace=list(report.p_trace),
         state_from=report.state_from,
         state_trace=list(report.state_trace),
+        palette=list(report.palette),
     )
 
 

@@ -45,6 +45,7 @@ CSV_COLUMNS = (
     "p10_diff",
     "p90_diff",
     "correct_rate",
+    "mean_grey_distance",
 )
 
 
@@ -58,6 +59,7 @@ class ErrorPoint:
     p10_diff: float  # the trials' 10th and 90th percentiles: the figure's band
     p90_diff: float
     correct_rate: float
+    mean_grey_distance: float  # greys shown against greys sensed (RunResult.grey_distance)
 
     def as_row(self) -> dict:
         return {k: getattr(self, k) for k in CSV_COLUMNS}
@@ -70,6 +72,8 @@ def error_spec(args, rhos: list[float]) -> SweepSpec:
     options["threshold"] = args.threshold
     if args.orientation != "axes":
         options["orientation"] = args.orientation
+    if args.levels:
+        options["levels"] = args.levels
     for name in ("consensus_steps", "formation_steps", "contrast"):
         if getattr(args, name) is not None:
             options[name] = getattr(args, name)
@@ -80,6 +84,7 @@ def error_spec(args, rhos: list[float]) -> SweepSpec:
 def points_from(folder: Path, rhos: list[float], spec: SweepSpec) -> list[ErrorPoint]:
     """The points of `spec`'s trials (a folder run with more --trials before holds more)."""
     columns = ["trial_id", "rho_meas", "rho_comm", "diff_cells", "correct", "status"]
+    columns.append("grey_distance")
     data = read(folder, columns=columns).to_pydict()
     meas, comm = np.array(data["rho_meas"]), np.array(data["rho_comm"])
     ids = {t.trial_id for t in spec.trial_list()}
@@ -87,6 +92,7 @@ def points_from(folder: Path, rhos: list[float], spec: SweepSpec) -> list[ErrorP
     ok = np.array([status == "ok" and trial in ids for status, trial in pairs])
     diff = np.array([np.nan if d is None else d for d in data["diff_cells"]], dtype=float)
     correct = np.array([bool(c) for c in data["correct"]])
+    grey = np.array([np.nan if g is None else g for g in data["grey_distance"]], dtype=float)
     points = []
     for mode in MODES:
         for rho in rhos:
@@ -110,6 +116,7 @@ def points_from(folder: Path, rhos: list[float], spec: SweepSpec) -> list[ErrorP
                     float(np.percentile(values, 10)),
                     float(np.percentile(values, 90)),
                     float(np.mean(correct[keep])),
+                    float(np.mean(grey[keep])),
                 )
             )
     return points

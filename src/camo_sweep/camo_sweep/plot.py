@@ -19,6 +19,7 @@ from .table import read
 
 METRICS = (
     "diff_cells",
+    "grey_distance",
     "correct",
     "votes_horizontal",
     "votes_vertical",

@@ -36,6 +36,7 @@ RESULT_COLUMNS = (
     "chosen_pattern",
     "correct",
     "diff_cells",
+    "grey_distance",
     *(f"votes_{name}" for name in PATTERN_NAMES),
     *(f"mean_p_{name}" for name in PATTERN_NAMES),
 )
@@ -131,6 +132,7 @@ def result_columns(summary: dict, reference: Reference) -> dict[str, Any]:
         "chosen_pattern": pattern_of(summary),
         "correct": pattern_of(summary) == reference.pattern,
         "diff_cells": int(np.count_nonzero(final != reference.final)),
+        "grey_distance": float(summary["grey_distance"]),
     }
     for k, name in enumerate(PATTERN_NAMES):
         row[f"votes_{name}"] = int(summary["votes"].get(name, 0))  # --orientation any: none
@@ -155,6 +157,7 @@ def sim_row(trial: Trial, reference: Reference) -> dict[str, Any]:
         "pattern": result.majority_pattern,
         "orientation_deg": result.orientation_deg,
         "votes": result.selection_counts,
+        "grey_distance": result.grey_distance,
         "mean_p": mean_p(result.p).tolist(),
         "final": result.final,
     }
