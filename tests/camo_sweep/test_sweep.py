@@ -233,3 +233,11 @@ def test_an_axis_of_numbers_and_auto_is_written_as_text(tmp_path):
     rows = table(out)
     assert sorted(r["consensus_steps"] for r in rows) == ["10", "auto"]
     assert {r["sim_args"] for r in rows} == {"--consensus-steps 10", "--consensus-steps auto"}
+
+
+def test_a_sweep_refuses_a_layout_it_would_not_run(tmp_path):
+    out = sweep("--axis", "rho_comm=0,0.1", "--set", "layout=hex", "--out", str(tmp_path / "s"))
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.strip().endswith(
+        "sweeps run on the grid: --layout is ./camo sim's alone for now"
+    )

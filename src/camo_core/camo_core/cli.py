@@ -16,6 +16,8 @@ import numpy as np
 from . import bench, figures
 from .animation import Snapshots, write_animation
 from .exceptions import UsageError, reported
+from .layout import layout_of, sense_at
+from .layout_rules import run_on_layout
 from .options import (
     Parser,
     add_contrast_option,
@@ -53,6 +55,8 @@ def sensed_overrides(texts: list[str], rows: int, cols: int) -> dict[tuple[int, 
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
+    if args.layout:
+        return sim_on_layout(args)
     params = params_from(args)
     image, label = image_from(args)
     raw = sense_image(image, params.rows, params.cols, params.profile)
@@ -87,6 +91,33 @@ def cmd_sim(args: argparse.Namespace) -> int:
     return 0
 
 
+def sim_on_layout(args: argparse.Namespace) -> int:
+    """./camo sim --layout: the per-robot rules on robots at positions (figure.png, no GIF)."""
+    if args.orientation != "any":
+        raise UsageError("--layout needs --orientation any: a layout has no grid axes")
+    if args.sensed:
+        raise UsageError("--sensed names grid cells: it does not go with --layout")
+    layout = layout_of(args.layout, args.rows, args.cols, args.seed)
+    if args.layout not in ("hex",) and not args.layout.startswith("jitter:"):
+        args.rows, args.cols = 1, layout.count  # a file's robots, in its order
+    params = params_from(args)
+    image, label = image_from(args)
+    result = run_on_layout(params, layout, sense_at(image, layout))
+    folder = out_dir(args)
+    summary = result.summary(arrays=True)
+    summary["layout"] = layout.name
+    summary["positions"] = layout.positions.tolist()
+    write_summary(summary, folder)
+    write_params_file(args.options_parser, args, folder)
+    title = f"{run_title(label, params)}, layout {layout.name}"
+    figures.run_figure(result, image, folder / "figure.png", title=title)
+    print(
+        f"pattern: {pattern_said(summary)}; wrote {folder}/summary.json and figure.png; "
+        f"simulated robot by robot in {result.elapsed_s:.3f} s"
+    )
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     sizes = tuple(int(s) for s in args.sizes.split(",")) if args.sizes else bench.SIZES
     report = bench.run(sizes=sizes, whole=args.whole)
@@ -105,6 +136,14 @@ def add_sim_arguments(sim: Parser) -> Parser:
             default=None,
             help=f"inhibitor weight W2 of the {what} kernels (default: the profile's)",
         )
+    sim.add_argument(
+        "--layout",
+        default=None,
+        metavar="hex|jitter:A|FILE",
+        help="robots at hexagonal positions, at grid positions jittered by up to A spacings, "
+        "or at a CSV file's x,y positions (spacings); needs --orientation any (default: the "
+        "grid)",
+    )
     sim.add_argument(
         "--sensed",
         action="append",

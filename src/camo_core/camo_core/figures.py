@@ -8,6 +8,7 @@ import cv2
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.collections
 import matplotlib.colors
 import matplotlib.figure
 import matplotlib.patches
@@ -95,8 +96,11 @@ def run_plot(
         shown = shown if shown.ndim == 2 else shown[:, :, ::-1]
         axes[0].imshow(shown, cmap="gray", vmin=0, vmax=255, **extent)
     axes[0].set_title("background")
-    shown, extent = _shown(result.sensed, nearest=True)
-    axes[1].imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
+    if result.positions is not None:
+        draw_discs(axes[1], result.positions, result.sensed)
+    else:
+        shown, extent = _shown(result.sensed, nearest=True)
+        axes[1].imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
     axes[1].set_title(f"sensed grey ({result.params.rows}x{result.params.cols} robots)")
     _consensus_panel(axes[2], result)
     for ax, states, label in (
@@ -112,11 +116,20 @@ def run_plot(
                 label = "initial greys (each robot's class)"
         if result.alive is not None:
             shown[~result.alive] = 128
-        shown, extent = _shown(shown, nearest=True)
-        ax.imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
+        if result.positions is not None:
+            draw_discs(ax, result.positions, shown)
+        else:
+            shown, extent = _shown(shown, nearest=True)
+            ax.imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
         ax.set_title(label)
     if result.orientation_deg is not None:
-        _direction(axes[4], result.orientation_deg, result.params.rows, result.params.cols)
+        if result.positions is not None:
+            low, high = result.positions.min(axis=0), result.positions.max(axis=0)
+            extent = (high[1] - low[1] + 1, high[0] - low[0] + 1, *((low + high) / 2)[::-1])
+        else:
+            rows, cols = result.params.rows, result.params.cols
+            extent = (rows, cols, (rows - 1) / 2, (cols - 1) / 2)
+        _direction(axes[4], result.orientation_deg, *extent)
     all_marks = dict(marks or {})
     if result.alive is not None:
         all_marks["dead"] = ~result.alive
@@ -133,11 +146,27 @@ def run_plot(
     return fig
 
 
-def _direction(ax, degrees: int, rows: int, cols: int) -> None:
-    """The chosen stripe direction, as a line through the grid's centre (y up on the page)."""
-    half = 0.42 * min(rows, cols)
+def draw_discs(ax, positions: np.ndarray, greys: np.ndarray) -> None:
+    """--layout: each robot a disc at its position, in its grey (y down, as on the grid)."""
+    discs = matplotlib.collections.PatchCollection(
+        [matplotlib.patches.Circle((x, y), 0.45) for x, y in positions],
+        cmap="gray",
+        edgecolor="none",
+    )
+    discs.set_array(np.asarray(greys, dtype=float).ravel())
+    discs.set_clim(0, 255)
+    ax.add_collection(discs)
+    low, high = positions.min(axis=0) - 0.6, positions.max(axis=0) + 0.6
+    ax.set_xlim(low[0], high[0])
+    ax.set_ylim(high[1], low[1])
+    ax.set_aspect("equal")
+    ax.set_facecolor("#c8d2e0")
+
+
+def _direction(ax, degrees: int, height: float, width: float, y: float, x: float) -> None:
+    """The chosen stripe direction, as a line through the swarm's centre (y up on the page)."""
+    half = 0.42 * min(height, width)
     dx, dy = half * np.cos(np.radians(degrees)), half * np.sin(np.radians(degrees))
-    x, y = (cols - 1) / 2, (rows - 1) / 2
     ax.plot([x - dx, x + dx], [y + dy, y - dy], color="red", linewidth=2, alpha=0.8)
     ax.annotate(f"{degrees}°", (x + dx, y - dy), color="red", fontsize=9, fontweight="bold")
 

@@ -85,6 +85,8 @@ class RunResult:
     consensus_range: np.ndarray | None = None
     # --levels: rows x cols x K, the greys each robot's palette holds, darkest first.
     palette: np.ndarray | None = None
+    # --layout: robots x 2, each robot's x and y (y down) in spacings; None on the grid.
+    positions: np.ndarray | None = None
 
     @property
     def display(self) -> np.ndarray:

@@ -117,8 +117,7 @@ def consensus_step(
     size = len(p_own)
     acc = [0.0] * size
     weight_sum = 0.0
-    for slot in range(8):
-        message = received[slot]
+    for message in received:  # slots 0-7 on the grid; a layout's near neighbours in id order
         if message is None:
             continue
         p_other, degree_other = message
@@ -134,7 +133,7 @@ def energy_step(energy: float, degree: int, received: Sequence[tuple[float, int]
     """consensus_step on one number: `received[k]` is (energy, degree) from slot k (0-7), or
     None. Carried in p's first component, as the simulator's kernel carries it (the rule is the
     same for each component)."""
-    as_p = [None if m is None else ((m[0], 0.0, 0.0), m[1]) for m in received[:8]]
+    as_p = [None if m is None else ((m[0], 0.0, 0.0), m[1]) for m in received]
     return consensus_step((energy, 0.0, 0.0), degree, as_p)[0]
 
 

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from camo_core.exceptions import CamoError
+from camo_core.exceptions import CamoError, UsageError
 from camo_core.options import image_from, params_from
 from camo_core.params import CamoParams
 from camo_core.result import SUMMARY_KEYS, RunResult, mean_p, pattern_of, summary_bytes
@@ -100,6 +100,8 @@ def simulate_options(
 
 def check_options(options: dict[str, Any]) -> None:
     """Raise the one-line error of options that cannot make a run (before any is run)."""
+    if options.get("layout"):
+        raise UsageError("sweeps run on the grid: --layout is ./camo sim's alone for now")
     params_from(namespace(options, 0))
 
 

@@ -1,0 +1,153 @@
+"""--layout: swarms that are not square grids (docs/algorithm.md §2.7).
+
+Robots stand at positions (x right, y down, in units of the spacing between neighbours): a
+hexagonal packing (every other row offset by half a spacing, rows sqrt(3)/2 apart, so that
+each robot has six neighbours at one spacing), square positions jittered by up to A spacings
+(seeded), or the positions of a CSV file (x,y a line). A robot knows its neighbours by range
+and bearing, as a real one would measure them: those within NEAR spacings (colours, energies,
+consensus) and within FAR (formation). Its slots are the near ones in id order, then the far
+ones in id order.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from . import rng
+from .exceptions import CamoError
+
+NEAR = 1.5
+FAR = 2.3
+KINDS = ("hex", "jitter:A", "FILE")
+STREAM_JITTER = 9  # rng stream of the jitter draws (a = coordinate, b = robot)
+MAX_ROBOTS = 65536
+
+
+class LayoutError(CamoError):
+    """A layout that cannot be read or made; the message says why in one line."""
+
+
+@dataclass(frozen=True)
+class Layout:
+    name: str  # as given: hex, jitter:0.3 or the file's path
+    positions: np.ndarray  # robots x 2 float64: x, y in spacings
+
+    @property
+    def count(self) -> int:
+        return len(self.positions)
+
+    def neighbours(self) -> list[tuple[list[int], list[int]]]:
+        """Per robot: (ids within NEAR, ids within FAR but beyond NEAR), each in id order."""
+        return neighbours_of(self.positions)
+
+
+def layout_of(spec: str, rows: int, cols: int, seed: int) -> Layout:
+    """hex, jitter:A (A in [0, 0.5)) over rows x cols, or a CSV file of x,y positions."""
+    if spec == "hex":
+        i, j = np.mgrid[0:rows, 0:cols].astype(np.float64)
+        positions = np.stack([j + 0.5 * (i % 2), i * (math.sqrt(3) / 2)], axis=-1)
+        return Layout(spec, positions.reshape(-1, 2))
+    if spec.startswith("jitter:"):
+        try:
+            amount = float(spec.split(":", 1)[1])
+        except ValueError:
+            raise LayoutError(f"jitter:A needs a number A of spacings (got {spec!r})") from None
+        if not 0.0 <= amount < 0.5:
+            raise LayoutError(f"jitter:A needs 0 <= A < 0.5 spacings (got {amount:g})")
+        ids = np.arange(rows * cols, dtype=np.uint64)
+        shift = [2 * rng.uniform_array(seed, STREAM_JITTER, axis, ids, 0) - 1 for axis in (0, 1)]
+        i, j = np.divmod(np.arange(rows * cols), cols)
+        positions = np.stack([j + amount * shift[0], i + amount * shift[1]], axis=-1)
+        return Layout(spec, positions.astype(np.float64))
+    return Layout(spec, read_positions(Path(spec)))
+
+
+def read_positions(path: Path) -> np.ndarray:
+    """x,y per line (spacings); a header line of words is skipped."""
+    try:
+        with open(path, newline="") as handle:
+            lines = [row for row in csv.reader(handle) if row and any(c.strip() for c in row)]
+    except OSError as exc:
+        raise LayoutError(f"cannot read the layout {path}: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, csv.Error):
+        raise LayoutError(f"layout {path} is not a CSV file of x,y positions") from None
+    if lines and not _numbers(lines[0]):
+        lines = lines[1:]
+    bad = next((n for n, row in enumerate(lines, 1) if len(row) != 2 or not _numbers(row)), None)
+    if bad is not None or not lines:
+        where = f"line {bad}" if bad is not None else "no positions"
+        raise LayoutError(f"layout {path}: {where}: want x,y (two finite numbers) per line")
+    if len(lines) > MAX_ROBOTS:
+        raise LayoutError(f"layout {path} has {len(lines)} robots, above {MAX_ROBOTS}")
+    positions = np.array([[float(x), float(y)] for x, y in lines])
+    close = _closest_pair(positions)
+    if close is not None and close < 0.1:
+        raise LayoutError(f"layout {path} has two robots {close:.3g} spacings apart (< 0.1)")
+    return positions
+
+
+def _numbers(row: list[str]) -> bool:
+    try:
+        return all(math.isfinite(float(c)) for c in row)
+    except ValueError:
+        return False
+
+
+def neighbours_of(positions: np.ndarray) -> list[tuple[list[int], list[int]]]:
+    """Robots within NEAR and FAR of each, found through a grid of FAR-sized buckets."""
+    buckets: dict[tuple[int, int], list[int]] = {}
+    cells = np.floor(positions / FAR).astype(np.int64)
+    for robot, (cx, cy) in enumerate(cells.tolist()):
+        buckets.setdefault((cx, cy), []).append(robot)
+    out = []
+    for robot, (cx, cy) in enumerate(cells.tolist()):
+        near, far = [], []
+        x, y = positions[robot]
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for other in buckets.get((cx + dx, cy + dy), ()):
+                    if other == robot:
+                        continue
+                    distance = math.hypot(positions[other, 0] - x, positions[other, 1] - y)
+                    if distance <= NEAR:
+                        near.append(other)
+                    elif distance <= FAR:
+                        far.append(other)
+        out.append((sorted(near), sorted(far)))
+    return out
+
+
+def _closest_pair(positions: np.ndarray) -> float | None:
+    best = None
+    for robot, (near, _) in enumerate(neighbours_of(positions)):
+        for other in near:
+            d = float(np.hypot(*(positions[other] - positions[robot])))
+            best = d if best is None or d < best else best
+    return best
+
+
+def sense_at(image: np.ndarray, layout: Layout) -> np.ndarray:
+    """Each robot's grey: the mean of the image over one spacing around its position, the
+    layout's extent (plus half a spacing round it) stretched over the image."""
+    gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    height, width = gray.shape
+    low = layout.positions.min(axis=0) - 0.5
+    span = layout.positions.max(axis=0) + 0.5 - low
+    scale = np.array([width, height]) / span  # pixels per spacing, per axis
+    sums = cv2.integral(gray.astype(np.float64))
+    out = np.empty(layout.count)
+    for robot, (x, y) in enumerate(layout.positions):
+        x0, y0 = (np.array([x, y]) - 0.5 - low) * scale
+        x1, y1 = (np.array([x, y]) + 0.5 - low) * scale
+        left, right = int(np.clip(round(x0), 0, width - 1)), int(np.clip(round(x1), 1, width))
+        top, bottom = int(np.clip(round(y0), 0, height - 1)), int(np.clip(round(y1), 1, height))
+        right, bottom = max(right, left + 1), max(bottom, top + 1)
+        total = sums[bottom, right] - sums[top, right] - sums[bottom, left] + sums[top, left]
+        out[robot] = total / ((bottom - top) * (right - left))
+    return out

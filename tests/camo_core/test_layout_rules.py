@@ -1,0 +1,113 @@
+"""--layout: robots at positions, neighbours by range, a fitted tensor and a kernel of offsets."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+from support import brick_courses, run_camo
+
+from camo_core import orientation
+from camo_core.backgrounds import background, stripes
+from camo_core.layout import LayoutError, layout_of, sense_at
+from camo_core.layout_rules import fitted_tensor, kernel, run_on_layout
+from camo_core.params import CamoParams
+from camo_core.rules import MOTTLED
+
+
+def test_a_hexagonal_robot_has_six_neighbours_one_spacing_away():
+    layout = layout_of("hex", 6, 6, seed=0)
+    near, far = layout.neighbours()[2 * 6 + 2]  # an inner robot
+    assert len(near) == 6 and len(far) == 12  # six at sqrt(3) and six at 2 spacings
+    robot = layout.positions[14]
+    assert all(math.isclose(np.hypot(*(layout.positions[j] - robot)), 1.0) for j in near)
+
+
+def test_jitter_is_seeded_and_bounded():
+    a, b = layout_of("jitter:0.3", 5, 5, seed=1), layout_of("jitter:0.3", 5, 5, seed=1)
+    c = layout_of("jitter:0.3", 5, 5, seed=2)
+    assert np.array_equal(a.positions, b.positions)
+    assert not np.array_equal(a.positions, c.positions)
+    i, j = np.divmod(np.arange(25), 5)
+    assert np.abs(a.positions - np.stack([j, i], axis=-1)).max() <= 0.3
+    with pytest.raises(LayoutError, match=r"0 <= A < 0\.5"):
+        layout_of("jitter:0.7", 5, 5, seed=0)
+
+
+def test_a_layout_file_is_read_or_refused_in_one_line(tmp_path):
+    good = tmp_path / "swarm.csv"
+    good.write_text("x,y\n0,0\n1,0\n0.5,0.9\n")
+    assert layout_of(str(good), 8, 8, 0).positions.tolist() == [[0, 0], [1, 0], [0.5, 0.9]]
+    for text, said in (("0,0\n1,nan\n", "line 2"), ("0,0\n0.05,0\n", "0.05 spacings apart"),
+                       ("", "no positions")):  # fmt: skip
+        bad = tmp_path / "bad.csv"
+        bad.write_text(text)
+        with pytest.raises(LayoutError, match=said):
+            layout_of(str(bad), 8, 8, 0)
+    with pytest.raises(LayoutError, match="cannot read the layout"):
+        layout_of(str(tmp_path / "missing.csv"), 8, 8, 0)
+
+
+def test_the_fitted_tensor_of_a_ramp_lies_across_it_and_needs_three_bearings():
+    offsets = [(1.0, 0.0), (0.5, 0.866), (-0.5, 0.866), (-1.0, 0.0), (-0.5, -0.866), (0.5, -0.866)]
+    greys = [100.0 + 10 * dx for dx, _ in offsets]  # 10 grey levels a spacing along x
+    gxx, gyy, gxy = fitted_tensor(100.0, greys, offsets)
+    assert gxx == pytest.approx(100.0) and gyy == pytest.approx(0.0, abs=1e-9)
+    assert gxy == pytest.approx(0.0, abs=1e-9)
+    assert orientation.angle_of(orientation.choose((gxx, gyy, gxy))) == 90  # vertical stripes
+    two_bearings = [greys[0], None, None, greys[3], None, None]
+    assert fitted_tensor(100.0, two_bearings, offsets) is None
+
+
+def test_on_square_positions_the_kernels_are_the_grids():
+    layout = layout_of("jitter:0", 7, 7, seed=0)
+    near, far = layout.neighbours()[3 * 7 + 3]
+    slots = near + far
+    offsets = [tuple(layout.positions[j] - layout.positions[24]) for j in slots]
+    params = CamoParams()
+    grid = dict(zip(orientation.OFFSETS, orientation.ROLES[orientation.ORIENTED], strict=True))
+    roles, w2 = kernel(orientation.ORIENTED, offsets, params)
+    for (dx, dy), role in zip(offsets, roles, strict=True):
+        assert grid.get((round(dy), round(dx)), 0) == role
+    assert w2 == params.w2_stripes
+    roles, w2 = kernel(MOTTLED, offsets, params)
+    assert roles.count(1) == 4 and roles.count(-1) == 8 and w2 == params.w2_mottled
+
+
+def run(image, spec, **options):
+    layout = layout_of(spec, 32, 32, seed=0)
+    params = CamoParams(rows=32, cols=32, orientation="any", **options)
+    return run_on_layout(params, layout, sense_at(image, layout))
+
+
+def test_on_a_hexagonal_swarm_trunks_are_vertical_courses_horizontal_gravel_mottled():
+    assert run(background("forest"), "hex").majority_label == "stripes at 90°"
+    assert run(brick_courses(), "hex", threshold_auto=True).majority_label == "stripes at 0°"
+    gravel = np.random.default_rng(2).normal(128, 40, (64, 64))
+    gravel = np.clip(np.kron(gravel, np.ones((4, 4))), 0, 255).astype(np.uint8)
+    assert run(gravel, "hex").majority_pattern == "mottled"
+
+
+def test_a_jittered_swarm_reads_45_degree_stripes_within_15_degrees():
+    result = run(stripes(45, period=48, seed=3), "jitter:0.3")
+    assert abs(result.orientation_deg - 45) <= 15
+    assert np.mean(result.final == (result.sensed < 127)) >= 0.8
+
+
+def test_sim_on_a_layout_writes_its_positions_and_refuses_what_it_cannot(tmp_path):
+    options = ["--layout", "hex", "--orientation", "any", "--rows", "6", "--cols", "6"]
+    out = run_camo("sim", *options, "--levels", "3", "--rho-comm", "0.2",
+                   "--out", str(tmp_path / "a"))  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert summary["layout"] == "hex" and len(summary["positions"]) == 36
+    assert (tmp_path / "a" / "figure.png").exists()
+    said = run_camo("sim", "--layout", "hex", "--out", str(tmp_path / "b"))
+    assert said.returncode == 2
+    assert said.stderr.strip() == (
+        "camo: error: --layout needs --orientation any: a layout has no grid axes"
+    )
+    missing = run_camo("sim", "--layout", str(tmp_path / "no.csv"), "--orientation", "any",
+                       "--out", str(tmp_path / "c"))  # fmt: skip
+    assert missing.returncode != 0 and len(missing.stderr.strip().splitlines()) == 1
+    assert "cannot read the layout" in missing.stderr
