@@ -26,8 +26,9 @@ import numpy as np
 from PIL import Image
 
 from . import levels
-from .figures import PATTERN_COLORS, direction_legend, mark, tensor_rgb
+from .figures import PATTERN_COLORS, mark
 from .params import CamoParams
+from .tensor_colours import direction_legend, tensor_rgb
 
 MAX_FRAMES = 80
 MAX_SIDE = 256  # robots per side a frame shows: one pixel each at most, in a 3 inch panel

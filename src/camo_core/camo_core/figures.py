@@ -19,6 +19,7 @@ from . import levels
 from .orientation import CODES, COHERENCE_MIN, ORIENTED, STEP_DEG
 from .result import RunResult
 from .rules import MOTTLED
+from .tensor_colours import direction_legend, tensor_at, tensor_rgb
 
 PATTERN_COLORS = {"horizontal": "tab:blue", "vertical": "tab:green", "mottled": "tab:orange"}
 TENSOR_COLORS = {"Jxx": "tab:blue", "Jyy": "tab:green", "Jxy": "tab:purple"}
@@ -217,35 +218,6 @@ def _tensor_panel(ax, result: RunResult) -> None:
     ax.set_title(f"consensus: {result.majority_label}")
 
 
-def tensor_rgb(p: np.ndarray) -> np.ndarray:
-    """Tensors (... x 3) as colours: the hue is the stripe direction (0 to 180 degrees round
-    the colour wheel), the saturation the coherence (white: no direction)."""
-    jxx, jyy, jxy = p[..., 0], p[..., 1], p[..., 2]
-    x, y = jxx - jyy, 2 * jxy
-    with np.errstate(divide="ignore", invalid="ignore"):
-        coherence = np.nan_to_num(np.sqrt(x * x + y * y) / (jxx + jyy))
-    hue = ((90 - np.degrees(np.arctan2(y, x)) / 2) % 180) / 180
-    hsv = np.stack([hue, np.clip(coherence / 0.5, 0, 1), np.full(hue.shape, 0.95)], axis=-1)
-    return matplotlib.colors.hsv_to_rgb(hsv)
-
-
-def direction_legend() -> list:
-    """Legend patches for tensor_rgb's colours."""
-    angles = (0, 45, 90, 135)
-    patches = [
-        matplotlib.patches.Patch(color=tensor_rgb(np.array(_tensor_at(a))), label=f"{a}°")
-        for a in angles
-    ]
-    return [*patches, matplotlib.patches.Patch(facecolor="white", edgecolor="grey",
-                                                label="no direction")]  # fmt: skip
-
-
-def _tensor_at(degrees: float) -> tuple[float, float, float]:
-    """A fully coherent tensor of stripes at `degrees` (double angle 180 - 2 degrees)."""
-    double = np.radians(180 - 2 * degrees)
-    return 0.5 + 0.5 * np.cos(double), 0.5 - 0.5 * np.cos(double), 0.5 * np.sin(double)
-
-
 def mark(ax, marks: dict[str, np.ndarray]) -> list:
     """Scatter the marked robots of each kind on a grid panel; their legend handles."""
     handles = []
@@ -370,7 +342,7 @@ def timeline_figure(
     for ax in axes.flat:
         ax.axis("off")
     paper = [matplotlib.colors.to_rgb(c) for c in PATTERN_COLORS.values()]
-    angles = [tensor_rgb(np.array(_tensor_at(k * STEP_DEG))) for k in range(CODES - ORIENTED)]
+    angles = [tensor_rgb(np.array(tensor_at(k * STEP_DEG))) for k in range(CODES - ORIENTED)]
     colors = np.array([*paper, *angles, (0.5, 0.5, 0.5)])
     grey = {0: 1.0, 1: 0.0, -1: 0.5}
     row = 0
