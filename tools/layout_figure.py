@@ -17,9 +17,9 @@ import numpy as np
 
 from camo_core import figures
 from camo_core.backgrounds import background, stripes
-from camo_core.layout import layout_of, sense_at
-from camo_core.layout_rules import run_on_layout
+from camo_core.layout import layout_for, sense_at
 from camo_core.params import CamoParams
+from camo_core.perrobot import run_per_robot
 
 SIDE = 32
 LAYOUTS = ("jitter:0", "hex", "jitter:0.3")
@@ -43,9 +43,11 @@ def main(argv: list[str]) -> int:
         axes[row, 0].imshow(image, cmap="gray", vmin=0, vmax=255)
         axes[row, 0].set_ylabel(name, fontsize=9)
         for column, spec in enumerate(LAYOUTS, start=1):
-            layout = layout_of(spec, SIDE, SIDE, seed=0)
-            params = CamoParams(rows=SIDE, cols=SIDE, orientation="any", threshold_auto=True)
-            result = run_on_layout(params, layout, sense_at(image, layout))
+            params = CamoParams(rows=SIDE, cols=SIDE, orientation="any", threshold_auto=True,
+                                layout=spec)  # fmt: skip
+            layout = layout_for(params)
+            raw = sense_at(image, layout).reshape(SIDE, SIDE)
+            result = run_per_robot(params, raw)
             figures.draw_discs(axes[row, column], layout.positions, result.display)
             label = "square" if spec == "jitter:0" else spec
             axes[row, column].set_title(f"{label}: {result.majority_label}", fontsize=8)

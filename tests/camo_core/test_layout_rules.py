@@ -9,9 +9,10 @@ from support import brick_courses, run_camo
 
 from camo_core import orientation
 from camo_core.backgrounds import background, stripes
-from camo_core.layout import LayoutError, layout_of, sense_at
-from camo_core.layout_rules import fitted_tensor, kernel, run_on_layout
-from camo_core.params import CamoParams
+from camo_core.layout import LayoutError, layout_for, layout_of, sense_at
+from camo_core.layout_rules import fitted_tensor, kernel
+from camo_core.params import CamoParams, ParameterError
+from camo_core.perrobot import run_per_robot
 from camo_core.rules import MOTTLED
 
 
@@ -75,9 +76,20 @@ def test_on_square_positions_the_kernels_are_the_grids():
 
 
 def run(image, spec, **options):
-    layout = layout_of(spec, 32, 32, seed=0)
-    params = CamoParams(rows=32, cols=32, orientation="any", **options)
-    return run_on_layout(params, layout, sense_at(image, layout))
+    params = CamoParams(rows=32, cols=32, orientation="any", layout=spec, **options)
+    raw = sense_at(image, layout_for(params)).reshape(32, 32)
+    return run_per_robot(params, raw)
+
+
+def test_a_layout_needs_orientation_any_and_a_file_layout_its_positions():
+    with pytest.raises(ParameterError, match="--layout needs --orientation any"):
+        CamoParams(layout="hex")
+    with pytest.raises(ParameterError, match="one position per robot"):
+        CamoParams(rows=1, cols=3, layout="file", positions=((0, 0), (1, 0)), orientation="any")
+    with pytest.raises(ParameterError, match="layout must be hex, jitter:A or file"):
+        CamoParams(layout="triangle", orientation="any")
+    made = CamoParams(rows=1, cols=2, layout="file", positions=[[0, 0], [1, 0]], orientation="any")
+    assert made.positions == ((0.0, 0.0), (1.0, 0.0)) and hash(made)  # lists become tuples
 
 
 def test_on_a_hexagonal_swarm_trunks_are_vertical_courses_horizontal_gravel_mottled():

@@ -649,3 +649,36 @@ def test_the_swarm_with_orientation_any_threshold_auto_and_levels_equals_the_sim
                       "--domain-id", str(domain()))  # fmt: skip
     assert replay.returncode == 0, replay.stderr
     assert f"published {16 * 16 * 10} messages on {len(topics)} topics" in replay.stderr
+
+
+def test_the_swarm_on_a_hexagonal_layout_with_levels_equals_the_simulator(tmp_path):
+    from support import bag_tool
+
+    args = ["--layout", "hex", "--levels", "3", "--orientation", "any", "--rows", "12",
+            "--cols", "12", "--rho-comm", "0.2", "--pattern", "forest"]  # fmt: skip
+    run = camo_run(*args, "--procs", "2", "--out", str(tmp_path / "run"),
+                   "--record", str(tmp_path / "bag"))  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    sim = run_camo("sim", *args, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    ran = assert_like_sim(tmp_path / "run", tmp_path / "sim")
+    assert ran["layout"] == "hex" and ran["pattern"] == "stripes"
+    rendered = bag_tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
+    assert rendered.returncode == 0, rendered.stderr
+    assert_like_sim(tmp_path / "rendered", tmp_path / "sim")
+
+
+def test_a_file_layout_reaches_robot_nodes_of_their_own_as_a_csv(tmp_path):
+    from pathlib import Path
+
+    from camo_nodes.launch_config import build_parser, config_from
+    from camo_nodes.processes import robot_parameters
+
+    layout = tmp_path / "swarm.csv"
+    layout.write_text("0,0\n1,0\n0.5,0.87\n1.5,0.87\n")
+    args = ["--layout", str(layout), "--orientation", "any", "--out", str(tmp_path / "o")]
+    config = config_from(build_parser().parse_args(args))
+    assert (config.params.rows, config.params.cols, config.params.layout) == (1, 4, "file")
+    given = dict(x.split(":=", 1) for x in robot_parameters(config, 2) if ":=" in x)
+    written = Path(given["layout"])
+    assert written.parent == config.folder and written.read_text().splitlines()[2] == "0.5,0.87"

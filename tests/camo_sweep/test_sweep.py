@@ -239,5 +239,5 @@ def test_a_sweep_refuses_a_layout_it_would_not_run(tmp_path):
     out = sweep("--axis", "rho_comm=0,0.1", "--set", "layout=hex", "--out", str(tmp_path / "s"))
     assert out.returncode == 2, out.stderr
     assert out.stderr.strip().endswith(
-        "sweeps run on the grid: --layout is ./camo sim's alone for now"
+        "sweeps run on the grid: --layout is for ./camo sim and run, for now"
     )

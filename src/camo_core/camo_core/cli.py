@@ -16,8 +16,7 @@ import numpy as np
 from . import bench, figures
 from .animation import Snapshots, write_animation
 from .exceptions import UsageError, reported
-from .layout import layout_of, sense_at
-from .layout_rules import run_on_layout
+from .layout import layout_for, sense_at
 from .options import (
     Parser,
     add_contrast_option,
@@ -28,6 +27,7 @@ from .options import (
 )
 from .output import run_title
 from .params_file import write_params_file
+from .perrobot import run_per_robot
 from .progress import ProgressBar
 from .result import pattern_said, write_summary
 from .sensing import sense_image
@@ -92,24 +92,18 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 
 def sim_on_layout(args: argparse.Namespace) -> int:
-    """./camo sim --layout: the per-robot rules on robots at positions (figure.png, no GIF)."""
-    if args.orientation != "any":
-        raise UsageError("--layout needs --orientation any: a layout has no grid axes")
+    """./camo sim --layout: the robots' own rules, robot by robot (figure.png, no GIF)."""
     if args.sensed:
         raise UsageError("--sensed names grid cells: it does not go with --layout")
-    layout = layout_of(args.layout, args.rows, args.cols, args.seed)
-    if args.layout not in ("hex",) and not args.layout.startswith("jitter:"):
-        args.rows, args.cols = 1, layout.count  # a file's robots, in its order
     params = params_from(args)
     image, label = image_from(args)
-    result = run_on_layout(params, layout, sense_at(image, layout))
+    raw = sense_at(image, layout_for(params)).reshape(params.rows, params.cols)
+    result = run_per_robot(params, raw)
     folder = out_dir(args)
     summary = result.summary(arrays=True)
-    summary["layout"] = layout.name
-    summary["positions"] = layout.positions.tolist()
     write_summary(summary, folder)
     write_params_file(args.options_parser, args, folder)
-    title = f"{run_title(label, params)}, layout {layout.name}"
+    title = run_title(label, params)
     figures.run_figure(result, image, folder / "figure.png", title=title)
     print(
         f"pattern: {pattern_said(summary)}; wrote {folder}/summary.json and figure.png; "
@@ -136,14 +130,6 @@ def add_sim_arguments(sim: Parser) -> Parser:
             default=None,
             help=f"inhibitor weight W2 of the {what} kernels (default: the profile's)",
         )
-    sim.add_argument(
-        "--layout",
-        default=None,
-        metavar="hex|jitter:A|FILE",
-        help="robots at hexagonal positions, at grid positions jittered by up to A spacings, "
-        "or at a CSV file's x,y positions (spacings); needs --orientation any (default: the "
-        "grid)",
-    )
     sim.add_argument(
         "--sensed",
         action="append",

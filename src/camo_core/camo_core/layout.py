@@ -14,6 +14,7 @@ from __future__ import annotations
 import csv
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import cv2
@@ -21,6 +22,9 @@ import numpy as np
 
 from . import rng
 from .exceptions import CamoError
+from .grid import neighbor_ids
+from .params import CamoParams
+from .sensing import to_gray
 
 NEAR = 1.5
 FAR = 2.3
@@ -45,6 +49,51 @@ class Layout:
     def neighbours(self) -> list[tuple[list[int], list[int]]]:
         """Per robot: (ids within NEAR, ids within FAR but beyond NEAR), each in id order."""
         return neighbours_of(self.positions)
+
+
+@dataclass(frozen=True)
+class Place:
+    """One robot's neighbours on a layout: its slots (ids, the near ones first) and their
+    offsets from it (dx, dy in spacings, y down)."""
+
+    neighbors: tuple[int, ...]
+    near: int  # slots 0..near-1 are within NEAR
+    offsets: tuple[tuple[float, float], ...]
+
+
+@lru_cache(maxsize=8)
+def layout_for(params: CamoParams) -> Layout:
+    """The layout a run's parameters name (the same positions in every process)."""
+    if params.layout == "file":
+        return Layout("file", np.array(params.positions, dtype=np.float64).reshape(-1, 2))
+    return layout_of(params.layout, params.rows, params.cols, params.seed)
+
+
+@lru_cache(maxsize=8)
+def places_for(params: CamoParams) -> tuple[Place, ...]:
+    layout = layout_for(params)
+    out = []
+    for robot, (near, far) in enumerate(layout.neighbours()):
+        slots = (*near, *far)
+        here = layout.positions[robot]
+        offsets = tuple(
+            (float(layout.positions[j, 0] - here[0]), float(layout.positions[j, 1] - here[1]))
+            for j in slots
+        )
+        out.append(Place(slots, len(near), offsets))
+    return tuple(out)
+
+
+def slot_ids(params: CamoParams, robot: int) -> list[int | None]:
+    """The ids in a robot's slots: the grid's twelve (None off the grid), or a layout's."""
+    if params.layout:
+        return list(places_for(params)[robot].neighbors)
+    return neighbor_ids(*divmod(robot, params.cols), params.rows, params.cols)
+
+
+def file_positions(path: str) -> tuple[tuple[float, float], ...]:
+    """--layout FILE's positions, as CamoParams carries them."""
+    return tuple((float(x), float(y)) for x, y in read_positions(Path(path)))
 
 
 def layout_of(spec: str, rows: int, cols: int, seed: int) -> Layout:
@@ -132,10 +181,11 @@ def _closest_pair(positions: np.ndarray) -> float | None:
     return best
 
 
-def sense_at(image: np.ndarray, layout: Layout) -> np.ndarray:
-    """Each robot's grey: the mean of the image over one spacing around its position, the
-    layout's extent (plus half a spacing round it) stretched over the image."""
-    gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+def sense_at(image: np.ndarray, layout: Layout, profile: str = "paper") -> np.ndarray:
+    """Each robot's grey: the mean of the image (grey by the profile's weights) over one
+    spacing around its position, the layout's extent (plus half a spacing round it)
+    stretched over the image."""
+    gray = to_gray(image, profile)
     height, width = gray.shape
     low = layout.positions.min(axis=0) - 0.5
     span = layout.positions.max(axis=0) + 0.5 - low

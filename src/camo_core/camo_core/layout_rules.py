@@ -6,22 +6,17 @@ its near neighbours; consensus and the choice are those of --orientation any; it
 kernel is built from the offsets of the neighbours within reach, with its own inhibitor
 weight, which stands in for the grid's edge mirroring. A lost message counts as off.
 
-The driver calls these per robot, as a robot node would: on a layout it is the simulator.
+A robot's RobotCore calls these (robot.py); on a layout the simulator is the per-robot
+driver (perrobot.py), which runs exactly what the robot nodes run.
 """
 
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Sequence
 
-import numpy as np
-
-from . import levels, orientation, rng, rules
-from .layout import Layout
+from . import orientation
 from .params import CamoParams
-from .result import RunResult, mean_p
-from .sensing import noisy_value
 
 STRIPE_REACH = 2.25  # an along-stripe activator is at most this far
 MOTTLED_ACTIVATOR = 1.2
@@ -127,86 +122,3 @@ def formation_step(
     if params.profile == "droplet" and s == 0:
         return state
     return 0
-
-
-def run_on_layout(
-    params: CamoParams, layout: Layout, raw: np.ndarray, exempt: np.ndarray | None = None
-) -> RunResult:
-    """The whole run on a layout, robot by robot; `raw`: each robot's grey before noise."""
-    start = time.perf_counter()
-    seed, rho = params.seed, params.rho_comm
-    n, positions = layout.count, layout.positions
-    pairs = layout.neighbours()
-    slots = [near + far for near, far in pairs]
-    offsets = [[tuple(positions[j] - positions[i]) for j in s] for i, s in enumerate(slots)]
-
-    def heard(stream, step, i, values, upto=None):
-        chosen = slots[i][: len(pairs[i][0]) if upto == "near" else None]
-        return [
-            values[j] if known[i][k] and not rng.lost(seed, stream, step, j, i, rho) else None
-            for k, j in enumerate(chosen)
-        ]
-
-    hello = rng.STREAM_HELLO
-    known = [[not rng.lost(seed, hello, 0, j, i, rho) for j in s] for i, s in enumerate(slots)]
-    degree = [sum(known[i][: len(pairs[i][0])]) for i in range(n)]
-    real = np.zeros(n, bool) if exempt is None else np.asarray(exempt, bool).ravel()
-    sensed = [
-        float(raw[i]) if real[i] else noisy_value(seed, i, float(raw[i]), params.rho_meas)
-        for i in range(n)
-    ]
-    near_offsets = [o[: len(pairs[i][0])] for i, o in enumerate(offsets)]
-    colours = [heard(rng.STREAM_COLOR, 0, i, sensed, "near") for i in range(n)]
-    energy = [texture_energy(sensed[i], colours[i], near_offsets[i]) for i in range(n)]
-    if params.threshold_auto:
-        for step in range(params.consensus_steps):
-            sent = [(e, d) for e, d in zip(energy, degree, strict=True)]
-            got = [heard(rng.STREAM_ENERGY, step, i, sent, "near") for i in range(n)]
-            energy = [rules.energy_step(energy[i], degree[i], got[i]) for i in range(n)]
-    p = []
-    for i in range(n):
-        tensor = fitted_tensor(sensed[i], colours[i], near_offsets[i]) or (0.0, 0.0, 0.0)
-        vector = orientation.normalised(*tensor, orientation.regulariser(params, energy[i]))
-        p.append((*vector, *levels.start_vector(sensed[i])) if params.levels else vector)
-    votes = orientation.choose(np.array([v[:3] for v in p]))
-    trace = [mean_p(np.array([v[:3] for v in p]))]
-    for step in range(params.consensus_steps):
-        sent = [(v, d) for v, d in zip(p, degree, strict=True)]
-        got = [heard(rng.STREAM_CONSENSUS, step, i, sent, "near") for i in range(n)]
-        p = [rules.consensus_step(p[i], degree[i], got[i]) for i in range(n)]
-        trace.append(mean_p(np.array([v[:3] for v in p])))
-    pattern = [orientation.choose(v[:3]) for v in p]
-    palettes = [levels.palette(v[3:], params.levels) for v in p] if params.levels else None
-    if palettes:
-        state = [levels.initial_layers(sensed[i], palettes[i][0]) for i in range(n)]
-    else:
-        state = [rules.initial_state(g) for g in sensed]
-    initial = list(state)
-    kernels = [kernel(pattern[i], offsets[i], params) for i in range(n)]
-    layers = max(1, params.levels - 1)
-    for step in range(params.formation_steps):
-        sent = list(state)
-        new = []
-        for i in range(n):
-            got = heard(rng.STREAM_STATE, step, i, sent)
-            roles, w2 = kernels[i]
-            value = 0
-            for k in range(layers):
-                bits = [None if v is None else (v >> k) & 1 for v in got]
-                value |= formation_step((state[i] >> k) & 1, roles, w2, bits, params) << k
-            new.append(value)
-        state = new
-    shape = (params.rows, params.cols)
-    return RunResult(
-        params=params,
-        sensed=np.array(sensed).reshape(shape),
-        votes=np.asarray(votes).reshape(shape),
-        p=np.array([v[:3] for v in p]).reshape((*shape, 3)),
-        selected=np.array(pattern).reshape(shape),
-        initial=np.array(initial, dtype=np.uint8).reshape(shape),
-        final=np.array(state, dtype=np.uint8).reshape(shape),
-        consensus_trace=np.array(trace),
-        elapsed_s=time.perf_counter() - start,
-        palette=np.array([g for _, g in palettes]).reshape((*shape, -1)) if palettes else None,
-        positions=positions,
-    )

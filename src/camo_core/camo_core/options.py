@@ -14,6 +14,7 @@ import numpy as np
 
 from .backgrounds import BACKGROUNDS, background
 from .exceptions import UsageError
+from .layout import file_positions
 from .params import AUTO, ORIENTATIONS, PROFILES, CamoParams, auto_consensus_steps
 from .sensing import load_image, with_contrast
 
@@ -111,6 +112,14 @@ def add_run_options(
         "black and white (default: the paper's two)",
     )
     parser.add_argument(
+        "--layout",
+        default=None,
+        metavar="hex|jitter:A|FILE",
+        help="robots at hexagonal positions, at grid positions jittered by up to A spacings, "
+        "or at a CSV file's x,y positions (spacings; a file's robots make one row); needs "
+        "--orientation any (default: the grid)",
+    )
+    parser.add_argument(
         "--consensus-steps",
         type=steps_or_auto,
         default=None,
@@ -154,6 +163,17 @@ def threshold_or_auto(value) -> float | str:
         raise argparse.ArgumentTypeError(f"a number or auto (got {value!r})") from None
 
 
+def layout_options(spec: str | None, rows: int, cols: int) -> dict:
+    """--layout (or a node's layout parameter) as CamoParams takes it, with the grid's size: a
+    file's positions read, its robots one row."""
+    if not spec:
+        return {"rows": rows, "cols": cols}
+    if spec == "hex" or spec.startswith("jitter:"):
+        return {"rows": rows, "cols": cols, "layout": spec}
+    positions = file_positions(spec)
+    return {"rows": 1, "cols": len(positions), "layout": "file", "positions": positions}
+
+
 def params_from(args: argparse.Namespace) -> CamoParams:
     steps = args.consensus_steps
     if steps == AUTO:
@@ -161,8 +181,7 @@ def params_from(args: argparse.Namespace) -> CamoParams:
     auto = args.threshold == AUTO
     return CamoParams(
         profile=args.profile,
-        rows=args.rows,
-        cols=args.cols,
+        **layout_options(getattr(args, "layout", None), args.rows, args.cols),
         threshold=CamoParams.threshold if auto else args.threshold,
         threshold_auto=auto,
         orientation=args.orientation,

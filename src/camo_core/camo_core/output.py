@@ -14,9 +14,10 @@ from .result import RunResult, write_summary
 
 
 def run_title(label: str, params: CamoParams, robots: str = "robots") -> str:
+    layout = f", layout {params.layout}" if params.layout else ""
     return (
         f"{label}: {params.rows}x{params.cols} {robots}, {params.profile} profile, "
-        f"seed {params.seed}, rho_meas {params.rho_meas:g}, rho_comm {params.rho_comm:g}"
+        f"seed {params.seed}, rho_meas {params.rho_meas:g}, rho_comm {params.rho_comm:g}{layout}"
     )
 
 

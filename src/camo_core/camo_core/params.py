@@ -63,6 +63,10 @@ class CamoParams:
     # --levels K: K greys of the swarm's choosing instead of black and white (0: the paper's);
     # docs/algorithm.md, "Levels".
     levels: int = 0
+    # --layout: "" (the grid), "hex", "jitter:A", or "file" with the robots' x, y in
+    # `positions` (spacings, y down, one pair per robot id); docs/algorithm.md, "Layout".
+    layout: str = ""
+    positions: tuple[tuple[float, float], ...] = ()
     w1: float = field(default=1.0, init=False)
 
     def __post_init__(self) -> None:
@@ -95,6 +99,37 @@ class CamoParams:
             )
         for name in ("threshold", "rho_meas", "rho_comm", "w2_stripes", "w2_mottled"):
             object.__setattr__(self, name, float(getattr(self, name)))
+        self._check_layout()
+
+    def _check_layout(self) -> None:
+        layout = self.layout
+        if not isinstance(layout, str):
+            raise ParameterError(f"layout must be text (got {layout!r})")
+        positions = tuple((float(x), float(y)) for x, y in self.positions)
+        object.__setattr__(self, "positions", positions)  # hashable, from lists too
+        if not layout:
+            if positions:
+                raise ParameterError("positions are a file layout's: give layout file too")
+            return
+        if layout.startswith("jitter:"):
+            try:
+                amount = float(layout.split(":", 1)[1])
+            except ValueError:
+                amount = math.nan
+            if not 0.0 <= amount < 0.5:
+                raise ParameterError(f"jitter:A needs 0 <= A < 0.5 spacings (got {layout!r})")
+        elif layout == "file":
+            if len(positions) != self.rows * self.cols or self.rows != 1:
+                raise ParameterError(
+                    f"a file layout has rows 1 and one position per robot (got {len(positions)} "
+                    f"positions for {self.rows}x{self.cols})"
+                )
+            if not all(math.isfinite(v) for xy in positions for v in xy):
+                raise ParameterError("a file layout's positions must be finite numbers")
+        elif layout != "hex":
+            raise ParameterError(f"layout must be hex, jitter:A or file (got {layout!r})")
+        if self.orientation != "any":
+            raise ParameterError("--layout needs --orientation any: a layout has no grid axes")
 
     @property
     def orientation_any(self) -> bool:

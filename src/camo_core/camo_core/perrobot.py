@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from .layout import layout_for
 from .params import CamoParams
 from .result import RunResult, mean_p
 from .robot import RobotCore
@@ -32,13 +33,13 @@ def run_per_robot(
             bool(exempt[robot.row, robot.col]) if exempt is not None else False,
         )
     for robot in robots:
-        robot.describe([None if n is None else robots[n].sensed for n in robot.neighbors[:8]])
+        robot.describe([None if n is None else robots[n].sensed for n in robot.neighbors])
     if params.threshold_auto:
         for step in range(params.consensus_steps):
             sent = [(r.energy, r.degree) for r in robots]
             for robot in robots:
                 robot.average_energy(
-                    step, [None if n is None else sent[n] for n in robot.neighbors[:8]]
+                    step, [None if n is None else sent[n] for n in robot.neighbors]
                 )
     for robot in robots:
         robot.cast_vote()
@@ -48,7 +49,7 @@ def run_per_robot(
     for step in range(params.consensus_steps):
         sent = [(r.p, r.degree) for r in robots]
         for robot in robots:
-            robot.consensus(step, [None if n is None else sent[n] for n in robot.neighbors[:8]])
+            robot.consensus(step, [None if n is None else sent[n] for n in robot.neighbors])
         trace.append(mean_p(np.array([r.pattern_p for r in robots])))
     for robot in robots:
         robot.finish_consensus()
@@ -57,7 +58,10 @@ def run_per_robot(
     for step in range(params.formation_steps):
         sent_states = [r.state for r in robots]
         heard = [[None if n is None else sent_states[n] for n in r.neighbors] for r in robots]
-        relays = [r.relay(step, h) for r, h in zip(robots, heard, strict=True)]
+        relaying = params.orientation_any and not params.layout  # the grid's knight cells
+        relays = [
+            r.relay(step, h) if relaying else None for r, h in zip(robots, heard, strict=True)
+        ]
         for robot, states in zip(robots, heard, strict=True):
             from_relays = [None if n is None else relays[n] for n in robot.neighbors[:8]]
             robot.form(step, states, from_relays)
@@ -75,4 +79,5 @@ def run_per_robot(
         palette=np.array([r.palette for r in robots]).reshape(rows, cols, -1)
         if params.levels
         else None,
+        positions=layout_for(params).positions if params.layout else None,
     )

@@ -27,7 +27,6 @@ import math
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from .grid import NUM_SLOTS
 from .params import CamoParams
 from .robot import RobotCore
 from .robot_io import (
@@ -100,8 +99,7 @@ class StepProtocol:
         self.wait_started = 0.0
         self.energy_step: int | None = None  # --threshold auto: the averaging step, once described
         self.kinds = kinds_of(params)
-        self.listen = listen_slots(params)
-        self.colors = self.listen["color"]
+        self.listen = listen_slots(params, self.core.near, len(self.core.neighbors))
         # --orientation any: the formation step whose states were taken and relayed, and them.
         self.relayed: tuple[int, list] | None = None
         self.last_tick: float | None = None
@@ -191,10 +189,10 @@ class StepProtocol:
         """Take one step if it may be taken; False when the robot must wait."""
         core, params = self.core, self.params
         if self.phase == DISCOVERY:
-            pending = self._waiting_for("hello", 0, NUM_SLOTS, known_only=False)
+            pending = self._waiting_for("hello", 0, self.listen["hello"], known_only=False)
             if not self._ready(pending, self.discovery_timeout, now, ticking):
                 return False
-            core.discover([h is not None for h in self._take("hello", 0, NUM_SLOTS)])
+            core.discover([h is not None for h in self._take("hello", 0, self.listen["hello"])])
             self._next(SENSING, 0, now)
         elif self.phase == SENSING:
             if not self.background_up:
@@ -209,10 +207,13 @@ class StepProtocol:
                 self.wait_started = now
             if self.energy_step is None:
                 if not self._ready(
-                    self._waiting_for("color", 0, self.colors), self.step_timeout, now, ticking
+                    self._waiting_for("color", 0, self.listen["color"]),
+                    self.step_timeout,
+                    now,
+                    ticking,
                 ):
                     return False
-                core.describe(self._take("color", 0, self.colors))
+                core.describe(self._take("color", 0, self.listen["color"]))
                 self.energy_step = 0
                 if params.threshold_auto and params.consensus_steps:
                     self._wait_anew(now)
@@ -220,10 +221,10 @@ class StepProtocol:
                     return True
             if params.threshold_auto and self.energy_step < params.consensus_steps:
                 step = self.energy_step
-                pending = self._waiting_for("energy", step, 8)
+                pending = self._waiting_for("energy", step, self.listen["energy"])
                 if not self._ready(pending, self.step_timeout, now, ticking):
                     return False
-                core.average_energy(step, self._take("energy", step, 8))
+                core.average_energy(step, self._take("energy", step, self.listen["energy"]))
                 self.energy_step += 1
                 self._wait_anew(now)
                 if self.energy_step < params.consensus_steps:
@@ -242,10 +243,10 @@ class StepProtocol:
                 self._report(now, forced=True)
                 self._send("state", 0, core.state)
                 return True
-            pending = self._waiting_for("vote", self.step, 8)
+            pending = self._waiting_for("vote", self.step, self.listen["vote"])
             if not self._ready(pending, self.step_timeout, now, ticking):
                 return False
-            core.consensus(self.step, self._take("vote", self.step, 8))
+            core.consensus(self.step, self._take("vote", self.step, self.listen["vote"]))
             self.traces.p.extend(core.pattern_p)
             self._next(CONSENSUS, self.step + 1, now)
             self._report(now)
@@ -277,11 +278,11 @@ class StepProtocol:
         them, the neighbours' relays) are in; False while waiting."""
         step, core = self.step, self.core
         if self.relayed is None or self.relayed[0] != step:
-            pending = self._waiting_for("state", step, NUM_SLOTS)
+            pending = self._waiting_for("state", step, self.listen["state"])
             if not self._ready(pending, self.step_timeout, now, ticking):
                 return False
-            states = self._take("state", step, NUM_SLOTS)
-            if not self.params.orientation_any:
+            states = self._take("state", step, self.listen["state"])
+            if "relay" not in self.kinds:
                 core.form(step, states)
                 return True
             self.relayed = (step, states)

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .layout import layout_for
 from .orientation import selector
 from .params import CamoParams
 from .result import RunResult, mean_p, p_stats
@@ -172,6 +173,7 @@ class RoundRecord:
             elapsed_s=time.monotonic() - self.started,
             alive=None if alive.all() else alive.reshape(shape),
             palette=self.palette.reshape((*shape, -1)) if self.params.levels else None,
+            positions=layout_for(self.params).positions if self.params.layout else None,
             consensus_range=np.array(spread).reshape(-1, 3, 2) if spread else None,
         )
 

@@ -16,6 +16,7 @@ except ImportError:
     orjson = None
 
 from . import kernels, levels
+from .layout import layout_for
 from .orientation import CODES, ORIENTED, angle_of, pattern_name
 from .params import CamoParams
 from .rules import MOTTLED, PATTERN_NAMES
@@ -172,6 +173,9 @@ class RunResult:
             "consensus_trace": self.consensus_trace.tolist(),
             "elapsed_s": round(float(self.elapsed_s), 6),
         }
+        if params.layout:  # where the robots stood (summary.json's grids are by robot id)
+            summary["layout"] = params.layout
+            summary["positions"] = [list(xy) for xy in layout_for(params).positions.tolist()]
         if self.alive is not None:
             # A swarm run in which robots died: their cells hold null, and they are listed.
             dead = ~self.alive

@@ -12,8 +12,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from . import levels, orientation, rng, rules
+from . import layout_rules, levels, orientation, rng, rules
 from .grid import CONSENSUS_SLOTS, DESCRIPTOR_SLOTS, NUM_SLOTS, neighbor_ids, robot_id
+from .layout import places_for
 from .params import CamoParams, ParameterError
 from .sensing import noisy_value
 
@@ -43,9 +44,19 @@ class RobotCore:
                 f"{self.params.rows}x{self.params.cols} grid"
             )
         self.id = robot_id(self.row, self.col, self.params.cols)
-        self.neighbors: list[int | None] = neighbor_ids(
-            self.row, self.col, self.params.rows, self.params.cols
-        )
+        # On a --layout a robot's slots are its neighbours by range, the near ones first
+        # (colours, energies and votes come from those); on the grid the twelve of §1.
+        self.place = places_for(self.params)[self.id] if self.params.layout else None
+        if self.place is None:
+            self.neighbors: list[int | None] = neighbor_ids(
+                self.row, self.col, self.params.rows, self.params.cols
+            )
+            self.near = len(CONSENSUS_SLOTS)
+        else:
+            self.neighbors = list(self.place.neighbors)
+            self.near = self.place.near
+            self.known = [False] * len(self.neighbors)
+        self._kernel: tuple[list[int], float] | None = None  # a layout's, once it has a pattern
         self._arrivals: dict[tuple[int, int], tuple[bool, ...]] = {}
         # A lossless link delivers every neighbour's message: no draw needed.
         self._everyone = tuple(n is not None for n in self.neighbors)
@@ -84,13 +95,13 @@ class RobotCore:
     def discover(self, heard: Sequence[bool]) -> None:
         """`heard[s]`: a hello from slot s was delivered. Known = delivered and not lost."""
         arriving = self.arrivals(rng.STREAM_HELLO, 0)
-        self.known = [bool(heard[s]) and arriving[s] for s in range(NUM_SLOTS)]
+        self.known = [bool(heard[s]) and arriving[s] for s in range(len(self.neighbors))]
         self._known_counts()
 
     def _known_counts(self) -> None:
         """The consensus degree and the known-slot mask, once known changes (read every step)."""
-        self.degree = sum(self.known[s] for s in CONSENSUS_SLOTS)
-        self.known_mask = sum(1 << s for s in range(NUM_SLOTS) if self.known[s])
+        self.degree = sum(self.known[s] for s in range(self.near))
+        self.known_mask = sum(1 << s for s, known in enumerate(self.known) if known)
 
     # ---- phase 1: sensing and the local vote ----------------------------------
 
@@ -108,6 +119,13 @@ class RobotCore:
         """`colors[s]` for slots 0-3 (0-7 with --orientation any): the delivered neighbour
         values (None if none). Keeps the scores (or the structure tensor); the texture energy,
         which --threshold auto averages before the vote."""
+        if self.place is not None:
+            received = self._filter(rng.STREAM_COLOR, 0, colors, range(self.near))
+            offsets = self.place.offsets[: self.near]
+            fitted = layout_rules.fitted_tensor(self.sensed, received, offsets)
+            self.tensor = fitted or (0.0, 0.0, 0.0)  # too few bearings: it abstains
+            self.energy = layout_rules.texture_energy(self.sensed, received, offsets)
+            return self.energy
         received = self._filter(rng.STREAM_COLOR, 0, colors, DESCRIPTOR_SLOTS)
         horizontal, vertical, self.energy = rules.descriptor(
             self.sensed, received, self.params.profile
@@ -120,7 +138,7 @@ class RobotCore:
 
     def average_energy(self, step: int, energies: Sequence[tuple[float, int] | None]) -> float:
         """`energies[s]` for slots 0-7: (energy, degree) delivered for `step`, or None."""
-        received = self._filter(rng.STREAM_ENERGY, step, energies, CONSENSUS_SLOTS)
+        received = self._filter(rng.STREAM_ENERGY, step, energies, range(self.near))
         self.energy = rules.energy_step(self.energy, self.degree, received)
         return self.energy
 
@@ -144,7 +162,7 @@ class RobotCore:
 
     def consensus(self, step: int, votes: Sequence[Vote | None]) -> tuple[float, float, float]:
         """`votes[s]` for slots 0-7: (p, degree) delivered for `step`, or None."""
-        received = self._filter(rng.STREAM_CONSENSUS, step, votes, CONSENSUS_SLOTS)
+        received = self._filter(rng.STREAM_CONSENSUS, step, votes, range(self.near))
         self.p = rules.consensus_step(self.p, self.degree, received)
         return self.p
 
@@ -185,9 +203,9 @@ class RobotCore:
         (--orientation any) `relays[s]` for slots 0-7: their relays for `step`, or None."""
         if self.pattern is None:
             self.finish_consensus()
-        received = self._filter(rng.STREAM_STATE, step, states, range(NUM_SLOTS))
+        received = self._filter(rng.STREAM_STATE, step, states, range(len(self.neighbors)))
         knights = [None] * 8
-        if self.params.orientation_any:
+        if self.params.orientation_any and self.place is None:
             relayed = self._filter(rng.STREAM_RELAY, step, relays, CONSENSUS_SLOTS)
             knights = orientation.knight_states(relayed)
         if not self.params.levels:
@@ -208,6 +226,11 @@ class RobotCore:
         return self.state
 
     def _form_layer(self, state: int, received: list, knights: list) -> int:
+        if self.place is not None:
+            if self._kernel is None:
+                self._kernel = layout_rules.kernel(self.pattern, self.place.offsets, self.params)
+            roles, w2 = self._kernel
+            return layout_rules.formation_step(state, roles, w2, received, self.params)
         if not self.params.orientation_any:
             return rules.formation_step(state, self.pattern, received, self.params)
         return orientation.formation_step(

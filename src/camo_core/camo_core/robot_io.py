@@ -41,8 +41,11 @@ PHASE_OF = {
 }
 
 
-def listen_slots(params: CamoParams) -> dict[str, int]:
-    """How many slots each kind is heard from in a run with these parameters."""
+def listen_slots(params: CamoParams, near: int = 8, slots: int = NUM_SLOTS) -> dict[str, int]:
+    """How many slots each kind is heard from in a run with these parameters; on a --layout,
+    by a robot with `near` near neighbours among its `slots`."""
+    if params.layout:
+        return {"hello": slots, "color": near, "energy": near, "vote": near, "state": slots}
     return {**LISTEN, "color": 8} if params.orientation_any else LISTEN
 
 
@@ -57,7 +60,7 @@ def messages_per_round(params: CamoParams) -> dict[str, int]:
     if params.threshold_auto:
         sent["energy"] = params.consensus_steps
     sent |= {"vote": params.consensus_steps, "state": params.formation_steps}
-    if params.orientation_any:
+    if params.orientation_any and not params.layout:  # a layout's robots hear two hops
         sent["relay"] = params.formation_steps
     return sent
 

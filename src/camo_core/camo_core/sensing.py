@@ -172,13 +172,16 @@ class Projection:
     """The backgrounds projected so far, as sensed grids (one resize per image, shared by all the
     robots of a process)."""
 
-    def __init__(self, rows: int, cols: int, profile: str) -> None:
+    def __init__(self, rows: int, cols: int, profile: str, sample=None) -> None:
         self.rows, self.cols, self.profile = rows, cols, profile
+        # How an image becomes the robots' greys (rows x cols, by robot id): block means, or
+        # on a --layout the means round the robots' positions (layout.sense_at).
+        self.sample = sample or (lambda image: sense_image(image, rows, cols, profile))
         self.grids: list[np.ndarray] = []
 
     def add(self, image: np.ndarray) -> None:
         """Raises ImageError for an image smaller than the grid."""
-        self.grids.append(sense_image(image, self.rows, self.cols, self.profile))
+        self.grids.append(self.sample(image))
 
 
 class ProjectedSensor:

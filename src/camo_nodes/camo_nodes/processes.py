@@ -40,6 +40,18 @@ def _dying_with(parent: int, how: int = signal.SIGKILL) -> Callable[[], None]:
     return die_with_parent
 
 
+def layout_parameter(config: RunConfig) -> str:
+    """A robot node's layout parameter: hex or jitter:A as given, a file layout as a CSV the
+    run writes into its folder (the node reads it as --layout FILE would)."""
+    params = config.params
+    if params.layout != "file":
+        return params.layout or '""'
+    path = config.folder / "layout.csv"
+    if not path.exists():
+        path.write_text("".join(f"{x!r},{y!r}\n" for x, y in params.positions))
+    return str(path.resolve())
+
+
 def robot_parameters(config: RunConfig, robot: int) -> list[str]:
     """A standalone robot's (or bridge's) ROS parameters, as -p options."""
     params = config.params
@@ -57,6 +69,7 @@ def robot_parameters(config: RunConfig, robot: int) -> list[str]:
         "threshold_auto": str(params.threshold_auto).lower(),
         "orientation": params.orientation,
         "levels": params.levels,
+        "layout": layout_parameter(config),
         "consensus_steps": params.consensus_steps,
         "formation_steps": params.formation_steps,
         "step_timeout": float(config.step_timeout),

@@ -22,7 +22,8 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from camo_core.exceptions import CamoError
-from camo_core.options import node_help, wants_help
+from camo_core.layout import layout_for, sense_at
+from camo_core.options import layout_options, node_help, wants_help
 from camo_core.params import CamoParams, ParameterError
 from camo_core.protocol import StepProtocol
 from camo_core.robot_io import NOTHING, Display, Message, Output, Sensor
@@ -118,6 +119,7 @@ ROBOT_PARAMETERS = {
     "threshold_auto": False,
     "orientation": "axes",
     "levels": 0,
+    "layout": "",
     "consensus_steps": -1,
     "formation_steps": -1,
     "step_timeout": 10.0,
@@ -126,13 +128,22 @@ ROBOT_PARAMETERS = {
 }
 
 
+def projected_on(params: CamoParams):
+    """How a projected image becomes the robots' greys: None (block means), or on a layout the
+    means round their positions."""
+    if not params.layout:
+        return None
+    layout = layout_for(params)
+    shape = (params.rows, params.cols)
+    return lambda image: sense_at(image, layout, params.profile).reshape(shape)
+
+
 def params_from_values(values: dict) -> tuple[CamoParams, int, int, float, float]:
     """A standalone robot's ROS parameters as (params, row, col, step timeout, discovery timeout);
     raises ParameterError."""
     params = CamoParams(
         profile=values["profile"],
-        rows=values["rows"],
-        cols=values["cols"],
+        **layout_options(values["layout"], values["rows"], values["cols"]),
         threshold=values["threshold"],
         threshold_auto=values["threshold_auto"],
         orientation=values["orientation"],
@@ -201,7 +212,7 @@ def host_robots(
     unless `sensors` names another (a Droplet's); `lean` robots have no services of their own."""
     node = host_node(topics)
     transport = Transport(node, params, topics, tiles, setup)
-    projection = Projection(params.rows, params.cols, params.profile)
+    projection = Projection(params.rows, params.cols, params.profile, projected_on(params))
     robots = []
     for cell in sorted(transport.hosted):
         row, col = divmod(cell, params.cols)

@@ -29,7 +29,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
-from camo_core.grid import neighbor_ids
+from camo_core.layout import slot_ids
 from camo_core.params import CamoParams
 from camo_core.robot_io import PHASE_OF, Message, Report, kinds_of, messages_per_round
 from camo_core.validation import message_problem, phase_problem
@@ -141,14 +141,11 @@ def listener_qos() -> QoSProfile:
 
 
 def edge_of(params: CamoParams, hosted: set[int], robots: Iterable[int]) -> set[int]:
-    """Robots with a neighbour (any of the 12 slots) that this process does not host."""
+    """Robots with a neighbour (any of the 12 slots, or a layout's) this process does not
+    host."""
     edge = set()
     for robot in robots:
-        row, col = divmod(robot, params.cols)
-        if any(
-            n is not None and n not in hosted
-            for n in neighbor_ids(row, col, params.rows, params.cols)
-        ):
+        if any(n is not None and n not in hosted for n in slot_ids(params, robot)):
             edge.add(robot)
     return edge
 

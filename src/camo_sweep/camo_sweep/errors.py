@@ -67,6 +67,8 @@ class ErrorPoint:
 
 def error_spec(args, rhos: list[float]) -> SweepSpec:
     """The preset: the run options given, three blocks over rho, --trials replicates."""
+    if args.layout:
+        raise UsageError("./camo errors runs on the grid: --layout is for ./camo sim and run")
     options = {"image": args.image} if args.image else {"pattern": args.pattern or "forest"}
     options |= {"rows": args.rows, "cols": args.cols, "profile": args.profile}
     options["threshold"] = args.threshold

@@ -101,7 +101,7 @@ def simulate_options(
 def check_options(options: dict[str, Any]) -> None:
     """Raise the one-line error of options that cannot make a run (before any is run)."""
     if options.get("layout"):
-        raise UsageError("sweeps run on the grid: --layout is ./camo sim's alone for now")
+        raise UsageError("sweeps run on the grid: --layout is for ./camo sim and run, for now")
     params_from(namespace(options, 0))
 
 
