@@ -88,3 +88,18 @@ def test_a_recorded_scene_and_diagnostics_decode_in_foxglove_libraries(recorded,
     first = health["last"]["status"]["first"][0]
     assert first["name"] == "camo/robot_0_0"
     assert first["values"]["first"][0]["key"] == "phase"
+
+
+def test_on_a_layout_each_cube_stands_at_its_position_in_its_palettes_grey():
+    params = CamoParams(rows=2, cols=3, layout="hex", orientation="any", levels=3)
+    rec = RoundRecord(params)
+    rec.sensed[:] = 100.0
+    rec.state[:] = [0b11, 0b01, 0, -1, 0b11, 0]
+    rec.palette[:] = [20, 120, 230]
+    cubes = scene.markers(rec, np.zeros(6, bool), set(), Time()).markers[0]
+    # Row 1 is offset by half a spacing and sqrt(3)/2 down (y up in the scene).
+    assert cubes.points[3].x == 0.5 * scene.SPACING
+    assert np.isclose(cubes.points[3].y, -np.sqrt(3) / 2 * scene.SPACING)
+    greys = [c.r for c in cubes.colors]
+    assert np.allclose(greys[:3], [20 / 255, 120 / 255, 230 / 255])
+    assert np.isclose(greys[3], 100 / 255)  # no state yet: its sensed grey

@@ -23,6 +23,9 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from camo_core import levels
+from camo_core.layout import layout_for
+from camo_core.params import CamoParams
 from camo_core.record import RoundRecord
 from camo_core.robot_io import PHASE_NAMES
 
@@ -34,8 +37,12 @@ DEAD = ColorRGBA(r=0.9, g=0.1, b=0.1, a=1.0)
 BRIDGED = ColorRGBA(r=0.1, g=0.4, b=1.0, a=1.0)
 
 
-def position(robot: int, cols: int, z: float = 0.0) -> Point:
-    row, col = divmod(robot, cols)
+def position(robot: int, params: CamoParams, z: float = 0.0) -> Point:
+    """A robot's place in the scene: its grid cell, or on a --layout its position."""
+    if params.layout:
+        x, y = layout_for(params).positions[robot]
+        return Point(x=float(x) * SPACING, y=-float(y) * SPACING, z=z)
+    row, col = divmod(robot, params.cols)
     return Point(x=col * SPACING, y=-row * SPACING, z=z)
 
 
@@ -43,14 +50,18 @@ def shown_grey(record: RoundRecord) -> tuple[np.ndarray, np.ndarray]:
     """Each robot's grey (0..1) and opacity: its state's colour once it has one (on = dark), its
     sensed grey before, a faint mid-grey until it reports."""
     sensed = np.nan_to_num(record.sensed, nan=128.0) / 255.0
-    grey = np.where(record.state == 1, 0.0, np.where(record.state == 0, 1.0, sensed))
+    if record.params.levels:  # the palette's grey of the layers on
+        shown = levels.shown_grid(np.maximum(record.state, 0), record.palette) / 255.0
+        grey = np.where(record.state >= 0, shown, sensed)
+    else:
+        grey = np.where(record.state == 1, 0.0, np.where(record.state == 0, 1.0, sensed))
     alpha = np.where(np.isnan(record.sensed) & (record.state < 0), 0.3, 1.0)
     return grey, alpha
 
 
-def _outline(robot: int, cols: int) -> list[Point]:
+def _outline(robot: int, params: CamoParams) -> list[Point]:
     """The four edges of a robot's square, as line-list point pairs."""
-    centre = position(robot, cols, HEIGHT)
+    centre = position(robot, params, HEIGHT)
     half = SPACING * 0.48
     corners = [(-half, -half), (half, -half), (half, half), (-half, half)]
     points = [Point(x=centre.x + dx, y=centre.y + dy, z=centre.z) for dx, dy in corners]
@@ -58,14 +69,13 @@ def _outline(robot: int, cols: int) -> list[Point]:
 
 
 def markers(record: RoundRecord, dead: np.ndarray, bridged: set[int], stamp: Time) -> MarkerArray:
-    cols = record.params.cols
     grey, alpha = shown_grey(record)
     cubes = Marker(ns="camo/robots", id=0, type=Marker.CUBE_LIST, action=Marker.ADD)
     cubes.header.frame_id, cubes.header.stamp = FRAME, stamp
     cubes.pose.orientation.w = 1.0
     cubes.scale.x = cubes.scale.y = SIZE
     cubes.scale.z = HEIGHT
-    cubes.points = [position(i, cols, HEIGHT / 2) for i in range(record.params.count)]
+    cubes.points = [position(i, record.params, HEIGHT / 2) for i in range(record.params.count)]
     cubes.colors = [
         ColorRGBA(r=float(g), g=float(g), b=float(g), a=float(a))
         for g, a in zip(grey, alpha, strict=True)
@@ -76,7 +86,7 @@ def markers(record: RoundRecord, dead: np.ndarray, bridged: set[int], stamp: Tim
     outlines.scale.x = SPACING * 0.06  # line width
     for robot in sorted(set(np.flatnonzero(dead)) | bridged):
         colour = DEAD if dead[robot] else BRIDGED
-        edges = _outline(int(robot), cols)
+        edges = _outline(int(robot), record.params)
         outlines.points += edges
         outlines.colors += [colour] * len(edges)
     if not outlines.points:
