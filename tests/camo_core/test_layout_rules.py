@@ -113,7 +113,8 @@ def test_sim_on_a_layout_writes_its_positions_and_refuses_what_it_cannot(tmp_pat
     assert out.returncode == 0, out.stderr
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert summary["layout"] == "hex" and len(summary["positions"]) == 36
-    assert (tmp_path / "a" / "figure.png").exists()
+    assert (tmp_path / "a" / "figure.png").exists() and (tmp_path / "a" / "run.gif").exists()
+    assert "wrote" in out.stdout and "run.gif" in out.stdout
     said = run_camo("sim", "--layout", "hex", "--out", str(tmp_path / "b"))
     assert said.returncode == 2
     assert said.stderr.strip() == (

@@ -26,7 +26,8 @@ import numpy as np
 from PIL import Image
 
 from . import levels
-from .figures import PATTERN_COLORS, mark
+from .figures import PATTERN_COLORS, draw_discs, mark
+from .layout import layout_for
 from .params import CamoParams
 from .tensor_colours import direction_legend, tensor_rgb
 
@@ -54,7 +55,9 @@ class Snapshots:
 
     def __init__(self, params: CamoParams) -> None:
         self.params = params
-        self.stride = max(1, math.ceil(max(params.rows, params.cols) / MAX_SIDE))
+        # A layout's robots are drawn at their positions, every one of them.
+        side = max(params.rows, params.cols)
+        self.stride = 1 if params.layout else max(1, math.ceil(side / MAX_SIDE))
         consensus, formation = shown_steps(params.consensus_steps, params.formation_steps)
         self.wanted = {"consensus": set(consensus), "formation": set(formation)}
         self.frames: dict[tuple[int, int], tuple[str, np.ndarray]] = {}
@@ -117,9 +120,17 @@ def write_animation(
     frames = snapshots.shown()
     grey = np.nan_to_num(np.asarray(sensed, float), nan=128.0)
     fig, (left, right) = plt.subplots(1, 2, figsize=(6.4, 3.9), dpi=80)
-    left.imshow(snapshots.cells(grey), cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+    params = snapshots.params
+    positions = layout_for(params).positions if params.layout else None
+    if positions is None:
+        left.imshow(snapshots.cells(grey), cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        shown = right.imshow(frames[0][1], interpolation="nearest", animated=True)
+    else:  # each robot a disc at its position, recoloured frame by frame
+        draw_discs(left, positions, grey)
+        shown = draw_discs(right, positions, np.zeros(len(positions)))
+        shown.set_array(None)
+        shown.set_animated(True)
     left.set_title("sensed grey", fontsize=9)
-    shown = right.imshow(frames[0][1], interpolation="nearest", animated=True)
     caption = right.set_title(frames[0][0], fontsize=9)
     all_marks = {**(marks or {}), "dead": np.asarray(dead, bool)}
     all_marks = {name: snapshots.cells(mask) for name, mask in all_marks.items()}
@@ -127,8 +138,8 @@ def write_animation(
     for ax in (left, right):
         ax.set_xticks([])
         ax.set_yticks([])
-        handles = mark(ax, all_marks)
-    on_top = [caption, *right.collections]  # drawn again over each frame's image
+        handles = mark(ax, all_marks, positions)
+    on_top = [caption, *(c for c in right.collections if c is not shown)]  # drawn over the frame
     for artist in on_top:
         artist.set_animated(True)
     if snapshots.params.orientation_any:
@@ -150,7 +161,10 @@ def write_animation(
     images = []
     for text, rgb in frames:
         canvas.restore_region(still)
-        shown.set_data(rgb)
+        if positions is None:
+            shown.set_data(rgb)
+        else:
+            shown.set_facecolor(rgb.reshape(-1, 3))
         caption.set_text(text)
         for artist in (shown, *on_top):
             fig.draw_artist(artist)

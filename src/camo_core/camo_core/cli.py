@@ -97,17 +97,20 @@ def sim_on_layout(args: argparse.Namespace) -> int:
         raise UsageError("--sensed names grid cells: it does not go with --layout")
     params = params_from(args)
     image, label = image_from(args)
-    raw = sense_at(image, layout_for(params)).reshape(params.rows, params.cols)
-    result = run_per_robot(params, raw)
+    raw = sense_at(image, layout_for(params), params.profile).reshape(params.rows, params.cols)
+    snapshots = Snapshots(params)
+    result = run_per_robot(params, raw, observe=snapshots)
     folder = out_dir(args)
     summary = result.summary(arrays=True)
     write_summary(summary, folder)
     write_params_file(args.options_parser, args, folder)
     title = run_title(label, params)
     figures.run_figure(result, image, folder / "figure.png", title=title)
+    dead = np.zeros(params.count, bool)
+    write_animation(snapshots, result.sensed, dead, folder / "run.gif", title)
     print(
-        f"pattern: {pattern_said(summary)}; wrote {folder}/summary.json and figure.png; "
-        f"simulated robot by robot in {result.elapsed_s:.3f} s"
+        f"pattern: {pattern_said(summary)}; wrote {folder}/summary.json, figure.png and "
+        f"run.gif; simulated robot by robot in {result.elapsed_s:.3f} s"
     )
     return 0
 

@@ -134,7 +134,7 @@ def run_plot(
     all_marks = dict(marks or {})
     if result.alive is not None:
         all_marks["dead"] = ~result.alive
-    handles = mark(axes[1], all_marks) + mark(axes[3], all_marks) + mark(axes[4], all_marks)
+    handles = [h for ax in axes[[1, 3, 4]] for h in mark(ax, all_marks, result.positions)]
     if handles:
         legend = {h.get_label(): h for h in handles}
         fig.legend(legend.values(), legend.keys(), loc="lower right", fontsize=8, ncol=4)
@@ -147,8 +147,9 @@ def run_plot(
     return fig
 
 
-def draw_discs(ax, positions: np.ndarray, greys: np.ndarray) -> None:
-    """--layout: each robot a disc at its position, in its grey (y down, as on the grid)."""
+def draw_discs(ax, positions: np.ndarray, greys: np.ndarray):
+    """--layout: each robot a disc at its position, in its grey (y down, as on the grid); the
+    discs' collection."""
     discs = matplotlib.collections.PatchCollection(
         [matplotlib.patches.Circle((x, y), 0.45) for x, y in positions],
         cmap="gray",
@@ -162,6 +163,7 @@ def draw_discs(ax, positions: np.ndarray, greys: np.ndarray) -> None:
     ax.set_ylim(high[1], low[1])
     ax.set_aspect("equal")
     ax.set_facecolor("#c8d2e0")
+    return discs
 
 
 def _direction(ax, degrees: int, height: float, width: float, y: float, x: float) -> None:
@@ -218,13 +220,18 @@ def _tensor_panel(ax, result: RunResult) -> None:
     ax.set_title(f"consensus: {result.majority_label}")
 
 
-def mark(ax, marks: dict[str, np.ndarray]) -> list:
-    """Scatter the marked robots of each kind on a grid panel; their legend handles."""
+def mark(ax, marks: dict[str, np.ndarray], positions: np.ndarray | None = None) -> list:
+    """Scatter the marked robots of each kind on a grid panel (or, with `positions`, a
+    layout's); their legend handles."""
     handles = []
     for name, mask in marks.items():
-        rows, cols = np.nonzero(np.asarray(mask, bool))
-        if len(rows):
-            handles.append(ax.scatter(cols, rows, s=28, linewidths=1.3, **MARK_STYLES[name]))
+        mask = np.asarray(mask, bool)
+        if positions is None:
+            ys, xs = np.nonzero(mask)
+        else:
+            xs, ys = positions[mask.ravel()].T
+        if len(xs):
+            handles.append(ax.scatter(xs, ys, s=28, linewidths=1.3, **MARK_STYLES[name]))
     return handles
 
 

@@ -15,12 +15,18 @@ from .layout import layout_for
 from .params import CamoParams
 from .result import RunResult, mean_p
 from .robot import RobotCore
+from .simulator import Observer
 
 
 def run_per_robot(
-    params: CamoParams, raw_sensed: np.ndarray, exempt: np.ndarray | None = None
+    params: CamoParams,
+    raw_sensed: np.ndarray,
+    exempt: np.ndarray | None = None,
+    observe: Observer | None = None,
 ) -> RunResult:
-    """`raw_sensed`: rows x cols block means before noise; `exempt`: real readings (no noise)."""
+    """`raw_sensed`: rows x cols block means before noise; `exempt`: real readings (no noise);
+    `observe` is shown every step as the simulator shows it (`simulator.Observer`)."""
+    shown = observe or (lambda phase, step, values: None)
     start = time.perf_counter()
     rows, cols = params.rows, params.cols
     robots = [RobotCore(params, i, j) for i in range(rows) for j in range(cols)]
@@ -46,15 +52,21 @@ def run_per_robot(
     votes = np.array([r.vote for r in robots]).reshape(rows, cols)
 
     trace = [mean_p(np.array([r.pattern_p for r in robots]))]
+    shown("consensus", 0, np.array([r.pattern_p for r in robots]))
     for step in range(params.consensus_steps):
         sent = [(r.p, r.degree) for r in robots]
         for robot in robots:
             robot.consensus(step, [None if n is None else sent[n] for n in robot.neighbors])
         trace.append(mean_p(np.array([r.pattern_p for r in robots])))
+        shown("consensus", step + 1, np.array([r.pattern_p for r in robots]))
     for robot in robots:
         robot.finish_consensus()
     initial = np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols)
 
+    def formation_view():  # what a GIF shows of formation: the states, or with --levels the greys
+        return np.array([r.display if params.levels else r.state for r in robots])
+
+    shown("formation", 0, formation_view())
     for step in range(params.formation_steps):
         sent_states = [r.state for r in robots]
         heard = [[None if n is None else sent_states[n] for n in r.neighbors] for r in robots]
@@ -65,6 +77,7 @@ def run_per_robot(
         for robot, states in zip(robots, heard, strict=True):
             from_relays = [None if n is None else relays[n] for n in robot.neighbors[:8]]
             robot.form(step, states, from_relays)
+        shown("formation", step + 1, formation_view())
 
     return RunResult(
         params=params,
