@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import copy
 import itertools
+import math
 import os
 import sys
 import time
@@ -175,13 +176,18 @@ def layout_options(spec: str | None, rows: int, cols: int) -> dict:
 
 
 def params_from(args: argparse.Namespace) -> CamoParams:
+    where = layout_options(getattr(args, "layout", None), args.rows, args.cols)
     steps = args.consensus_steps
     if steps == AUTO:
-        steps = auto_consensus_steps(args.profile, args.rows, args.cols)
+        rows, cols = where["rows"], where["cols"]
+        if where.get("positions"):  # a file's robots: their extent, not one long row
+            extent = np.ptp(np.array(where["positions"]), axis=0)
+            rows = cols = math.ceil(float(extent.max())) + 1
+        steps = auto_consensus_steps(args.profile, rows, cols)
     auto = args.threshold == AUTO
     return CamoParams(
         profile=args.profile,
-        **layout_options(getattr(args, "layout", None), args.rows, args.cols),
+        **where,
         threshold=CamoParams.threshold if auto else args.threshold,
         threshold_auto=auto,
         orientation=args.orientation,
