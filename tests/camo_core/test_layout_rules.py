@@ -9,7 +9,7 @@ from support import brick_courses, run_camo
 
 from camo_core import orientation
 from camo_core.backgrounds import background, stripes
-from camo_core.layout import LayoutError, layout_for, layout_of, sense_at
+from camo_core.layout import LayoutError, layout_for, layout_of, places_for, sense_at
 from camo_core.layout_rules import fitted_tensor, kernel
 from camo_core.params import CamoParams, ParameterError
 from camo_core.perrobot import run_per_robot
@@ -39,14 +39,26 @@ def test_a_layout_file_is_read_or_refused_in_one_line(tmp_path):
     good = tmp_path / "swarm.csv"
     good.write_text("x,y\n0,0\n1,0\n0.5,0.9\n")
     assert layout_of(str(good), 8, 8, 0).positions.tolist() == [[0, 0], [1, 0], [0.5, 0.9]]
-    for text, said in (("0,0\n1,nan\n", "line 2"), ("0,0\n0.05,0\n", "0.05 spacings apart"),
-                       ("", "no positions")):  # fmt: skip
+    cases = (("0,0\n1,nan\n", "line 2"), ("0,0\n0.3,0\n", "0.3 spacings apart"),
+             ("", "no positions"), ("x,y\n0,0\n\n1,2,3\n", "line 4"),
+             ("1e308,0\n-1e308,0\n", "line 1"))  # fmt: skip
+    for text, said in cases:
         bad = tmp_path / "bad.csv"
         bad.write_text(text)
         with pytest.raises(LayoutError, match=said):
             layout_of(str(bad), 8, 8, 0)
     with pytest.raises(LayoutError, match="cannot read the layout"):
         layout_of(str(tmp_path / "missing.csv"), 8, 8, 0)
+
+
+def test_a_layout_that_crowds_a_robot_is_refused(tmp_path):
+    dense = tmp_path / "dense.csv"
+    dense.write_text("".join(f"{0.5 * j + 0.25 * (i % 2)},{0.45 * i}\n"
+                             for i in range(14) for j in range(14)))  # fmt: skip
+    params = CamoParams(rows=1, cols=196, layout="file", orientation="any",
+                        positions=layout_of(str(dense), 8, 8, 0).positions.tolist())  # fmt: skip
+    with pytest.raises(LayoutError, match=r"neighbours within 2\.3 spacings: at most 64"):
+        places_for(params)
 
 
 def test_the_fitted_tensor_of_a_ramp_lies_across_it_and_needs_three_bearings():

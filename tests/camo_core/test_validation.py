@@ -82,7 +82,18 @@ def test_relays_and_tensors_pass_only_in_a_run_with_orientation_any():
     oriented = PARAMS.with_(orientation="any")
     relay = Message("relay", 3, 0, 5, (1, 0, None, None, 1, 1, 0, None))
     assert message_problem(relay, oriented) is None
-    assert message_problem(relay, PARAMS) == "a relay in a run without --orientation any"
+    assert (
+        message_problem(relay, PARAMS) == "a relay in a run without --orientation any on the grid"
+    )
+    on_layout = oriented.with_(layout="hex")
+    assert (
+        message_problem(relay, on_layout)
+        == "a relay in a run without --orientation any on the grid"
+    )
+    # A layout's robot can have more than eight near neighbours.
+    vote = Message("vote", 3, 0, 0, ((0.2, 0.1, 0.0), 11))
+    assert message_problem(vote, on_layout) is None
+    assert message_problem(vote, oriented) == "vote out of range"
     for bad, reason in (
         ((1, 0, 2, None, 1, 1, 0, None), "relay out of range"),
         ((1, 0), "relay out of range"),

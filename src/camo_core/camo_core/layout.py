@@ -28,6 +28,9 @@ from .sensing import to_gray
 
 NEAR = 1.5
 FAR = 2.3
+MIN_GAP = 0.5  # spacings: closer robots would crowd a robot's reach
+MAX_SLOTS = 64  # neighbours within FAR: RobotStatus.known_slots is a 64-bit mask
+MAX_COORDINATE = 1e6
 KINDS = ("hex", "jitter:A", "FILE")
 STREAM_JITTER = 9  # rng stream of the jitter draws (a = coordinate, b = robot)
 MAX_ROBOTS = 65536
@@ -80,6 +83,11 @@ def places_for(params: CamoParams) -> tuple[Place, ...]:
             (float(layout.positions[j, 0] - here[0]), float(layout.positions[j, 1] - here[1]))
             for j in slots
         )
+        if len(slots) > MAX_SLOTS:
+            raise LayoutError(
+                f"robot {robot} has {len(slots)} neighbours within {FAR:g} spacings: at most "
+                f"{MAX_SLOTS} (spread the robots out)"
+            )
         out.append(Place(slots, len(near), offsets))
     return tuple(out)
 
@@ -121,29 +129,46 @@ def read_positions(path: Path) -> np.ndarray:
     """x,y per line (spacings); a header line of words is skipped."""
     try:
         with open(path, newline="") as handle:
-            lines = [row for row in csv.reader(handle) if row and any(c.strip() for c in row)]
+            lines = [
+                (number, row)
+                for number, row in enumerate(csv.reader(handle), 1)
+                if row and any(c.strip() for c in row)
+            ]
     except OSError as exc:
         raise LayoutError(f"cannot read the layout {path}: {exc.strerror or exc}") from None
     except (UnicodeDecodeError, csv.Error):
         raise LayoutError(f"layout {path} is not a CSV file of x,y positions") from None
-    if lines and not _numbers(lines[0]):
-        lines = lines[1:]
-    bad = next((n for n, row in enumerate(lines, 1) if len(row) != 2 or not _numbers(row)), None)
+    if lines and not _parses(lines[0][1]):
+        lines = lines[1:]  # a header of words
+    bad = next((n for n, row in lines if len(row) != 2 or not _numbers(row)), None)
     if bad is not None or not lines:
         where = f"line {bad}" if bad is not None else "no positions"
-        raise LayoutError(f"layout {path}: {where}: want x,y (two finite numbers) per line")
+        raise LayoutError(
+            f"layout {path}: {where}: want x,y (two numbers within +-{MAX_COORDINATE:g}) a line"
+        )
+    lines = [row for _, row in lines]
     if len(lines) > MAX_ROBOTS:
         raise LayoutError(f"layout {path} has {len(lines)} robots, above {MAX_ROBOTS}")
     positions = np.array([[float(x), float(y)] for x, y in lines])
     close = _closest_pair(positions)
-    if close is not None and close < 0.1:
-        raise LayoutError(f"layout {path} has two robots {close:.3g} spacings apart (< 0.1)")
+    if close is not None and close < MIN_GAP:
+        raise LayoutError(
+            f"layout {path} has two robots {close:.3g} spacings apart (< {MIN_GAP:g})"
+        )
     return positions
+
+
+def _parses(row: list[str]) -> bool:
+    try:
+        [float(c) for c in row]
+    except ValueError:
+        return False
+    return True
 
 
 def _numbers(row: list[str]) -> bool:
     try:
-        return all(math.isfinite(float(c)) for c in row)
+        return all(abs(float(c)) <= MAX_COORDINATE for c in row)  # NaN fails too
     except ValueError:
         return False
 

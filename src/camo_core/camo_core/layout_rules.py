@@ -94,12 +94,13 @@ def kernel(
     roles = []
     angle = orientation.angle_of(code)
     for dx, dy in offsets:
-        r = math.hypot(dx, dy)
+        r = round(math.hypot(dx, dy), 9)
         if angle is None:
             roles.append(1 if r <= MOTTLED_ACTIVATOR else -1 if r <= MOTTLED_INHIBITOR else 0)
             continue
         c, s = math.cos(math.radians(angle)), math.sin(math.radians(angle))
-        along, across = abs(dx * c - dy * s), abs(dx * s + dy * c)
+        along = round(abs(dx * c - dy * s), 9)  # exactly 0.5 or 1.5 stays so (orientation.py)
+        across = round(abs(dx * s + dy * c), 9)
         if across < 0.5 and r <= STRIPE_REACH:
             roles.append(1)
         elif 0.5 <= across < 1.5 and along < 1.5:

@@ -185,8 +185,10 @@ def _oriented_roles(degrees: float) -> list[int]:
     c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
     roles = []
     for di, dj in OFFSETS:
-        along = abs(dj * c - di * s)
-        across = abs(dj * s + di * c)
+        # Rounded, so that a distance of exactly 0.5 or 1.5 (sin 30 is 0.49999999999999994 in
+        # floats) falls on the side the rule puts it, and mirror angles get mirror kernels.
+        along = round(abs(dj * c - di * s), 9)
+        across = round(abs(dj * s + di * c), 9)
         if across < 0.5:
             roles.append(1)
         elif across < 1.5 and along < 1.5:

@@ -124,8 +124,8 @@ class CamoParams:
                     f"a file layout has rows 1 and one position per robot (got {len(positions)} "
                     f"positions for {self.rows}x{self.cols})"
                 )
-            if not all(math.isfinite(v) for xy in positions for v in xy):
-                raise ParameterError("a file layout's positions must be finite numbers")
+            if not all(abs(v) <= 1e6 for xy in positions for v in xy):  # NaN fails too
+                raise ParameterError("a file layout's positions must be numbers within +-1e6")
         elif layout != "hex":
             raise ParameterError(f"layout must be hex, jitter:A or file (got {layout!r})")
         if self.orientation != "any":

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from .layout import MAX_SLOTS
 from .levels import BIN_WIDTH, BINS
 from .orientation import CODES
 from .params import CamoParams
@@ -98,6 +99,7 @@ def message_problem(message: Message, params: CamoParams) -> str | None:
     if message.round < 0:
         return "round out of range"
     kind, value, step = message.kind, message.value, message.step
+    most = MAX_SLOTS if params.layout else 8  # neighbours a degree counts
     if kind == "hello":
         if step != 0 or tuple(value) != divmod(message.sender, params.cols):
             return "hello from the wrong cell"
@@ -110,13 +112,13 @@ def message_problem(message: Message, params: CamoParams) -> str | None:
             return "an energy in a run without --threshold auto"
         if not 0 <= step < params.consensus_steps:
             return "step out of range"
-        if not (_finite(energy) and 0.0 <= energy <= MAX_ENERGY) or not 0 <= degree <= 8:
+        if not (_finite(energy) and 0.0 <= energy <= MAX_ENERGY) or not 0 <= degree <= most:
             return "energy out of range"
     elif kind == "vote":
         p, degree = value
         if not 0 <= step < params.consensus_steps:
             return "step out of range"
-        if not vote_vector(params)(p) or not 0 <= degree <= 8:
+        if not vote_vector(params)(p) or not 0 <= degree <= most:
             return "vote out of range"
     elif kind == "state":
         if not 0 <= step < params.formation_steps:
@@ -124,8 +126,8 @@ def message_problem(message: Message, params: CamoParams) -> str | None:
         if value not in states_of(params):
             return "state out of range"
     elif kind == "relay":
-        if not params.orientation_any:
-            return "a relay in a run without --orientation any"
+        if not params.orientation_any or params.layout:
+            return "a relay in a run without --orientation any on the grid"
         if not 0 <= step < params.formation_steps:
             return "step out of range"
         if len(value) != 8 or any(v is not None and v not in states_of(params) for v in value):
