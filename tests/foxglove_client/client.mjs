@@ -38,7 +38,9 @@ function finish(code) {
     schemaName: c.schemaName,
     schemaEncoding: c.schemaEncoding,
   }));
-  process.stdout.write(JSON.stringify({ channels: topics, decoded, errors }) + "\n");
+  // uint64 fields (RobotStatus.known_slots) decode as BigInt, which JSON has no form for.
+  const plain = (_key, value) => (typeof value === "bigint" ? value.toString() : value);
+  process.stdout.write(JSON.stringify({ channels: topics, decoded, errors }, plain) + "\n");
   client.close();
   process.exit(code);
 }
