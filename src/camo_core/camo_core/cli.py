@@ -55,19 +55,22 @@ def sensed_overrides(texts: list[str], rows: int, cols: int) -> dict[tuple[int, 
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
-    if args.layout:
-        return sim_on_layout(args)
     params = params_from(args)
     image, label = image_from(args)
-    raw = sense_image(image, params.rows, params.cols, params.profile)
     exempt = None
-    overrides = sensed_overrides(args.sensed, params.rows, params.cols)
-    if overrides:
-        # Real readings: they replace the image's value and never get simulated measurement noise.
-        exempt = np.zeros(raw.shape, bool)
-        for (row, col), value in overrides.items():
-            raw[row, col] = value
-            exempt[row, col] = True
+    if params.layout:
+        if args.sensed:
+            raise UsageError("--sensed names grid cells: it does not go with --layout")
+        raw = sense_at(image, layout_for(params), params.profile).reshape(params.rows, params.cols)
+    else:
+        raw = sense_image(image, params.rows, params.cols, params.profile)
+        overrides = sensed_overrides(args.sensed, params.rows, params.cols)
+        if overrides:
+            # Real readings: they replace the image's value and get no simulated noise.
+            exempt = np.zeros(raw.shape, bool)
+            for (row, col), value in overrides.items():
+                raw[row, col] = value
+                exempt[row, col] = True
     folder = out_dir(args)
     big = params.count >= 256 * 256
     bar = (
@@ -75,7 +78,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     )
     progress = (lambda phase, step, total: bar.update(note=phase)) if bar else None
     snapshots = Snapshots(params)
-    result = simulate(params, raw, exempt=exempt, progress=progress, observe=snapshots)
+    if params.layout:  # no vectorised kernels for positions: the robots' own rules, one by one
+        result = run_per_robot(params, raw, observe=snapshots)
+    else:
+        result = simulate(params, raw, exempt=exempt, progress=progress, observe=snapshots)
     summary = result.summary(arrays=True)
     write_summary(summary, folder)
     write_params_file(args.options_parser, args, folder)
@@ -84,33 +90,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     figures.run_figure(result, image, folder / "figure.png", title=title, marks=marks)
     dead = np.zeros(params.count, bool)  # the simulator loses messages, never robots
     write_animation(snapshots, result.sensed, dead, folder / "run.gif", title, marks)
+    how = "robot by robot " if params.layout else ""
     print(
         f"pattern: {pattern_said(summary)}; wrote {folder}/summary.json, "
-        f"figure.png and run.gif; simulated in {result.elapsed_s:.3f} s"
-    )
-    return 0
-
-
-def sim_on_layout(args: argparse.Namespace) -> int:
-    """./camo sim --layout: the robots' own rules, robot by robot (figure.png, no GIF)."""
-    if args.sensed:
-        raise UsageError("--sensed names grid cells: it does not go with --layout")
-    params = params_from(args)
-    image, label = image_from(args)
-    raw = sense_at(image, layout_for(params), params.profile).reshape(params.rows, params.cols)
-    snapshots = Snapshots(params)
-    result = run_per_robot(params, raw, observe=snapshots)
-    folder = out_dir(args)
-    summary = result.summary(arrays=True)
-    write_summary(summary, folder)
-    write_params_file(args.options_parser, args, folder)
-    title = run_title(label, params)
-    figures.run_figure(result, image, folder / "figure.png", title=title)
-    dead = np.zeros(params.count, bool)
-    write_animation(snapshots, result.sensed, dead, folder / "run.gif", title)
-    print(
-        f"pattern: {pattern_said(summary)}; wrote {folder}/summary.json, figure.png and "
-        f"run.gif; simulated robot by robot in {result.elapsed_s:.3f} s"
+        f"figure.png and run.gif; simulated {how}in {result.elapsed_s:.3f} s"
     )
     return 0
 
