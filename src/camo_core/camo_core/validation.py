@@ -38,10 +38,13 @@ def _grey(value: float) -> bool:
 
 
 def probability_vector(p: Sequence[float], tolerance: float = TOLERANCE) -> bool:
-    return (
-        len(p) == 3
-        and all(math.isfinite(x) and -tolerance <= x <= 1.0 + tolerance for x in p)
-        and abs(sum(p) - 1.0) <= tolerance
+    return len(p) == 3 and shares(p, tolerance)
+
+
+def shares(p: Sequence[float], tolerance: float = TOLERANCE) -> bool:
+    """Finite entries in [0, 1] that sum to 1 (up to `tolerance`)."""
+    return all(math.isfinite(x) and -tolerance <= x <= 1.0 + tolerance for x in p) and (
+        abs(sum(p) - 1.0) <= tolerance
     )
 
 
@@ -65,17 +68,13 @@ def histogram_vector(v: Sequence[float], tolerance: float = TOLERANCE) -> bool:
     lies between the bin's least and greatest grey times its share."""
     if len(v) != 2 * BINS or not all(math.isfinite(x) for x in v):
         return False
-    shares, sums = v[:BINS], v[BINS:]
-    if not probability_vector_of(shares, tolerance):
+    histogram, sums = v[:BINS], v[BINS:]
+    if not shares(histogram, tolerance):
         return False
     return all(
         BIN_WIDTH * b * h - tolerance * 256 <= s <= 256 * h + tolerance * 256
-        for b, (h, s) in enumerate(zip(shares, sums, strict=True))
+        for b, (h, s) in enumerate(zip(histogram, sums, strict=True))
     )
-
-
-def probability_vector_of(p: Sequence[float], tolerance: float) -> bool:
-    return all(-tolerance <= x <= 1.0 + tolerance for x in p) and abs(sum(p) - 1.0) <= tolerance
 
 
 def vote_vector(params: CamoParams, tolerance: float = TOLERANCE):
