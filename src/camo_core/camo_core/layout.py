@@ -23,14 +23,13 @@ import numpy as np
 from . import rng
 from .exceptions import CamoError
 from .grid import neighbor_ids
-from .params import CamoParams
+from .params import MAX_COORDINATE, CamoParams
 from .sensing import to_gray
 
 NEAR = 1.5
 FAR = 2.3
 MIN_GAP = 0.5  # spacings: closer robots would crowd a robot's reach
 MAX_SLOTS = 64  # neighbours within FAR: RobotStatus.known_slots is a 64-bit mask
-MAX_COORDINATE = 1e6
 KINDS = ("hex", "jitter:A", "FILE")
 STREAM_JITTER = 9  # rng stream of the jitter draws (a = coordinate, b = robot)
 MAX_ROBOTS = 65536

@@ -28,7 +28,8 @@ PROFILE_DEFAULTS: dict[str, dict[str, Any]] = {
     },
 }
 
-MAX_LEVELS = 8  # levels.MAX_LEVELS: K - 1 layers fit a state's uint8 and leave 255 free
+MAX_LEVELS = 8  # --levels: K - 1 layers fit a state's uint8 and leave 255 (not received) free
+MAX_COORDINATE = 1e6  # spacings: a file layout's positions stay within this
 MAX_SIDE = 8192  # robots per row or column; ids stay far inside uint32
 MAX_STEPS = 100_000
 AUTO = "auto"
@@ -124,8 +125,10 @@ class CamoParams:
                     f"a file layout has rows 1 and one position per robot (got {len(positions)} "
                     f"positions for {self.rows}x{self.cols})"
                 )
-            if not all(abs(v) <= 1e6 for xy in positions for v in xy):  # NaN fails too
-                raise ParameterError("a file layout's positions must be numbers within +-1e6")
+            if not all(abs(v) <= MAX_COORDINATE for xy in positions for v in xy):  # NaN too
+                raise ParameterError(
+                    f"a file layout's positions must be numbers within +-{MAX_COORDINATE:g}"
+                )
         elif layout != "hex":
             raise ParameterError(f"layout must be hex, jitter:A or file (got {layout!r})")
         if self.orientation != "any":
