@@ -66,11 +66,11 @@ def run_per_robot(
     def formation_view():  # what a GIF shows of formation: the states, or with --levels the greys
         return np.array([r.display if params.levels else r.state for r in robots])
 
+    relaying = params.orientation_any and not params.layout  # the grid's knight cells
     shown("formation", 0, formation_view())
     for step in range(params.formation_steps):
         sent_states = [r.state for r in robots]
         heard = [[None if n is None else sent_states[n] for n in r.neighbors] for r in robots]
-        relaying = params.orientation_any and not params.layout  # the grid's knight cells
         relays = [
             r.relay(step, h) if relaying else None for r, h in zip(robots, heard, strict=True)
         ]
