@@ -73,27 +73,38 @@ def _arrives(prefix, src, dst, rho):
     return float(h >> _S11) * _INV_2_53 >= rho
 
 
+@njit(cache=True, inline="always")
+def _weight(known, degree, i, j, s, prefix, rho):
+    """The Metropolis weight robot (i, j) gives its slot s's message this step: 0 when that
+    slot is unknown or its message is lost."""
+    if (known[i, j] >> s) & 1 == 0:
+        return 0.0
+    cols = degree.shape[1]
+    ni = i + DI[s]
+    nj = j + DJ[s]
+    if not _arrives(prefix, ni * cols + nj, i * cols + j, rho):
+        return 0.0
+    d = degree[i, j]
+    dn = degree[ni, nj]
+    return METROPOLIS[d if d > dn else dn]
+
+
 @njit(cache=True, parallel=True)
 def consensus_step(p, out, known, degree, prefix, rho):
     """One Metropolis step for every robot: p (rows x cols x 3) -> out."""
     rows, cols = degree.shape
     for i in prange(rows):
         for j in range(cols):
-            me = i * cols + j
             a0 = 0.0
             a1 = 0.0
             a2 = 0.0
             w_sum = 0.0
-            d = degree[i, j]
             for s in range(8):
-                if (known[i, j] >> s) & 1 == 0:
+                w = _weight(known, degree, i, j, s, prefix, rho)
+                if w == 0.0:
                     continue
                 ni = i + DI[s]
                 nj = j + DJ[s]
-                if not _arrives(prefix, ni * cols + nj, me, rho):
-                    continue
-                dn = degree[ni, nj]
-                w = METROPOLIS[d if d > dn else dn]
                 a0 = a0 + w * p[ni, nj, 0]
                 a1 = a1 + w * p[ni, nj, 1]
                 a2 = a2 + w * p[ni, nj, 2]
@@ -112,20 +123,15 @@ def consensus_step_n(p, out, known, degree, prefix, rho):
     for i in prange(rows):
         acc = np.empty(size)
         for j in range(cols):
-            me = i * cols + j
             for k in range(size):
                 acc[k] = 0.0
             w_sum = 0.0
-            d = degree[i, j]
             for s in range(8):
-                if (known[i, j] >> s) & 1 == 0:
+                w = _weight(known, degree, i, j, s, prefix, rho)
+                if w == 0.0:
                     continue
                 ni = i + DI[s]
                 nj = j + DJ[s]
-                if not _arrives(prefix, ni * cols + nj, me, rho):
-                    continue
-                dn = degree[ni, nj]
-                w = METROPOLIS[d if d > dn else dn]
                 for k in range(size):
                     acc[k] = acc[k] + w * p[ni, nj, k]
                 w_sum = w_sum + w
