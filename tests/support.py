@@ -272,3 +272,15 @@ def drawn_direction(states: np.ndarray) -> float:
     i, j = np.unravel_index(np.argmax(spectrum), spectrum.shape)
     ky, kx = (i if i <= rows // 2 else i - rows), (j if j <= cols // 2 else j - cols)
     return float(-(np.degrees(np.arctan2(ky, kx)) + 90) % 180)
+
+
+def assert_drivers_agree(params: CamoParams, raw: np.ndarray, fields: tuple[str, ...], what=()):
+    """The vectorised simulator and the per-robot driver give the same `fields`, bit for bit;
+    the two results (`what` names the case in a failure)."""
+    from camo_core.perrobot import run_per_robot
+    from camo_core.simulator import simulate
+
+    fast, slow = simulate(params, raw), run_per_robot(params, raw)
+    for field in fields:
+        assert np.array_equal(getattr(fast, field), getattr(slow, field)), (*what, field)
+    return fast, slow

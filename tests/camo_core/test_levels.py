@@ -4,12 +4,11 @@ import json
 
 import numpy as np
 import pytest
-from support import Bus, brick_courses, run_camo
+from support import Bus, assert_drivers_agree, brick_courses, run_camo
 
 from camo_core import levels
 from camo_core.backgrounds import background, stripes
 from camo_core.params import CamoParams, ParameterError
-from camo_core.perrobot import run_per_robot
 from camo_core.robot_io import DONE, Message
 from camo_core.sensing import sense_image
 from camo_core.simulator import simulate
@@ -27,9 +26,7 @@ def test_the_drivers_agree_with_levels(k, rho):
         params = CamoParams(rows=rows, cols=cols, seed=3, rho_meas=rho, rho_comm=rho, levels=k,
                             orientation=orientation, profile=profile)  # fmt: skip
         raw = generator.uniform(0, 255, (rows, cols))
-        fast, slow = simulate(params, raw), run_per_robot(params, raw)
-        for field in FIELDS:
-            assert np.array_equal(getattr(fast, field), getattr(slow, field)), (rows, cols, field)
+        assert_drivers_agree(params, raw, FIELDS, (rows, cols))
 
 
 def test_one_robots_palette_is_the_grids_bit_for_bit():

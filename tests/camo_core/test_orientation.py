@@ -4,13 +4,12 @@ import json
 
 import numpy as np
 import pytest
-from support import Bus, brick_courses, drawn_direction, run_camo
+from support import Bus, assert_drivers_agree, brick_courses, drawn_direction, run_camo
 
 from camo_core import orientation, rules
 from camo_core.backgrounds import stripes
 from camo_core.orientation import ORIENTED, ROLES, choose, raw_tensor
 from camo_core.params import CamoParams, ParameterError
-from camo_core.perrobot import run_per_robot
 from camo_core.robot_io import DONE
 from camo_core.sensing import sense_image
 from camo_core.simulator import simulate
@@ -27,9 +26,7 @@ def test_the_drivers_agree_with_orientation_any(profile, rho, auto):
         params = CamoParams(profile=profile, rows=rows, cols=cols, seed=7, rho_meas=rho,
                             rho_comm=rho, threshold_auto=auto, orientation="any")  # fmt: skip
         raw = generator.uniform(0, 255, (rows, cols))
-        fast, slow = simulate(params, raw), run_per_robot(params, raw)
-        for field in FIELDS:
-            assert np.array_equal(getattr(fast, field), getattr(slow, field)), (rows, cols, field)
+        assert_drivers_agree(params, raw, FIELDS, (rows, cols))
 
 
 def test_the_drivers_agree_on_stripes_at_every_angle_with_loss():
@@ -38,10 +35,8 @@ def test_the_drivers_agree_on_stripes_at_every_angle_with_loss():
     for degrees in range(0, 180, 15):
         params = CamoParams(rows=12, cols=12, rho_comm=0.25, seed=degrees, orientation="any")
         raw = sense_image(stripes(degrees, period=100, noise=10), 12, 12, "paper")
-        fast, slow = simulate(params, raw), run_per_robot(params, raw)
+        fast, _ = assert_drivers_agree(params, raw, FIELDS, (degrees,))
         assert (fast.selected >= ORIENTED).any(), degrees
-        for field in FIELDS:
-            assert np.array_equal(getattr(fast, field), getattr(slow, field)), (degrees, field)
 
 
 def test_the_oriented_kernels_at_0_and_90_degrees_are_the_papers_stripe_kernels():

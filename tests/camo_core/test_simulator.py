@@ -6,6 +6,7 @@ import sys
 
 import numpy as np
 import pytest
+from support import assert_drivers_agree
 
 from camo_core.params import CamoParams
 from camo_core.perrobot import run_per_robot
@@ -25,17 +26,14 @@ def test_drivers_agree_on_random_grids(profile, rho, seed):
             profile=profile, rows=rows, cols=cols, seed=seed, rho_meas=rho, rho_comm=rho
         )
         raw = generator.uniform(0, 255, (rows, cols))
-        fast, slow = simulate(params, raw), run_per_robot(params, raw)
-        for field in FIELDS:
-            assert np.array_equal(getattr(fast, field), getattr(slow, field)), (rows, cols, field)
+        assert_drivers_agree(params, raw, FIELDS, (rows, cols))
 
 
 def test_drivers_agree_with_measurement_only_and_communication_only():
     raw = np.random.default_rng(3).uniform(0, 255, (7, 6))
     for rho_meas, rho_comm in [(0.3, 0.0), (0.0, 0.3)]:
         params = CamoParams(rows=7, cols=6, seed=5, rho_meas=rho_meas, rho_comm=rho_comm)
-        fast, slow = simulate(params, raw), run_per_robot(params, raw)
-        assert all(np.array_equal(getattr(fast, f), getattr(slow, f)) for f in FIELDS)
+        assert_drivers_agree(params, raw, FIELDS)
 
 
 def test_errors_change_the_outcome_and_seeds_matter():

@@ -2,11 +2,10 @@
 
 import numpy as np
 import pytest
-from support import Bus, brick_courses, run_camo
+from support import Bus, assert_drivers_agree, brick_courses, run_camo
 
 from camo_core import rules
 from camo_core.params import CamoParams
-from camo_core.perrobot import run_per_robot
 from camo_core.sensing import sense_image
 from camo_core.simulator import simulate
 
@@ -21,9 +20,7 @@ def test_the_drivers_agree_with_threshold_auto(profile, rho):
         params = CamoParams(profile=profile, rows=rows, cols=cols, seed=7, rho_meas=rho,
                             rho_comm=rho, threshold_auto=True)  # fmt: skip
         raw = generator.uniform(0, 255, (rows, cols))
-        fast, slow = simulate(params, raw), run_per_robot(params, raw)
-        for field in FIELDS:
-            assert np.array_equal(getattr(fast, field), getattr(slow, field)), (rows, cols, field)
+        assert_drivers_agree(params, raw, FIELDS, (rows, cols))
 
 
 def test_the_energy_is_averaged_as_p_is_and_sets_each_robots_threshold():
