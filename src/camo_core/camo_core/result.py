@@ -48,12 +48,16 @@ def pattern_of(summary: dict) -> str:
     return summary["pattern"] if angle is None else f"{summary['pattern']}_{angle}"
 
 
+def label_of(pattern: str, angle: int | None) -> str:
+    """A pattern as a figure or a console names it: "vertical", "stripes at 45°"."""
+    return pattern if angle is None else f"stripes at {angle}°"
+
+
 def pattern_said(summary: dict) -> str:
     """How a console line names a summary's pattern: "vertical (horizontal 3, vertical 61,
     mottled 0)"; with --orientation any "stripes at 30° (stripes_15 110, stripes_30 146)", the
     selections no robot made left out."""
-    angle = summary.get("orientation_deg")
-    label = summary["pattern"] if angle is None else f"stripes at {angle}°"
+    label = label_of(summary["pattern"], summary.get("orientation_deg"))
     oriented = "orientation_deg" in summary
     counts = ", ".join(f"{k} {v}" for k, v in summary["votes"].items() if v or not oriented)
     return f"{label} ({counts})"
@@ -144,8 +148,7 @@ class RunResult:
     @property
     def majority_label(self) -> str:
         """The majority pattern as a figure or a console names it ("stripes at 45°")."""
-        angle = self.orientation_deg
-        return self.majority_pattern if angle is None else f"stripes at {angle}°"
+        return label_of(self.majority_pattern, self.orientation_deg)
 
     def summary(self, arrays: bool = False) -> dict[str, Any]:
         """The summary.json document. arrays: the sensed, initial and final grids stay NumPy
