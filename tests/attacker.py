@@ -1,7 +1,7 @@
 """A stranger in a run's domain (for tests/camo_nodes/test_trust.py): it finds the run's topics on
-the graph and publishes on every one of them copies of the robots' messages with plausible ids,
-rounds and steps, some with NaN and out-of-range values, some well-formed but wrong, plus a fake
-host announcement, a fake background and fake parameters.
+the graph and publishes on every one of them copies of the robots' messages (arrays of them on
+tile topics) with plausible ids, rounds and steps, some with NaN and out-of-range values, some
+well-formed but wrong, plus a fake host announcement, a fake background and fake parameters.
 
     python tests/attacker.py RUN_ID SECONDS [FIRST-LAST ...]
 
@@ -26,13 +26,25 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
-from camo_msgs.msg import Color, Hello, Host, RobotStatus, State, Vote
+from camo_msgs.msg import (
+    Color,
+    ColorArray,
+    Hello,
+    HelloArray,
+    Host,
+    RobotStatus,
+    State,
+    StateArray,
+    Vote,
+    VoteArray,
+)
 
+ARRAYS = {HelloArray: Hello, ColorArray: Color, VoteArray: Vote, StateArray: State}
 TYPES = {
-    "camo_msgs/msg/Hello": Hello,
-    "camo_msgs/msg/Color": Color,
-    "camo_msgs/msg/Vote": Vote,
-    "camo_msgs/msg/State": State,
+    "camo_msgs/msg/HelloArray": HelloArray,
+    "camo_msgs/msg/ColorArray": ColorArray,
+    "camo_msgs/msg/VoteArray": VoteArray,
+    "camo_msgs/msg/StateArray": StateArray,
     "camo_msgs/msg/RobotStatus": RobotStatus,
     "camo_msgs/msg/Host": Host,
     "sensor_msgs/msg/Image": Image,
@@ -44,6 +56,8 @@ KINDS = ("hello", "color", "vote", "state")
 
 def forged(cls, k: int, count: int, cols: int):
     """The k-th forgery of a message type: NaN, out of range, or plausible and wrong."""
+    if cls in ARRAYS:  # what a tile topic carries: several forged robot messages at once
+        return cls(messages=[forged(ARRAYS[cls], k * 3 + j, count, cols) for j in range(3)])
     robot, step, bad = k % count, k % 30, k % 3
     if cls is Hello:
         return Hello(sender_id=robot, row=robot // cols, col=robot % cols, phase=0)
@@ -83,7 +97,7 @@ def main() -> int:
     guessed |= {f"/{run}/swarm/status": RobotStatus, f"/{run}/swarm/params": String}
     for tile in tiles:
         for part in ("edge", "core"):
-            for kind, cls in zip(KINDS, (Hello, Color, Vote, State), strict=True):
+            for kind, cls in zip(KINDS, ARRAYS, strict=True):
                 guessed[f"/{run}/camo/tile_{tile.replace('-', '_')}/{part}/{kind}"] = cls
     for name, cls in guessed.items():
         publishers[name] = (node.create_publisher(cls, name, qos), cls)

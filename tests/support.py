@@ -160,6 +160,23 @@ def bag_tool(module: str, *args: str, timeout: float = 120) -> subprocess.Comple
     )
 
 
+def robot_messages_in(bag, suffix: str) -> list:
+    """Every robot message a bag holds on the topics ending in `suffix` ("/vote"), unpacked from
+    their arrays."""
+    from rclpy.serialization import deserialize_message
+
+    from camo_bag.container import read_messages, read_summary
+    from camo_bag.msgdefs import message_class
+
+    types = {t.name: message_class(t.type) for t in read_summary(bag).topics}
+    topics = [name for name in types if name.endswith(suffix)]
+    return [
+        msg
+        for m in read_messages(bag, topics)
+        for msg in deserialize_message(m.data, types[m.topic]).messages
+    ]
+
+
 def tile_range(topic: str) -> range:
     """The robots of a tile topic /<run>/camo/tile_FIRST_LAST/<part>/<kind>."""
     first, last = re.search(r"/tile_(\d+)_(\d+)/", topic).groups()

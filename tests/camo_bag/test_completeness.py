@@ -12,8 +12,9 @@ from camo_bag.completeness import examine, message_fields
 from camo_bag.container import BagWriter, TopicInfo, read_messages, read_summary
 
 
-def copy_bag(source, target, drop) -> None:
-    """A copy of a bag without the messages `drop(topic, data)` picks."""
+def copy_bag(source, target, drop=lambda topic, data: False, edit=None) -> None:
+    """A copy of a bag without the messages `drop(topic, data)` picks; `edit(topic, data)`, if
+    given, returns what a message becomes: a list of CDR bytes (none: dropped)."""
     summary = read_summary(source)
     writer = BagWriter(target, library="test")
     for topic in summary.topics:
@@ -21,8 +22,55 @@ def copy_bag(source, target, drop) -> None:
             TopicInfo(topic.name, topic.type, topic.qos, topic.type_hash), topic.definition
         )
     for message in read_messages(source):
-        if not drop(message.topic, message.data):
-            writer.write(message.topic, message.data, message.log_time, message.publish_time)
+        if drop(message.topic, message.data):
+            continue
+        edited = [message.data] if edit is None else edit(message.topic, message.data)
+        for data in edited:
+            writer.write(message.topic, data, message.log_time, message.publish_time)
+    writer.close()
+
+
+def without_votes_of(robots: set[int]):
+    """An `edit` for copy_bag: vote arrays without those robots' votes."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from camo_msgs.msg import VoteArray
+
+    def edit(topic, data):
+        if not topic.endswith("/vote"):
+            return [data]
+        array = deserialize_message(data, VoteArray)
+        array.messages = [v for v in array.messages if v.sender_id not in robots]
+        return [serialize_message(array)] if array.messages else []
+
+    return edit
+
+
+def older_layout(source, target) -> None:
+    """The bag as camo recorded it before arrays: one robot message per bag message, typed
+    camo_msgs/msg/Vote (and so on)."""
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from camo_bag.ledger import ARRAY_KINDS
+    from camo_bag.msgdefs import message_class, message_definition
+
+    summary = read_summary(source)
+    writer = BagWriter(target, library="test")
+    arrays = {}
+    for topic in summary.topics:
+        type_name = topic.type
+        if type_name in ARRAY_KINDS:
+            arrays[topic.name] = message_class(type_name)
+            type_name = type_name.removesuffix("Array")
+        definition = message_definition(type_name) if topic.name in arrays else topic.definition
+        writer.add_topic(TopicInfo(topic.name, type_name, topic.qos, ""), definition)
+    for message in read_messages(source):
+        cls = arrays.get(message.topic)
+        singles = [message.data] if cls is None else [
+            serialize_message(m) for m in deserialize_message(message.data, cls).messages
+        ]  # fmt: skip
+        for data in singles:
+            writer.write(message.topic, data, message.log_time, message.publish_time)
     writer.close()
 
 
@@ -64,13 +112,18 @@ def test_a_whole_recording_is_complete(recorded):
 def test_a_bag_that_lost_robots_votes_is_incomplete_and_render_refuses_it(recorded, tmp_path):
     bag, live = recorded
     lost = {3, 4, 5, 11}
-    copy_bag(
-        bag,
-        tmp_path / "cut",
-        lambda topic, data: topic.endswith("/vote") and message_fields("vote", data)[0] in lost,
-    )
+    copy_bag(bag, tmp_path / "cut", edit=without_votes_of(lost))
     gaps = examine(tmp_path / "cut").gaps()
     assert gaps == ["round 0: 4 robots lack votes: 3-5, 11"]
+    # The same in a bag of the older layout, whose fields are read from the CDR bytes.
+    older_layout(bag, tmp_path / "older")
+    assert examine(tmp_path / "older").gaps() == []
+    copy_bag(
+        tmp_path / "older",
+        tmp_path / "older_cut",
+        lambda topic, data: topic.endswith("/vote") and message_fields("vote", data)[0] in lost,
+    )
+    assert examine(tmp_path / "older_cut").gaps() == gaps
     info = bag_tool("cli", "info", str(tmp_path / "cut"))
     assert "INCOMPLETE" in info.stdout and "3-5, 11" in info.stdout
     refused = bag_tool("render", str(tmp_path / "cut"), "--out", str(tmp_path / "r"))

@@ -24,12 +24,13 @@ def test_bag_is_a_rosbag2_folder_with_an_indexed_ros2_mcap(recorded):
         summary = reader.get_summary()
     assert summary.chunk_indexes and all(c.compression == "zstd" for c in summary.chunk_indexes)
     assert {s.encoding for s in summary.schemas.values()} == {"ros2msg"}
-    vote = next(
-        s for s in summary.schemas.values() if s.name == "camo_msgs/msg/Vote"
+    votes = next(
+        s for s in summary.schemas.values() if s.name == "camo_msgs/msg/VoteArray"
     ).data.decode()
-    assert vote.startswith("# Phase 2 (consensus)")
-    assert "\n" + "=" * 80 + "\nMSG: std_msgs/Header\n" in vote
-    assert "\nMSG: builtin_interfaces/Time\n" in vote
+    assert votes.startswith("# Several robots' votes, sent together")
+    assert "\n" + "=" * 80 + "\nMSG: camo_msgs/Vote\n# Phase 2 (consensus)" in votes
+    assert "\n" + "=" * 80 + "\nMSG: std_msgs/Header\n" in votes
+    assert "\nMSG: builtin_interfaces/Time\n" in votes
     for channel in summary.channels.values():
         assert channel.message_encoding == "cdr"
         assert "reliability:" in channel.metadata["offered_qos_profiles"]
@@ -50,9 +51,10 @@ def test_mcap_ros2_decoder_reads_every_robot_message(recorded):
             stream, decoder_factories=[DecoderFactory()]
         ).iter_decoded_messages():
             if channel.topic.endswith("/vote"):
-                assert msg.sender_id in tile_range(channel.topic)  # a tile's robots only
-                assert abs(sum(msg.p) - 1.0) < 1e-9 and msg.phase == 2  # as Vote.msg says
-                votes.setdefault(msg.sender_id, []).append(msg.step)
+                for vote in msg.messages:
+                    assert vote.sender_id in tile_range(channel.topic)  # a tile's robots only
+                    assert abs(sum(vote.p) - 1.0) < 1e-9 and vote.phase == 2  # as Vote.msg says
+                    votes.setdefault(vote.sender_id, []).append(vote.step)
             elif channel.topic == f"/{BAG_RUN}/swarm/status" and msg.phase == 4:
                 final[(msg.row, msg.col)] = msg.state
             publish_before_log &= message.publish_time <= message.log_time
@@ -73,16 +75,16 @@ def test_rosbags_anyreader_reads_the_bag_folder(recorded):
         tiles = sorted(t for t in types if "/tile_" in t)
         # Two processes, two tiles of 15 robots: edge and core topics of four kinds each.
         assert {t.split("/")[3] for t in tiles} == {"tile_0_14", "tile_15_29"} and len(tiles) == 16
-        assert all(types[t] == f"camo_msgs/msg/{t.rsplit('/', 1)[1].title()}" for t in tiles)
+        assert all(types[t] == f"camo_msgs/msg/{t.rsplit('/', 1)[1].title()}Array" for t in tiles)
         sent: dict[tuple[int, str], int] = {}
         sensed = {}
         robots = [c for c in reader.connections if "/tile_" in c.topic]
         for connection, _, raw in reader.messages(connections=robots):
-            msg = reader.deserialize(raw, connection.msgtype)
             kind = connection.topic.rsplit("/", 1)[1]
-            sent[(msg.sender_id, kind)] = sent.get((msg.sender_id, kind), 0) + 1
-            if kind == "color":
-                sensed[msg.sender_id] = msg.value
+            for msg in reader.deserialize(raw, connection.msgtype).messages:
+                sent[(msg.sender_id, kind)] = sent.get((msg.sender_id, kind), 0) + 1
+                if kind == "color":
+                    sensed[msg.sender_id] = msg.value
     assert sent[(7, "state")] == BAG_FORMATION and sent[(7, "hello")] == 1
     assert [[sensed[i * BAG_COLS + j] for j in range(BAG_COLS)] for i in range(BAG_ROWS)] == live[
         "sensed"

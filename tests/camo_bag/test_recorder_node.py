@@ -12,6 +12,7 @@ from support import (
     bag_tool,
     camo_run,
     domain,
+    robot_messages_in,
     wait_for_line,
 )
 
@@ -116,8 +117,8 @@ def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers
         votes = [c for c in reader.connections if c.topic.endswith("/vote")]
         assert votes, "no vote topic recovered"
         for connection, _, raw in reader.messages(connections=votes):
-            msg = reader.deserialize(raw, connection.msgtype)
-            steps.setdefault(msg.sender_id, []).append(msg.step)
+            for msg in reader.deserialize(raw, connection.msgtype).messages:
+                steps.setdefault(msg.sender_id, []).append(msg.step)
     # Each finished chunk holds what arrived before it: a robot's votes from step 0 on, without
     # gaps (the recorder may lag a fast swarm, so not every robot need have reached a finished
     # chunk). A late joiner can get a live sample just before the history that precedes it, so
@@ -209,6 +210,7 @@ def test_ctrl_c_during_a_recorded_run_leaves_a_complete_indexed_bag(tmp_path):
     counts = {t.name: t.count for t in summary.topics}
     votes = sum(n for name, n in counts.items() if name.endswith("/vote"))
     assert votes >= seen and counts["/ctrlc/swarm/params"] == 1
+    assert len(robot_messages_in(tmp_path / "bag", "/vote")) >= votes
     assert (tmp_path / "bag" / "metadata.yaml").exists()
 
 

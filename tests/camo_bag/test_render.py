@@ -1,9 +1,8 @@
 """`camo render`: a run's summary and figures rebuilt from its bag alone."""
 
 import json
-import re
 
-from support import ROOT, Bus, bag_tool, camo_run
+from support import ROOT, Bus, bag_tool, camo_run, robot_messages_in
 
 
 def test_render_reads_a_bag_into_one_record_per_round(recorded, count_round_records):
@@ -66,11 +65,8 @@ def test_render_of_a_run_with_three_backgrounds_writes_each_round_from_a_complet
     info = bag_tool("cli", "info", str(tmp_path / "bag"))
     assert info.returncode == 0, info.stderr
     consensus_steps = len(live["consensus_trace"]) - 1
-    votes = sum(
-        int(count)
-        for count in re.findall(r"/vote +\| Type: camo_msgs/msg/Vote \| Count: (\d+)", info.stdout)
-    )
-    assert votes == 3 * 4 * 5 * consensus_steps
+    votes = {(v.round, v.sender_id, v.step) for v in robot_messages_in(tmp_path / "bag", "/vote")}
+    assert len(votes) == 3 * 4 * 5 * consensus_steps
 
 
 def test_render_refuses_a_bag_whose_messages_do_not_decode(tmp_path):

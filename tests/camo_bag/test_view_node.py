@@ -53,15 +53,17 @@ def test_foxglove_client_lists_subscribes_and_decodes_a_live_run(tmp_path, foxgl
     )
     (background,) = [t for t in channels if t.endswith("/camo/background")]
     assert channels[background]["schemaName"] == "sensor_msgs/msg/Image"
-    assert any(c["schemaName"] == "camo_msgs/msg/Vote" for c in channels.values())
+    assert any(c["schemaName"] == "camo_msgs/msg/VoteArray" for c in channels.values())
     decoded = {topic.split("/", 2)[2]: value for topic, value in seen["decoded"].items()}
     image = decoded["camo/background"]
     assert image["encoding"] in ("mono8", "bgr8") and image["width"] > 0
     assert image["data"]["length"] == image["step"] * image["height"]
     assert 0 <= decoded["swarm/status"]["sender_id"] < 36
     assert json.loads(decoded["swarm/params"]["data"])["params"]["rows"] == 6
-    votes = [v for topic, v in decoded.items() if topic.endswith("/edge/vote")]
-    assert votes and all(vote["p"] == {"length": 3} for vote in votes)
+    arrays = [v for topic, v in decoded.items() if topic.endswith("/edge/vote")]
+    votes = [array["messages"]["first"] for array in arrays]
+    assert votes and all(vote["p"] == {"length": 3} and vote["phase"] == 2 for vote in votes)
+    assert all(0 <= vote["sender_id"] < 36 for vote in votes)
     # Watching changed nothing: the run is the simulator's.
     assert run.returncode == 0, err[-2000:]
     assert "camo view: forwarded" in err

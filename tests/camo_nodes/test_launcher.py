@@ -619,9 +619,12 @@ def test_the_swarm_with_threshold_auto_equals_the_simulator_and_its_bag_holds_th
 
 def test_the_swarm_with_orientation_any_threshold_auto_and_levels_equals_the_simulator(tmp_path):
     import cv2
+    from rclpy.serialization import deserialize_message
     from support import bag_tool
 
+    from camo_bag.container import read_messages
     from camo_core.backgrounds import stripes
+    from camo_msgs.msg import RelayArray
 
     image = tmp_path / "stripes.png"
     cv2.imwrite(str(image), stripes(30, period=64))
@@ -639,16 +642,22 @@ def test_the_swarm_with_orientation_any_threshold_auto_and_levels_equals_the_sim
     assert "pattern: stripes at" in run.stdout
     info = bag_tool("cli", "info", str(tmp_path / "bag"))
     relays = [x for x in info.stdout.splitlines() if "/relay " in x]
-    assert relays and all("camo_msgs/msg/Relay" in x for x in relays)
-    rendered = bag_tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
+    assert relays and all("camo_msgs/msg/RelayArray" in x for x in relays)
+    bag = tmp_path / "bag"
+    rendered = bag_tool("render", str(bag), "--out", str(tmp_path / "rendered"))
     assert rendered.returncode == 0, rendered.stderr
     assert_like_sim(tmp_path / "rendered", tmp_path / "sim")
-    # Replay publishes the relays again, typed from the bag (16 x 16 robots, 10 steps each).
+    # The bag holds every relay (16 x 16 robots, 10 steps each), packed in arrays, and replay
+    # publishes those arrays again, typed from the bag.
     topics = [next(w for w in x.split() if w.endswith("/relay")) for x in relays]
-    replay = bag_tool("replay", str(tmp_path / "bag"), "--rate", "50", "--topics", *topics,
+    arrays = [deserialize_message(m.data, RelayArray) for m in read_messages(bag, topics)]
+    sent = {(r.sender_id, r.step) for array in arrays for r in array.messages}
+    assert sent == {(robot, step) for robot in range(16 * 16) for step in range(10)}
+    assert len(arrays) < len(sent) / 4  # several robots' relays in one DDS message
+    replay = bag_tool("replay", str(bag), "--rate", "50", "--topics", *topics,
                       "--domain-id", str(domain()))  # fmt: skip
     assert replay.returncode == 0, replay.stderr
-    assert f"published {16 * 16 * 10} messages on {len(topics)} topics" in replay.stderr
+    assert f"published {len(arrays)} messages on {len(topics)} topics" in replay.stderr
 
 
 def test_the_swarm_on_a_hexagonal_layout_with_levels_equals_the_simulator(tmp_path):

@@ -21,10 +21,14 @@ const readers = new Map(); // subscription id -> { topic, reader }
 const decoded = {};
 const errors = [];
 
+// Fields as they decode: arrays by their length (and an array of messages, such as a tile's
+// votes, by its first one too), nested messages as "object".
 function summary(message) {
   const out = {};
   for (const [key, value] of Object.entries(message)) {
-    if (ArrayBuffer.isView(value) || Array.isArray(value)) out[key] = { length: value.length };
+    if (Array.isArray(value) && value.length && typeof value[0] === "object" && !ArrayBuffer.isView(value[0]))
+      out[key] = { length: value.length, first: summary(value[0]) };
+    else if (ArrayBuffer.isView(value) || Array.isArray(value)) out[key] = { length: value.length };
     else if (value !== null && typeof value === "object") out[key] = "object";
     else out[key] = value;
   }

@@ -36,9 +36,12 @@ def run_verdict(bag: str) -> str:
     except BagError as exc:
         return f"Run:               none ({exc})"
     gaps = ledger.gaps()
+    held = f"Robot messages:    {sum(ledger.counts.values())} (each robot's step of a kind once)"
     if not gaps:
-        return "Run:               complete (every robot's messages of every round it finished)"
-    return "Run:               INCOMPLETE\n" + "\n".join(f"                   {g}" for g in gaps)
+        whole = "complete (every robot's messages of every round it finished)"
+        return f"{held}\nRun:               {whole}"
+    lines = "\n".join(f"                   {g}" for g in gaps)
+    return f"{held}\nRun:               INCOMPLETE\n{lines}"
 
 
 def main(argv: list[str] | None = None) -> int:

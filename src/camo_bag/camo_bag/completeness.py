@@ -2,10 +2,11 @@
 
 One pass over the bag fills a ledger (`ledger.py`) with the run's parameters,
 its result, the backgrounds, the robots' done reports and, for every robot
-message, its sender, round and step. Those three fields are read straight from
-the CDR bytes (a bag of a large run holds millions of robot messages, and a
-full decode costs ten times more); statuses, parameters and the result are
-decoded with rclpy's serialization.
+message, its sender, round and step. Arrays of robot messages (what runs
+record now), statuses, parameters and the result are decoded with rclpy's
+serialization; in bags of the older layout, one robot message per bag message,
+those three fields are read straight from the CDR bytes (such a bag of a large
+run holds millions of messages, and a full decode of each costs ten times more).
 """
 
 from __future__ import annotations
@@ -25,8 +26,8 @@ from camo_msgs.msg import RobotStatus
 from camo_nodes.topics import PARAMS_SUFFIX, result_from
 
 from .container import BagError, BagSummary, damaged, read_messages, read_summary
-from .ledger import ROBOT_KINDS, Ledger
-from .msgdefs import full_name, message_definition
+from .ledger import ARRAY_KINDS, SINGLE_KINDS, Ledger
+from .msgdefs import full_name, message_class, message_definition
 
 
 def message_fields(kind: str, data: bytes) -> tuple[int, int, int]:
@@ -43,6 +44,11 @@ def message_fields(kind: str, data: bytes) -> tuple[int, int, int]:
     else:
         sender, _phase, step, round_index = struct.unpack_from(order + "IB3xII", data, at)
     return sender, round_index, step
+
+
+def ledger_message(ledger: Ledger, kind: str, sender: int, round_index: int, step: int) -> None:
+    if ledger.params is None or sender < ledger.params.count:
+        ledger.message(kind, sender, round_index, step)
 
 
 def run_topics_of(summary: BagSummary) -> tuple[str, str, str, str]:
@@ -97,20 +103,28 @@ def examine(path: str | Path) -> Ledger:
     params, status, background, result = run_topics_of(summary)
     run = params[1 : -len(PARAMS_SUFFIX)]
     kinds = {
-        t.name: ROBOT_KINDS[full_name(t.type)]
+        t.name: SINGLE_KINDS[full_name(t.type)]
         for t in summary.topics
-        if full_name(t.type) in ROBOT_KINDS
+        if full_name(t.type) in SINGLE_KINDS
+    }
+    arrays = {
+        t.name: (ARRAY_KINDS[full_name(t.type)], message_class(t.type))
+        for t in summary.topics
+        if full_name(t.type) in ARRAY_KINDS
     }
     decode_status = status_decoder(summary, status)
     ledger = Ledger()
     try:
-        for message in read_messages(path, [params, status, background, result, *kinds]):
+        wanted = [params, status, background, result, *kinds, *arrays]
+        for message in read_messages(path, wanted):
             topic, data = message.topic, message.data
             kind = kinds.get(topic)
             if kind is not None:
-                sender, round_index, step = message_fields(kind, data)
-                if ledger.params is None or sender < ledger.params.count:
-                    ledger.message(kind, sender, round_index, step)
+                ledger_message(ledger, kind, *message_fields(kind, data))
+            elif topic in arrays:
+                kind, cls = arrays[topic]
+                for msg in deserialize_message(data, cls).messages:
+                    ledger_message(ledger, kind, msg.sender_id, msg.round, msg.step)
             elif topic == status:
                 msg = decode_status(data)
                 if msg.phase == DONE:

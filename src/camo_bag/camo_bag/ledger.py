@@ -22,8 +22,10 @@ from camo_core.params import CamoParams
 from camo_core.robot_io import messages_per_round
 
 MAX_STEP = 1_000_000  # before the run's parameters are known: no step of a run is beyond this
-# The robots' message types, and the kind of message each carries.
-ROBOT_KINDS = {
+# The robots' message types, and the kind of message each carries. A tile topic carries arrays
+# of them (one DDS message per topic and turn of a process's loop); bags recorded before that
+# hold one robot message per bag message.
+SINGLE_KINDS = {
     "camo_msgs/msg/Hello": "hello",
     "camo_msgs/msg/Color": "color",
     "camo_msgs/msg/Energy": "energy",
@@ -31,6 +33,13 @@ ROBOT_KINDS = {
     "camo_msgs/msg/State": "state",
     "camo_msgs/msg/Relay": "relay",
 }
+ARRAY_KINDS = {f"{name}Array": kind for name, kind in SINGLE_KINDS.items()}
+ROBOT_KINDS = {**SINGLE_KINDS, **ARRAY_KINDS}
+
+
+def robot_messages(type_name: str, msg) -> list:
+    """The robot messages in one decoded bag message of a robot type."""
+    return msg.messages if type_name in ARRAY_KINDS else [msg]
 
 
 @dataclass

@@ -55,7 +55,7 @@ from camo_nodes.topics import (
 from . import msgdefs, qos_yaml
 from .container import BagWriter, TopicInfo
 from .graph_topics import new_topics, taking_qos
-from .ledger import ROBOT_KINDS, Ledger
+from .ledger import ROBOT_KINDS, Ledger, robot_messages
 
 RESULT_GRACE = 10.0  # s a recorder waits, after the run's result, for what the result names
 
@@ -174,8 +174,10 @@ class RecorderNode(Node):
             if msg.phase == DONE:
                 ledger.reported_done(msg.sender_id, msg.round)
         else:
-            kind = ROBOT_KINDS[msgdefs.full_name(self.bag.topics[topic].type)]
-            ledger.message(kind, msg.sender_id, msg.round, msg.step)
+            type_name = msgdefs.full_name(self.bag.topics[topic].type)
+            kind = ROBOT_KINDS[type_name]
+            for robot_msg in robot_messages(type_name, msg):
+                ledger.message(kind, robot_msg.sender_id, robot_msg.round, robot_msg.step)
 
     def finished(self) -> bool:
         """The run's result is recorded, and all it says the bag must hold."""

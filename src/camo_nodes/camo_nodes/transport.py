@@ -4,7 +4,10 @@ A process hosts one or more *tiles* of robots (contiguous ranges of robot ids,
 row-major: bands of the grid). Each tile publishes on eight topics, one per
 message kind for its *edge* robots (those with a neighbour hosted elsewhere)
 and one per kind for the rest (its *core*), every message carrying its
-sender's id (`RunTopics.tile`). A robot hosted by the same process as its
+sender's id (`RunTopics.tile`). What a tile's robots send on one topic in one
+turn of the process's loop goes out as one DDS message, an array of them
+(`camo_msgs/VoteArray`, ...): a DDS write costs four times what packing one more
+robot message into it does (docs/swarm.md). A robot hosted by the same process as its
 neighbour gets the message handed over in memory, as rclcpp's intra-process
 communication does. A process subscribes only to the edge topics of the tiles
 that hold its robots' neighbours, which it learns from the tiles' hosts'
@@ -33,7 +36,22 @@ from camo_core.layout import slot_ids
 from camo_core.params import CamoParams
 from camo_core.robot_io import PHASE_OF, Message, Report, kinds_of, messages_per_round
 from camo_core.validation import message_problem, phase_problem
-from camo_msgs.msg import Color, Energy, Hello, Host, Relay, RobotStatus, State, Vote
+from camo_msgs.msg import (
+    Color,
+    ColorArray,
+    Energy,
+    EnergyArray,
+    Hello,
+    HelloArray,
+    Host,
+    Relay,
+    RelayArray,
+    RobotStatus,
+    State,
+    StateArray,
+    Vote,
+    VoteArray,
+)
 
 from .polled import PolledTopics
 from .topics import LATCHED, LATCHED_READER, RunTopics, history_qos, tile_name
@@ -47,6 +65,18 @@ MESSAGE_TYPES = {
     "state": State,
     "relay": Relay,
 }
+# On the wire: a tile topic of a kind carries arrays of its messages.
+ARRAY_TYPES = {
+    "hello": HelloArray,
+    "color": ColorArray,
+    "energy": EnergyArray,
+    "vote": VoteArray,
+    "state": StateArray,
+    "relay": RelayArray,
+}
+# Robot messages in one array at most: a process's pump can send several steps of thousands of
+# robots, and a DDS message past Fast DDS's shared-memory segment (512 KB) is slow.
+MAX_BATCH = 256
 NOT_RECEIVED = Relay.NOT_RECEIVED
 Receiver = Callable[[Message], None]
 Tile = tuple[int, int]  # first and last robot id, inclusive
@@ -150,6 +180,40 @@ def edge_of(params: CamoParams, hosted: set[int], robots: Iterable[int]) -> set[
     return edge
 
 
+class Batch:
+    """What a tile's robots send on one topic, until the next flush: one array message, its
+    elements reused from send to send (cheaper than new messages)."""
+
+    def __init__(self, writer, kind: str) -> None:
+        self.writer = writer
+        self.kind = kind
+        self.array = ARRAY_TYPES[kind]()
+        self.array.header.frame_id = "camo"
+        self.pool: list = []
+        self.count = 0
+
+    def add(self, message: Message) -> bool:
+        """Pack one message; True if the batch is now full."""
+        if self.count == len(self.pool):
+            element = MESSAGE_TYPES[self.kind](phase=PHASE_OF[self.kind])
+            element.header.frame_id = "camo"
+            self.pool.append(element)
+        element = self.pool[self.count]
+        fill(element, message)
+        element.header.stamp.sec, element.header.stamp.nanosec = divmod(
+            time.time_ns(), 1_000_000_000
+        )
+        self.count += 1
+        return self.count >= MAX_BATCH
+
+    def flush(self) -> None:
+        if self.count:
+            self.array.messages = self.pool[: self.count]
+            stamp(self.array)
+            self.writer.publish(self.array)
+            self.count = 0
+
+
 class Transport:
     """The DDS endpoints of one process's robots, owned by one node (the process's own)."""
 
@@ -170,16 +234,13 @@ class Transport:
         self.hosted = {r for first, last in tiles for r in range(first, last + 1)}
         self.edge = edge_of(params, self.hosted, self.hosted)
         self.kinds = kinds_of(params)  # the kinds of message this run's robots send
-        self.writers: dict[tuple[int, str], object] = {}  # (robot, kind) -> its tile's writer
+        self.batches: dict[tuple[int, str], Batch] = {}  # (robot, kind) -> its topic's batch
+        self._unsent: list[Batch] = []  # batches holding messages, to publish at the next flush
         for first, last in tiles:
             self._create_writers(first, last)
         self.status_pub = node.create_publisher(
             RobotStatus, topics.status, history_qos(status_depth(params) * len(self.hosted))
         )
-        # One message a kind, filled in for each send (cheaper than a new one each time).
-        self._reused = {kind: MESSAGE_TYPES[kind](phase=PHASE_OF[kind]) for kind in self.kinds}
-        for msg in self._reused.values():
-            msg.header.frame_id = "camo"
         self.receivers: dict[tuple[int, str], list[Receiver]] = defaultdict(list)
         self.needed: set[int] = set()  # neighbours hosted elsewhere
         self.remote: set[tuple[int, int]] = set()  # tiles subscribed to
@@ -202,13 +263,14 @@ class Transport:
             if not members:
                 continue
             for kind in self.kinds:
-                msg_type = MESSAGE_TYPES[kind]
+                # An array holds at least one message: at most as many arrays as messages.
                 depth = len(members) * messages_per_robot(self.params, kind)
                 writer = self.node.create_publisher(
-                    msg_type, self.topics.tile(name, part, kind), history_qos(depth)
+                    ARRAY_TYPES[kind], self.topics.tile(name, part, kind), history_qos(depth)
                 )
+                batch = Batch(writer, kind)
                 for robot in members:
-                    self.writers[(robot, kind)] = writer
+                    self.batches[(robot, kind)] = batch
 
     def listen(self, msg_type, topic: str, qos: QoSProfile, handle) -> None:
         """Poll this topic: `handle(CDR bytes, publisher GID)` for each message."""
@@ -250,42 +312,52 @@ class Transport:
             name = tile_name(first, last)
             for kind in self.kinds:
                 topic = self.topics.tile(name, "edge", kind)
-                self.listen(MESSAGE_TYPES[kind], topic, listener_qos(), self._robot_message(kind))
+                self.listen(ARRAY_TYPES[kind], topic, listener_qos(), self._robot_messages(kind))
 
-    def _robot_message(self, kind: str):
-        cls = MESSAGE_TYPES[kind]
+    def _robot_messages(self, kind: str):
+        cls = ARRAY_TYPES[kind]
 
         def handle(data: bytes, gid: bytes) -> None:
-            msg = deserialize_message(data, cls)
-            sender = msg.sender_id
-            if not self.trusted.speaks_for(gid, sender):
-                self.rejected.refuse(
-                    "not from the process hosting its sender", gid, f"robot {sender}"
-                )
-                return
-            message = from_ros(kind, msg)
-            problem = phase_problem(kind, msg.phase) or message_problem(message, self.params)
-            key = (kind, sender, message.round, message.step)
-            if problem is None and key in self._seen:
-                if self._seen[key] == message.value:
-                    return  # the same message again
-                problem = "a second, different message for the same step"
-            if problem is not None:
-                self.rejected.refuse(problem, gid, f"robot {sender}")
-                return
-            self._seen[key] = message.value
-            self._deliver(message)
+            for msg in deserialize_message(data, cls).messages:
+                self._robot_message(kind, msg, gid)
 
         return handle
+
+    def _robot_message(self, kind: str, msg, gid: bytes) -> None:
+        sender = msg.sender_id
+        if not self.trusted.speaks_for(gid, sender):
+            self.rejected.refuse("not from the process hosting its sender", gid, f"robot {sender}")
+            return
+        message = from_ros(kind, msg)
+        problem = phase_problem(kind, msg.phase) or message_problem(message, self.params)
+        key = (kind, sender, message.round, message.step)
+        if problem is None and key in self._seen:
+            if self._seen[key] == message.value:
+                return  # the same message again
+            problem = "a second, different message for the same step"
+        if problem is not None:
+            self.rejected.refuse(problem, gid, f"robot {sender}")
+            return
+        self._seen[key] = message.value
+        self._deliver(message)
 
     # ---- out ----------------------------------------------------------------------
 
     def send(self, message: Message) -> None:
-        msg = self._reused[message.kind]
-        fill(msg, message)
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
-        self.writers[(message.sender, message.kind)].publish(msg)
+        """To this process's robots at once; to the world at the next `flush()`."""
+        batch = self.batches[(message.sender, message.kind)]
+        if not batch.count:
+            self._unsent.append(batch)
+        if batch.add(message):
+            batch.flush()
         self._deliver(message)
+
+    def flush(self) -> None:
+        """Publish what was sent since the last flush: one array per topic (the host's loop calls
+        this after each turn)."""
+        unsent, self._unsent = self._unsent, []
+        for batch in unsent:
+            batch.flush()
 
     def report(self, report: Report) -> None:
         msg = status_msg(report)
@@ -316,4 +388,5 @@ class Transport:
 
     def close(self) -> None:
         """Before the node is destroyed: the takers use its subscriptions' handles."""
+        self.flush()
         self.polled.close()
