@@ -184,9 +184,10 @@ class Batch:
     """What a tile's robots send on one topic, until the next flush: one array message, its
     elements reused from send to send (cheaper than new messages)."""
 
-    def __init__(self, writer, kind: str) -> None:
+    def __init__(self, writer, kind: str, edge: bool) -> None:
         self.writer = writer
         self.kind = kind
+        self.edge = edge  # read by other processes' robots (else by recorders and viewers only)
         self.array = ARRAY_TYPES[kind]()
         self.array.header.frame_id = "camo"
         self.pool: list = []
@@ -236,6 +237,7 @@ class Transport:
         self.kinds = kinds_of(params)  # the kinds of message this run's robots send
         self.batches: dict[tuple[int, str], Batch] = {}  # (robot, kind) -> its topic's batch
         self._unsent: list[Batch] = []  # batches holding messages, to publish at the next flush
+        self._unsent_edges: list[Batch] = []  # those of them other processes' robots wait for
         for first, last in tiles:
             self._create_writers(first, last)
         self.status_pub = node.create_publisher(
@@ -268,7 +270,7 @@ class Transport:
                 writer = self.node.create_publisher(
                     ARRAY_TYPES[kind], self.topics.tile(name, part, kind), history_qos(depth)
                 )
-                batch = Batch(writer, kind)
+                batch = Batch(writer, kind, part == "edge")
                 for robot in members:
                     self.batches[(robot, kind)] = batch
 
@@ -319,7 +321,7 @@ class Transport:
 
         def handle(data: bytes, gid: bytes) -> None:
             for msg in deserialize_message(data, cls).messages:
-                self._robot_message(kind, msg, gid)
+                self._robot_message(kind, msg, gid)  # queued: poll() hands them over
 
         return handle
 
@@ -339,7 +341,7 @@ class Transport:
             self.rejected.refuse(problem, gid, f"robot {sender}")
             return
         self._seen[key] = message.value
-        self._deliver(message)
+        self._enqueue(message)
 
     # ---- out ----------------------------------------------------------------------
 
@@ -347,15 +349,22 @@ class Transport:
         """To this process's robots at once; to the world at the next `flush()`."""
         batch = self.batches[(message.sender, message.kind)]
         if not batch.count:
-            self._unsent.append(batch)
+            (self._unsent_edges if batch.edge else self._unsent).append(batch)
         if batch.add(message):
             batch.flush()
-        self._deliver(message)
+        self._enqueue(message)
+        self._pump()
 
     def flush(self) -> None:
         """Publish what was sent since the last flush: one array per topic (the host's loop calls
         this after each turn)."""
+        self._flush_edges()
         unsent, self._unsent = self._unsent, []
+        for batch in unsent:
+            batch.flush()
+
+    def _flush_edges(self) -> None:
+        unsent, self._unsent_edges = self._unsent_edges, []
         for batch in unsent:
             batch.flush()
 
@@ -367,22 +376,30 @@ class Transport:
     # ---- in -----------------------------------------------------------------------
 
     def poll(self) -> int:
-        """Take what came from other processes; how many messages."""
-        return self.polled.poll()
+        """Take what came from other processes and hand it to the robots; how many messages."""
+        taken = self.polled.poll()
+        self._pump()
+        return taken
 
-    def _deliver(self, message: Message) -> None:
-        """Hand a message to every hosted robot that listens to its sender. Queued, not called
-        at once: a robot that steps on it sends again, and that must not recurse."""
+    def _enqueue(self, message: Message) -> None:
+        """For every hosted robot that listens to the message's sender, at the next pump."""
         for receive in self.receivers.get((message.sender, message.kind), ()):
             self._queue.append((receive, message))
+
+    def _pump(self) -> None:
+        """Hand queued messages to their robots, in generations: first what came in, then what
+        the robots sent on it, and so on. Not recursive: a robot that steps on a message sends
+        again. Between generations the edge topics are flushed, so that another process's robots
+        get what they wait for before this process goes on with robots they do not hear."""
         if self._pumping:
             return
         self._pumping = True
         try:
-            queue = self._queue
-            while queue:
-                receive, queued = queue.pop()
-                receive(queued)
+            while self._queue:
+                generation, self._queue = self._queue, []
+                for receive, message in generation:
+                    receive(message)
+                self._flush_edges()
         finally:
             self._pumping = False
 
