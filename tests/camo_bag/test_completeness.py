@@ -118,6 +118,9 @@ def test_a_bag_that_lost_robots_votes_is_incomplete_and_render_refuses_it(record
     # The same in a bag of the older layout, whose fields are read from the CDR bytes.
     older_layout(bag, tmp_path / "older")
     assert examine(tmp_path / "older").gaps() == []
+    again = bag_tool("render", str(tmp_path / "older"), "--out", str(tmp_path / "older_r"))
+    assert again.returncode == 0, again.stderr
+    assert strict_json(tmp_path / "older_r" / "summary.json")["final"] == live["final"]
     copy_bag(
         tmp_path / "older",
         tmp_path / "older_cut",

@@ -1,13 +1,16 @@
 """`./camo bench ros`: the swarm against a bare rclpy exchange of the same shape, in one run.
 
-The bare exchange moves the same messages the same way and does nothing else:
-the same processes, each hosting a contiguous block of robot ids; per block the
-same eight tile topics (edge and core, four kinds); each process subscribes to
-the edge topics of the blocks that hold its robots' neighbours and hands the
-rest over in memory. Each step every robot publishes a `camo_msgs/Vote`, and a
-process moves on once every remote vote of that step that its robots need has
-arrived. No robot nodes, no protocol, no statuses, no monitor: the ratio of the
-swarm's figures to these is the cost of the algorithm and its bookkeeping.
+The bare exchange moves the same messages and does nothing else: the same
+processes, each hosting a contiguous block of robot ids; per block the same
+tile topics (edge and core); each process subscribes to the edge topics of the
+blocks that hold its robots' neighbours and hands the rest over in memory.
+Each step every robot publishes a `camo_msgs/Vote` as a DDS message of its own
+(the exchange the swarm's targets are set against), and a process moves on
+once every remote vote of that step that its robots need has arrived. No robot
+nodes, no protocol, no statuses, no monitor. The swarm packs its messages
+(`transport.py`); so the long-run rate is also measured against a *packed*
+bare exchange, whose processes publish each step one `camo_msgs/VoteArray`
+per tile topic, as the swarm's do at best.
 
 Figures: set-up (launch until every robot has voted; bare: until the
 processes are matched), steps per second (every robot voting to every robot
@@ -31,17 +34,19 @@ from rclpy.signals import SignalHandlerOptions
 
 from camo_core.grid import neighbor_ids
 from camo_core.params import CamoParams
-from camo_msgs.msg import Vote
+from camo_msgs.msg import Vote, VoteArray
 
 from .launch_config import split_cells
 from .topics import LEAN_NODE, RunTopics, history_qos, start_ros, tile_name
 from .transport import edge_of, listener_qos
 
 BARE_RUN = "bench_bare"
+PACKED_RUN = "bench_packed"
 
 
-def bare_worker(side: int, steps: int, block: int, procs: int) -> dict:
-    """One process of the bare exchange (block `block` of `procs`); its timings."""
+def bare_worker(side: int, steps: int, block: int, procs: int, packed: int = 0) -> dict:
+    """One process of the bare exchange (block `block` of `procs`; `packed`: a VoteArray per
+    topic and step); its timings."""
     started = time.monotonic()
     params = CamoParams(rows=side, cols=side, consensus_steps=steps)
     blocks = split_cells(list(range(side * side)), procs)
@@ -55,13 +60,14 @@ def bare_worker(side: int, steps: int, block: int, procs: int) -> dict:
         for n in neighbor_ids(*divmod(r, side), side, side)[:8]
         if n is not None and n not in hosted
     }
-    topics = RunTopics(BARE_RUN)
+    topics = RunTopics(PACKED_RUN if packed else BARE_RUN)
+    wire = VoteArray if packed else Vote
     start_ros("camo bench ros", [], signal_handler_options=SignalHandlerOptions.NO)  # same footing
     node = rclpy.create_node(f"bare_{block}", **LEAN_NODE)
     qos = history_qos(len(mine) * (steps + 4))
     name = tile_name(first, last)
     writers = {
-        part: node.create_publisher(Vote, topics.tile(name, part, "vote"), qos)
+        part: node.create_publisher(wire, topics.tile(name, part, "vote"), qos)
         for part in ("edge", "core")
     }
     got: dict[int, int] = {}  # step -> remote votes of it received
@@ -70,10 +76,14 @@ def bare_worker(side: int, steps: int, block: int, procs: int) -> dict:
         if msg.sender_id in needed:
             got[msg.step] = got.get(msg.step, 0) + 1
 
+    def on_votes(msg: VoteArray) -> None:
+        for vote in msg.messages:
+            on_vote(vote)
+
     peers = [b for b in blocks if b is not mine and any(n in b for n in needed)]
     for peer in peers:
         topic = topics.tile(tile_name(peer[0], peer[-1]), "edge", "vote")
-        node.create_subscription(Vote, topic, on_vote, listener_qos())
+        node.create_subscription(wire, topic, on_votes if packed else on_vote, listener_qos())
     executor = EventsExecutor()
     executor.add_node(node)
     deadline = time.monotonic() + 300
@@ -84,13 +94,25 @@ def bare_worker(side: int, steps: int, block: int, procs: int) -> dict:
         executor.spin_once(timeout_sec=0.05)
     matched = time.monotonic()
     vote = Vote(p=[0.2, 0.3, 0.5], degree=8)
+    parts = {"edge": [r for r in mine if r in edge], "core": [r for r in mine if r not in edge]}
+    arrays = {
+        part: VoteArray(messages=[Vote(p=[0.2, 0.3, 0.5], degree=8) for _ in robots])
+        for part, robots in parts.items()
+    }
     local = {}
     for step in range(steps):
         vote.step = step
-        for robot in mine:
-            vote.sender_id = robot
-            writers["edge" if robot in edge else "core"].publish(vote)
-            local[robot] = step  # the in-memory hand-over to this process's robots
+        for part, robots in parts.items():
+            for k, robot in enumerate(robots):
+                local[robot] = step  # the in-memory hand-over to this process's robots
+                if packed:
+                    element = arrays[part].messages[k]
+                    element.sender_id, element.step = robot, step
+                else:
+                    vote.sender_id = robot
+                    writers[part].publish(vote)
+            if packed and robots:
+                writers[part].publish(arrays[part])
         while got.get(step, 0) < len(needed) and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
     done = time.monotonic()
@@ -103,7 +125,7 @@ def bare_worker(side: int, steps: int, block: int, procs: int) -> dict:
     return {"started": started, "matched": matched, "done": done, "complete": done < deadline}
 
 
-def bare_exchange(side: int, steps: int, procs: int, domain: int) -> dict:
+def bare_exchange(side: int, steps: int, procs: int, domain: int, packed: bool = False) -> dict:
     """The bare exchange in `procs` processes: set-up, steps per second, launch to exit."""
     env = {
         **os.environ,
@@ -114,7 +136,10 @@ def bare_exchange(side: int, steps: int, procs: int, domain: int) -> dict:
     command = [sys.executable, "-m", "camo_nodes.bench", "--bare-worker", str(side), str(steps)]
     workers = [
         subprocess.Popen(
-            [*command, str(k), str(procs)], env=env, stdout=subprocess.PIPE, text=True
+            [*command, str(k), str(procs), str(int(packed))],
+            env=env,
+            stdout=subprocess.PIPE,
+            text=True,
         )
         for k in range(min(procs, side * side))
     ]
@@ -158,17 +183,29 @@ def default_steps(side: int) -> int:
     return max(300, 100_000 // side**2)
 
 
-def compare(side: int, procs: int, domain: int, out: Path, steps: int | None, repeat: int) -> dict:
-    """Medians of alternating swarm and bare runs (this shared machine's speed drifts)."""
-    swarm, bare = [], []
+def compare(
+    side: int,
+    procs: int,
+    domain: int,
+    out: Path,
+    steps: int | None,
+    repeat: int,
+    packed: bool = False,
+) -> dict:
+    """Medians of alternating swarm and bare runs (this shared machine's speed drifts); with
+    `packed`, of the packed bare exchange too."""
+    swarm, bare, packs = [], [], []
     bare_steps = steps or 45
     for k in range(repeat):
         swarm.append(swarm_run(side, procs, domain, out / f"{side}_{k}", steps))
         bare.append(bare_exchange(side, bare_steps, procs, domain))
+        if packed:
+            packs.append(bare_exchange(side, bare_steps, procs, domain, packed=True))
+        also = f", packed {packs[-1]['steps_per_s']:.1f}" if packed else ""
         print(
             f"{side}x{side}: swarm {swarm[-1]['steps_per_s']:.1f} steps/s, "
-            f"bare {bare[-1]['steps_per_s']:.1f}; launch to exit {swarm[-1]['wall_s']:.1f} s, "
-            f"bare {bare[-1]['wall_s']:.1f} s",
+            f"bare {bare[-1]['steps_per_s']:.1f}{also}; launch to exit "
+            f"{swarm[-1]['wall_s']:.1f} s, bare {bare[-1]['wall_s']:.1f} s",
             file=sys.stderr,
         )
     row = {"robots": f"{side}x{side}", "procs": procs, "steps": steps or 45, "repeat": repeat}
@@ -176,6 +213,9 @@ def compare(side: int, procs: int, domain: int, out: Path, steps: int | None, re
         row[f"swarm_{key}"] = statistics.median(r[key] for r in swarm)
         row[f"bare_{key}"] = statistics.median(r[key] for r in bare)
     row["rate_ratio"] = row["swarm_steps_per_s"] / row["bare_steps_per_s"]
+    if packed:
+        row["packed_steps_per_s"] = statistics.median(r["steps_per_s"] for r in packs)
+        row["packed_ratio"] = row["swarm_steps_per_s"] / row["packed_steps_per_s"]
     return row
 
 
@@ -260,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--out", type=Path, default=Path("results") / time.strftime("bench-ros-%Y%m%d-%H%M%S")
     )
-    parser.add_argument("--bare-worker", nargs=4, type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--bare-worker", nargs=5, type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.bare_worker:
         print(json.dumps(bare_worker(*args.bare_worker)))
@@ -276,6 +316,7 @@ def main(argv: list[str] | None = None) -> int:
             args.out / "rate",
             args.steps or default_steps(side),
             args.repeat,
+            packed=True,
         )
         for side in args.rate_sides
     ]
@@ -299,6 +340,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"medians of {args.repeat} alternating runs, {args.procs} processes")
         print("long runs (step rate):")
         print(format_table(rates))
+        for r in rates:
+            print(
+                f"{r['robots']} against the packed bare exchange: "
+                f"{r['packed_steps_per_s']:.1f} steps/s, ratio {r['packed_ratio']:.2f}"
+            )
         print("whole runs (35 + 10 steps):")
         print(format_table(whole))
         targets = {"recording": 1.5, "live view": 1.1}
