@@ -54,6 +54,7 @@ from camo_msgs.msg import (
 )
 
 from .polled import PolledTopics
+from .status_msg import status_msg
 from .topics import LATCHED, LATCHED_READER, RunTopics, history_qos, tile_name
 from .trust import Hosts, Rejections
 
@@ -123,30 +124,6 @@ def from_ros(kind: str, msg) -> Message:
     else:
         value = msg.state
     return Message(kind, msg.sender_id, msg.round, msg.step, value)
-
-
-def status_msg(report: Report) -> RobotStatus:
-    return RobotStatus(
-        sender_id=report.sender_id,
-        row=report.row,
-        col=report.col,
-        phase=report.phase,
-        step=report.step,
-        round=report.round,
-        sensed=report.sensed,
-        p=list(report.p),
-        pattern=report.pattern,
-        state=report.state,
-        alive=report.alive,
-        known_slots=report.known_slots,
-        deadlines=report.deadlines,
-        silent=list(report.silent),
-        p_from=report.p_from,
-        p_trace=list(report.p_trace),
-        state_from=report.state_from,
-        state_trace=list(report.state_trace),
-        palette=list(report.palette),
-    )
 
 
 def messages_per_robot(params: CamoParams, kind: str) -> int:
