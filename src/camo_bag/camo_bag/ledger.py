@@ -23,8 +23,8 @@ from camo_core.robot_io import messages_per_round
 
 MAX_STEP = 1_000_000  # before the run's parameters are known: no step of a run is beyond this
 # The robots' message types, and the kind of message each carries. A tile topic carries arrays
-# of them (one DDS message per topic and turn of a process's loop); bags recorded before that
-# hold one robot message per bag message.
+# of them (one DDS message for what a tile's robots sent since the last write); bags recorded
+# before that hold one robot message per bag message.
 SINGLE_KINDS = {
     "camo_msgs/msg/Hello": "hello",
     "camo_msgs/msg/Color": "color",

@@ -4,17 +4,18 @@ A process hosts one or more *tiles* of robots (contiguous ranges of robot ids,
 row-major: bands of the grid). Each tile publishes on eight topics, one per
 message kind for its *edge* robots (those with a neighbour hosted elsewhere)
 and one per kind for the rest (its *core*), every message carrying its
-sender's id (`RunTopics.tile`). What a tile's robots send on one topic in one
-turn of the process's loop goes out as one DDS message, an array of them
-(`camo_msgs/VoteArray`, ...): a DDS write costs four times what packing one more
-robot message into it does (docs/swarm.md). A robot hosted by the same process as its
-neighbour gets the message handed over in memory, as rclcpp's intra-process
-communication does. A process subscribes only to the edge topics of the tiles
-that hold its robots' neighbours, which it learns from the tiles' hosts'
-announcements (`camo_msgs/Host`, latched); a recorder or a viewer subscribes
-to all of them. So the DDS endpoints of a run grow with its processes, not
-with robots x neighbours, and a process takes only the messages its robots
-need (a tile's two boundary rows, not the whole band).
+sender's id (`RunTopics.tile`). What a tile's robots send on one topic between
+two writes goes out as one DDS message, an array of them (`camo_msgs/VoteArray`,
+...): a DDS write costs four times what packing one more robot message into it
+does (docs/swarm.md). Edge topics are written between generations of
+deliveries (`_pump`), core topics once per turn of the host's loop. A robot
+hosted by the same process as its neighbour gets the message handed over in
+memory, as rclcpp's intra-process communication does. A process subscribes
+only to the edge topics of the tiles that hold its robots' neighbours, which it
+learns from the tiles' hosts' announcements (`camo_msgs/Host`, latched); a
+recorder or a viewer subscribes to all of them. So the DDS endpoints of a run
+grow with its processes, not with robots x neighbours, and a process takes only
+the messages its robots need (a tile's two boundary rows, not the whole band).
 
 The edge subscriptions (and the hosts', and the background's) are not spun by
 the executor: `poll()` takes their messages with their publisher's GID
