@@ -31,7 +31,7 @@ settings.load_profile("explore" if os.environ.get("CAMO_FUZZ") == "explore" else
 @pytest.fixture
 def count_round_records(monkeypatch) -> list[int]:
     """Counts RoundRecord constructions (each allocates traces of consensus steps x robots)."""
-    from camo_core.record import RoundRecord
+    from camo_core.results.record import RoundRecord
 
     made: list[int] = []
     original = RoundRecord.__post_init__

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from camo_core.params import CamoParams
-from camo_core.protocol import StepProtocol
-from camo_core.robot_io import Message
-from camo_core.sensing import Reading
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.protocol import StepProtocol
+from camo_core.algorithm.robot_io import Message
+from camo_core.algorithm.sensing import Reading
 
 ROOT = Path(__file__).resolve().parents[1]
 FOXGLOVE_CLIENT = ROOT / "tests" / "foxglove_client"  # Foxglove's libraries, pinned (npm ci)
@@ -294,8 +294,8 @@ def drawn_direction(states: np.ndarray) -> float:
 def assert_drivers_agree(params: CamoParams, raw: np.ndarray, fields: tuple[str, ...], what=()):
     """The vectorised simulator and the per-robot driver give the same `fields`, bit for bit;
     the two results (`what` names the case in a failure)."""
-    from camo_core.perrobot import run_per_robot
-    from camo_core.simulator import simulate
+    from camo_core.algorithm.perrobot import run_per_robot
+    from camo_core.algorithm.simulator import simulate
 
     fast, slow = simulate(params, raw), run_per_robot(params, raw)
     for field in fields:

@@ -48,13 +48,13 @@ class NoRos(importlib.abc.MetaPathFinder):
             raise ImportError('ROS is blocked in this test: ' + name)
 sys.meta_path.insert(0, NoRos())
 import pkgutil, importlib, camo_core
-names = [m.name for m in pkgutil.iter_modules(camo_core.__path__)]
+names = [m.name for m in pkgutil.walk_packages(camo_core.__path__, 'camo_core.')]
 for name in names:
-    importlib.import_module('camo_core.' + name)
-from camo_core.params import CamoParams
-from camo_core.simulator import simulate
-from camo_core.backgrounds import background
-from camo_core.sensing import sense_image
+    importlib.import_module(name)
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.simulator import simulate
+from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.sensing import sense_image
 result = simulate(CamoParams(), sense_image(background('forest'), 8, 8, 'paper'))
 assert 'rclpy' not in sys.modules
 print(len(names), result.majority_pattern)
@@ -94,7 +94,7 @@ def test_camo_core_imports_and_runs_with_ros_blocked():
 
 
 def test_the_step_protocol_loads_no_rclpy():
-    code = "import sys, camo_core.protocol; print('rclpy' in sys.modules)"
+    code = "import sys, camo_core.algorithm.protocol; print('rclpy' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == "False", out.stderr
 

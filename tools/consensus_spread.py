@@ -17,10 +17,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from camo_core.backgrounds import background
-from camo_core.params import CamoParams, auto_consensus_steps
-from camo_core.sensing import sense_image
-from camo_core.simulator import simulate
+from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.params import CamoParams, auto_consensus_steps
+from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.simulator import simulate
 
 SIDES = (8, 16, 32, 64)
 STEPS = 3500

@@ -15,11 +15,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from camo_core import figures
-from camo_core.backgrounds import background, stripes
-from camo_core.layout import layout_for, sense_at
-from camo_core.params import CamoParams
-from camo_core.perrobot import run_per_robot
+from camo_core.algorithm.backgrounds import background, stripes
+from camo_core.algorithm.layout import layout_for, sense_at
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.perrobot import run_per_robot
+from camo_core.results import figures
 
 SIDE = 32
 LAYOUTS = ("jitter:0", "hex", "jitter:0.3")

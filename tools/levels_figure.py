@@ -16,10 +16,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from camo_core.backgrounds import background, stripes
-from camo_core.params import CamoParams
-from camo_core.sensing import sense_image
-from camo_core.simulator import simulate
+from camo_core.algorithm.backgrounds import background, stripes
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.simulator import simulate
 
 SIDE = 32
 LEVELS = (0, 2, 4)

@@ -16,10 +16,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from camo_core.backgrounds import stripes
-from camo_core.params import CamoParams
-from camo_core.sensing import sense_image
-from camo_core.simulator import simulate
+from camo_core.algorithm.backgrounds import stripes
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.simulator import simulate
 
 SIDE = 32
 SHOWN = (0, 30, 45, 60, 90, 135)

@@ -16,5 +16,5 @@ setup(
     maintainer_email="camo@example.org",
     description="The camouflage algorithm without ROS, and its reference simulator.",
     license="Apache-2.0",
-    entry_points={"console_scripts": ["camo_sim = camo_core.cli:main"]},
+    entry_points={"console_scripts": ["camo_sim = camo_core.cli.commands:main"]},
 )

@@ -180,7 +180,7 @@ def test_a_run_that_ended_early_makes_an_incomplete_bag(recorded, tmp_path, ende
 
 def test_the_ledger_counts_each_step_once_and_ignores_steps_no_robot_sends():
     from camo_bag.ledger import Ledger
-    from camo_core.params import CamoParams
+    from camo_core.algorithm.params import CamoParams
 
     ledger = Ledger()
     ledger.set_run(CamoParams(rows=1, cols=2, consensus_steps=3, formation_steps=2), 1)

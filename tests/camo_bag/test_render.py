@@ -98,8 +98,8 @@ def test_render_reads_a_bag_of_the_older_layout_with_its_older_status_type(tmp_p
 
     from camo_bag.container import BagWriter, TopicInfo
     from camo_bag.msgdefs import SEPARATOR, message_definition
-    from camo_core.params import CamoParams
-    from camo_core.simulator import simulate
+    from camo_core.algorithm.params import CamoParams
+    from camo_core.algorithm.simulator import simulate
 
     params = CamoParams(rows=2, cols=3, consensus_steps=6, formation_steps=4, seed=3)
     grid = np.random.default_rng(2).uniform(0, 255, (params.rows, params.cols))

@@ -3,10 +3,10 @@
 import numpy as np
 from support import Bus, run_camo
 
-from camo_core.animation import MAX_FRAMES, Snapshots, shown_steps
-from camo_core.params import CamoParams
-from camo_core.record import RoundRecord
-from camo_core.simulator import simulate
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.simulator import simulate
+from camo_core.results.animation import MAX_FRAMES, Snapshots, shown_steps
+from camo_core.results.record import RoundRecord
 
 
 def gif_frames(path) -> list[bytes]:

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from camo_core.backgrounds import background
-from camo_core.params import CamoParams
-from camo_core.sensing import ImageError, sense_image
-from camo_core.simulator import simulate
+from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.sensing import ImageError, sense_image
+from camo_core.algorithm.simulator import simulate
 
 
 @pytest.mark.parametrize(

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from support import run_camo
 
-from camo_core.result import SUMMARY_KEYS
+from camo_core.algorithm.result import SUMMARY_KEYS
 
 
 def test_sim_writes_summary_and_figure(tmp_path):
@@ -105,7 +105,7 @@ def test_sim_takes_real_readings_without_noise(tmp_path):
 
 
 def test_bench_whole_process_times_camo_sim_in_a_subprocess():
-    from camo_core import bench
+    from camo_core.cli import bench
 
     whole = bench.whole_process(repeats=1, side=32)  # --whole runs it at 1024x1024
     assert whole["command"].startswith("python -m camo_core.cli sim --image BIG --rows 32 ")

@@ -7,11 +7,11 @@ import pytest
 import yaml
 from support import run_camo
 
-from camo_core.backgrounds import background
-from camo_core.options import Parser, add_run_options, params_from
-from camo_core.params import ParameterError, auto_consensus_steps
-from camo_core.sensing import sense_image
-from camo_core.simulator import simulate
+from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.params import ParameterError, auto_consensus_steps
+from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.simulator import simulate
+from camo_core.cli.options import Parser, add_run_options, params_from
 
 
 def test_auto_keeps_the_profiles_steps_at_8x8_and_grows_with_the_diameter_squared():

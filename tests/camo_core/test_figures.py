@@ -7,11 +7,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from camo_core import figures
-from camo_core.backgrounds import background
-from camo_core.params import CamoParams
-from camo_core.sensing import sense_image
-from camo_core.simulator import simulate
+from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.simulator import simulate
+from camo_core.results import figures
 
 
 @pytest.fixture(scope="module")
@@ -120,7 +120,7 @@ def test_the_paper_random_level_is_only_drawn_for_the_paper_swarm_size(error_row
 
 
 def test_a_swarm_round_marks_its_bridged_robots_and_those_given_up_on():
-    from camo_core.record import RoundRecord
+    from camo_core.results.record import RoundRecord
 
     record = RoundRecord(CamoParams(rows=2, cols=3))
     record.given_up = {0: frozenset({4, 5})}  # robot 0 gave up on 4 and 5 for a while

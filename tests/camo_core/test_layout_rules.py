@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from support import brick_courses, run_camo
 
-from camo_core import orientation
-from camo_core.backgrounds import background, stripes
-from camo_core.layout import LayoutError, layout_for, layout_of, places_for, sense_at
-from camo_core.layout_rules import fitted_tensor, kernel
-from camo_core.params import CamoParams, ParameterError
-from camo_core.perrobot import run_per_robot
-from camo_core.rules import MOTTLED
+from camo_core.algorithm import orientation
+from camo_core.algorithm.backgrounds import background, stripes
+from camo_core.algorithm.layout import LayoutError, layout_for, layout_of, places_for, sense_at
+from camo_core.algorithm.layout_rules import fitted_tensor, kernel
+from camo_core.algorithm.params import CamoParams, ParameterError
+from camo_core.algorithm.perrobot import run_per_robot
+from camo_core.algorithm.rules import MOTTLED
 
 
 def test_a_hexagonal_robot_has_six_neighbours_one_spacing_away():

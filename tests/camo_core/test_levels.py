@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from support import Bus, assert_drivers_agree, brick_courses, run_camo
 
-from camo_core import levels
-from camo_core.backgrounds import background, stripes
-from camo_core.params import CamoParams, ParameterError
-from camo_core.robot_io import DONE, Message
-from camo_core.sensing import sense_image
-from camo_core.simulator import simulate
-from camo_core.validation import message_problem
+from camo_core.algorithm import levels
+from camo_core.algorithm.backgrounds import background, stripes
+from camo_core.algorithm.params import CamoParams, ParameterError
+from camo_core.algorithm.robot_io import DONE, Message
+from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.simulator import simulate
+from camo_core.algorithm.validation import message_problem
 
 FIELDS = ("sensed", "votes", "p", "selected", "initial", "final", "palette", "display")
 

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from support import Bus, assert_drivers_agree, brick_courses, drawn_direction, run_camo
 
-from camo_core import orientation, rules
-from camo_core.backgrounds import stripes
-from camo_core.orientation import ORIENTED, ROLES, choose, raw_tensor
-from camo_core.params import CamoParams, ParameterError
-from camo_core.robot_io import DONE
-from camo_core.sensing import sense_image
-from camo_core.simulator import simulate
+from camo_core.algorithm import orientation, rules
+from camo_core.algorithm.backgrounds import stripes
+from camo_core.algorithm.orientation import ORIENTED, ROLES, choose, raw_tensor
+from camo_core.algorithm.params import CamoParams, ParameterError
+from camo_core.algorithm.robot_io import DONE
+from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.simulator import simulate
 
 FIELDS = ("sensed", "votes", "p", "selected", "initial", "final", "consensus_trace")
 

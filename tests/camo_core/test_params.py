@@ -2,7 +2,7 @@
 
 import pytest
 
-from camo_core.params import CamoParams, ParameterError
+from camo_core.algorithm.params import CamoParams, ParameterError
 
 
 def test_profile_defaults_fill_steps_and_weights():

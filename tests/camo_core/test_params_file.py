@@ -11,7 +11,7 @@ import yaml
 from hypothesis import event, given
 from hypothesis import strategies as st
 
-from camo_core.params_file import ParamsFileError, check_params_file, check_ros_args
+from camo_core.cli.params_file import ParamsFileError, check_params_file, check_ros_args
 
 GOOD = """\
 /**:
@@ -145,7 +145,7 @@ def test_anything_in_a_params_file_ends_in_one_line_or_a_start(tmp_path_factory,
 
 
 def test_a_node_takes_its_own_keys_over_the_general_ones(tmp_path):
-    from camo_core.params_file import parameters_for
+    from camo_core.cli.params_file import parameters_for
 
     path = write(
         tmp_path,

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from support import Bus, FixedSensor
 
-from camo_core import rng
-from camo_core.params import CamoParams
-from camo_core.protocol import (
+from camo_core.algorithm import rng
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.protocol import (
     CONSENSUS,
     DISCOVERY,
     DONE,
@@ -15,9 +15,9 @@ from camo_core.protocol import (
     TICK,
     StepProtocol,
 )
-from camo_core.robot_io import Message
-from camo_core.sensing import Reading
-from camo_core.simulator import simulate
+from camo_core.algorithm.robot_io import Message
+from camo_core.algorithm.sensing import Reading
+from camo_core.algorithm.simulator import simulate
 
 
 def robot(params: CamoParams, row: int, col: int, value: float = 100.0, **kwargs) -> StepProtocol:
@@ -252,7 +252,7 @@ def test_a_neighbour_known_to_be_alive_is_waited_for_past_the_deadline():
 
 
 def test_reports_spaced_in_time_still_carry_every_step_and_rebuild_the_same_record():
-    from camo_core.record import RoundRecord
+    from camo_core.results.record import RoundRecord
 
     params = CamoParams(rows=2, cols=3, consensus_steps=12, formation_steps=6, seed=2)
     grid = np.random.default_rng(5).uniform(0, 255, (params.rows, params.cols))

@@ -10,10 +10,12 @@ import matplotlib.axes
 import numpy as np
 import pytest
 
-from camo_core import figures, result
-from camo_core.params import CamoParams
-from camo_core.result import SUMMARY_KEYS, RunResult, write_summary
-from camo_core.simulator import simulate
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.result import SUMMARY_KEYS, RunResult
+from camo_core.algorithm.simulator import simulate
+from camo_core.results import figures
+from camo_core.results import summary as result
+from camo_core.results.summary import write_summary
 
 SIDE = 160  # 25600 robots: above result.INDENTED_SUMMARY_CELLS, so orjson writes the grids
 

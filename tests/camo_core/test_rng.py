@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from camo_core import rng
+from camo_core.algorithm import rng
 
 
 def test_mix_matches_the_published_splitmix64_sequence():

@@ -2,9 +2,9 @@
 
 import pytest
 
-from camo_core import rules
-from camo_core.params import CamoParams
-from camo_core.rules import HORIZONTAL, MOTTLED, VERTICAL
+from camo_core.algorithm import rules
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.rules import HORIZONTAL, MOTTLED, VERTICAL
 
 PAPER = CamoParams(profile="paper")
 DROPLET = CamoParams(profile="droplet")

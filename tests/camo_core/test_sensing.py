@@ -9,9 +9,9 @@ import yaml
 from hypothesis import given
 from hypothesis import strategies as st
 
-from camo_core import sensing
-from camo_core.params import ParameterError
-from camo_core.sensing import Calibration, ImageError, rgb_to_gray, to_gray
+from camo_core.algorithm import sensing
+from camo_core.algorithm.params import ParameterError
+from camo_core.algorithm.sensing import Calibration, ImageError, rgb_to_gray, to_gray
 
 
 def test_block_means_are_unrounded_area_averages():
@@ -132,7 +132,7 @@ def test_contrast_pulls_every_value_toward_the_images_mean():
 def test_sim_at_a_contrast_senses_what_it_senses_on_that_image_written_out(tmp_path):
     from support import run_camo
 
-    from camo_core.backgrounds import background
+    from camo_core.algorithm.backgrounds import background
 
     faint = tmp_path / "faint.png"
     cv2.imwrite(str(faint), sensing.with_contrast(background("leopard"), 0.4))

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from support import assert_drivers_agree
 
-from camo_core.params import CamoParams
-from camo_core.perrobot import run_per_robot
-from camo_core.simulator import simulate
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.perrobot import run_per_robot
+from camo_core.algorithm.simulator import simulate
 
 FIELDS = ("sensed", "votes", "p", "selected", "initial", "final", "consensus_trace")
 SHAPES = [(1, 1), (1, 7), (6, 1), (2, 2), (3, 5), (8, 8), (9, 4)]
@@ -69,15 +69,15 @@ def test_exempt_robots_are_never_replaced_by_noise():
 STALE_CACHE_RUN = """
 import sys
 import numpy as np
-from camo_core import rules
+from camo_core.algorithm import rules
 if sys.argv[1] == "changed":  # a rules.py of another version: fewer mottled inhibitors
     rules.INHIBITORS[rules.MOTTLED] = (4, 5, 6, 7)
-from camo_core import kernels
-from camo_core.backgrounds import background
-from camo_core.params import CamoParams
-from camo_core.perrobot import run_per_robot
-from camo_core.sensing import sense_image
-from camo_core.simulator import simulate
+from camo_core.algorithm import kernels
+from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.perrobot import run_per_robot
+from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.simulator import simulate
 params = CamoParams(rows=8, cols=8)
 raw = sense_image(background("leopard"), 8, 8, "paper")
 grid, robots = simulate(params, raw), run_per_robot(params, raw)

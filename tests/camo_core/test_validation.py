@@ -5,10 +5,10 @@ import math
 
 import pytest
 
-from camo_core.params import CamoParams
-from camo_core.protocol import CONSENSUS, DISCOVERY, FORMATION, SENSING
-from camo_core.robot_io import Message
-from camo_core.validation import message_problem, phase_problem
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.protocol import CONSENSUS, DISCOVERY, FORMATION, SENSING
+from camo_core.algorithm.robot_io import Message
+from camo_core.algorithm.validation import message_problem, phase_problem
 
 PARAMS = CamoParams(rows=4, cols=5, consensus_steps=20, formation_steps=6)
 
@@ -57,7 +57,7 @@ def test_a_message_must_carry_its_kinds_phase():
 
 
 def test_energies_pass_only_in_a_run_with_threshold_auto_and_within_range():
-    from camo_core.rules import energy_step
+    from camo_core.algorithm.rules import energy_step
 
     auto = PARAMS.with_(threshold_auto=True)
     assert message_problem(Message("energy", 3, 0, 19, (510.0, 8)), auto) is None
@@ -108,7 +108,7 @@ def test_relays_and_tensors_pass_only_in_a_run_with_orientation_any():
         vote = Message("vote", 3, 0, 0, (bad, 4))
         assert message_problem(vote, oriented) == "vote out of range", bad
     # And every tensor a robot can make passes, however strong or faint its texture.
-    from camo_core import orientation
+    from camo_core.algorithm import orientation
 
     for greys in ([0.0] * 8, [255.0, 0.0] * 4, [0.0, 255.0, 0.0, 255.0, 255.0, 0.0, 0.0, 255.0]):
         for own in (0.0, 128.0, 255.0):

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from support import ROOT, StatusListener, assert_like_sim, camo_run, domain, run_camo
 
-from camo_core.backgrounds import background
-from camo_core.sensing import Calibration, rgb_to_gray
+from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.sensing import Calibration, rgb_to_gray
 from camo_droplet.emulator import DropletEmulator, Faults, emulated_rgb
 
 TRANSCRIPT = ROOT / "tests" / "data" / "firmware_transcript.txt"

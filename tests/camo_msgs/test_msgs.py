@@ -67,7 +67,7 @@ def test_each_message_type_round_trips(monkeypatch):
 
 
 def test_robot_status_constants_are_the_protocols_phases_and_the_rules_patterns():
-    from camo_core import protocol, rules
+    from camo_core.algorithm import protocol, rules
 
     assert [
         RobotStatus.PHASE_DISCOVERY,

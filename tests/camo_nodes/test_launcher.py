@@ -623,7 +623,7 @@ def test_the_swarm_with_orientation_any_threshold_auto_and_levels_equals_the_sim
     from support import bag_tool
 
     from camo_bag.container import read_messages
-    from camo_core.backgrounds import stripes
+    from camo_core.algorithm.backgrounds import stripes
     from camo_msgs.msg import RelayArray
 
     image = tmp_path / "stripes.png"

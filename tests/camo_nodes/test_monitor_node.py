@@ -96,7 +96,7 @@ def status(**fields):
 
 def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(count_round_records):
     # A record allocated per status made a long run's monitor fall far behind its robots.
-    from camo_core.params import CamoParams
+    from camo_core.algorithm.params import CamoParams
     from camo_nodes.monitor_node import MonitorNode
     from camo_nodes.topics import RunTopics
 
@@ -118,7 +118,7 @@ def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(coun
 
 
 def test_monitor_counts_bridged_robots_whose_hardware_is_offline():
-    from camo_core.params import CamoParams
+    from camo_core.algorithm.params import CamoParams
     from camo_nodes.monitor_node import MonitorNode
     from camo_nodes.topics import RunTopics
 

@@ -12,8 +12,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from support import BAG_COLS, BAG_ROWS, FOXGLOVE_CLIENT
 from visualization_msgs.msg import Marker
 
-from camo_core.params import CamoParams
-from camo_core.record import RoundRecord
+from camo_core.algorithm.params import CamoParams
+from camo_core.results.record import RoundRecord
 from camo_nodes import scene
 
 PARAMS = CamoParams(rows=2, cols=3)

@@ -91,7 +91,7 @@ def test_workers_elsewhere_never_open_the_sweeps_images(cluster, tmp_path):
     # The workers run in the repository's folder; the sweep, and its relative image, here.
     import cv2
 
-    from camo_core.backgrounds import background
+    from camo_core.algorithm.backgrounds import background
 
     address, _ = cluster
     cv2.imwrite(str(tmp_path / "a.png"), background("desert"))

@@ -16,10 +16,10 @@ from camo_sweep.spec import sim_parser
 from support import ROOT, run_camo, sweep
 from support import sweep_table as table
 
-from camo_core.backgrounds import background
-from camo_core.options import params_from
-from camo_core.sensing import sense_image
-from camo_core.simulator import simulate
+from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.simulator import simulate
+from camo_core.cli.options import params_from
 
 
 @pytest.fixture(scope="module")

@@ -5,11 +5,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from camo_bag.completeness import examine
+from camo_bag.container import BagError, format_info, mcap_file, read_summary, repair
+from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError
-from camo_core.options import Parser
-
-from .completeness import examine
-from .container import BagError, format_info, mcap_file, read_summary, repair
 
 
 def build_parser() -> Parser:

@@ -19,15 +19,14 @@ from mcap.records import Schema
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
+from camo_bag.container import BagError, BagSummary, damaged, read_messages, read_summary
+from camo_bag.ledger import ARRAY_KINDS, SINGLE_KINDS, Ledger
+from camo_bag.msgdefs import full_name, message_class, message_definition
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.protocol import DONE
 from camo_core.exceptions import CamoError
-from camo_core.params import CamoParams
-from camo_core.protocol import DONE
 from camo_msgs.msg import RobotStatus
 from camo_nodes.topics import PARAMS_SUFFIX, result_from
-
-from .container import BagError, BagSummary, damaged, read_messages, read_summary
-from .ledger import ARRAY_KINDS, SINGLE_KINDS, Ledger
-from .msgdefs import full_name, message_class, message_definition
 
 
 def message_fields(kind: str, data: bytes) -> tuple[int, int, int]:

@@ -8,7 +8,7 @@ from collections.abc import Callable, Iterator
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from . import msgdefs
+from camo_bag import msgdefs
 
 SKIPPED = {"/rosout", "/parameter_events"}
 

@@ -20,13 +20,12 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 
+from camo_bag import msgdefs
+from camo_bag.graph_topics import taking_qos
+from camo_core.cli.options import Parser, add_network_options, network_env
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.options import Parser, add_network_options, network_env
 from camo_core.shutdown import StopFlag
 from camo_nodes.topics import start_ros
-
-from . import msgdefs
-from .graph_topics import taking_qos
 
 # Before listing: at least DISCOVERY s for the graph to fill (ros2cli's daemon keeps it filled),
 # then until it has not changed for SETTLED s, MAX_DISCOVERY s at most (a loaded machine is slow).

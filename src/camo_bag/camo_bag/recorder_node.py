@@ -35,10 +35,14 @@ from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
+from camo_bag import msgdefs, qos_yaml
+from camo_bag.container import BagWriter, TopicInfo
+from camo_bag.graph_topics import new_topics, taking_qos
+from camo_bag.ledger import ROBOT_KINDS, Ledger, robot_messages
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.protocol import DONE
+from camo_core.cli.options import Parser, add_network_options, network_env, new_folder_problem
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.options import Parser, add_network_options, network_env, new_folder_problem
-from camo_core.params import CamoParams
-from camo_core.protocol import DONE
 from camo_core.shutdown import StopFlag
 from camo_nodes.topics import (
     LATCHED,
@@ -51,11 +55,6 @@ from camo_nodes.topics import (
     start_ros,
     wait_for_run,
 )
-
-from . import msgdefs, qos_yaml
-from .container import BagWriter, TopicInfo
-from .graph_topics import new_topics, taking_qos
-from .ledger import ROBOT_KINDS, Ledger, robot_messages
 
 RESULT_GRACE = 10.0  # s a recorder waits, after the run's result, for what the result names
 

@@ -23,19 +23,18 @@ from pathlib import Path
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
-from camo_core import figures
-from camo_core.animation import Snapshots, write_animation
+from camo_bag.completeness import examine, run_topics_of, setup_in, status_decoder
+from camo_bag.container import DAMAGE, BagError, damaged, read_messages, read_summary
+from camo_bag.ledger import gaps_of_round
+from camo_core.algorithm.params import CamoParams
+from camo_core.cli.options import Parser, add_out_options, out_dir
 from camo_core.exceptions import CamoError
-from camo_core.options import Parser, add_out_options, out_dir
-from camo_core.output import run_title, write_round
-from camo_core.params import CamoParams
-from camo_core.record import Backgrounds, Rounds
+from camo_core.results import figures
+from camo_core.results.animation import Snapshots, write_animation
+from camo_core.results.output import run_title, write_round
+from camo_core.results.record import Backgrounds, Rounds
 from camo_msgs.msg import RobotStatus
 from camo_nodes.topics import image_from_msg
-
-from .completeness import examine, run_topics_of, setup_in, status_decoder
-from .container import DAMAGE, BagError, damaged, read_messages, read_summary
-from .ledger import gaps_of_round
 
 
 @dataclass

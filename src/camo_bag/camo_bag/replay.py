@@ -17,14 +17,13 @@ import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from camo_bag import msgdefs, qos_yaml
+from camo_bag.container import BagSummary, read_messages, read_summary
+from camo_core.cli.options import Parser, add_network_options, network_env
+from camo_core.cli.progress import ProgressBar
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.options import Parser, add_network_options, network_env
-from camo_core.progress import ProgressBar
 from camo_core.shutdown import StopFlag
 from camo_nodes.topics import LEAN_NODE, check_run_id, start_ros
-
-from . import msgdefs, qos_yaml
-from .container import BagSummary, read_messages, read_summary
 
 
 def build_parser() -> Parser:

@@ -22,14 +22,13 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from camo_bag import msgdefs
+from camo_bag.graph_topics import new_topics, taking_qos
+from camo_bag.recorder_node import join
+from camo_core.cli.options import Parser, add_network_options, network_env
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.options import Parser, add_network_options, network_env
 from camo_core.shutdown import StopFlag
 from camo_nodes.topics import RunTopics, check_run_id, run_ended, start_ros
-
-from . import msgdefs
-from .graph_topics import new_topics, taking_qos
-from .recorder_node import join
 
 DEFAULT_PORT = 8765
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 
-from .shutdown import interrupt_on_signals
+from camo_core.shutdown import interrupt_on_signals
 
 
 class CamoError(Exception):

@@ -25,12 +25,15 @@ import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from camo_core.algorithm.params import CamoParams, ParameterError
+from camo_core.algorithm.protocol import CONSENSUS, NO_PATTERN, SENSING
+from camo_core.algorithm.sensing import Calibration
+from camo_core.cli.options import node_help, wants_help
 from camo_core.exceptions import CamoError
-from camo_core.options import node_help, wants_help
-from camo_core.params import CamoParams, ParameterError
-from camo_core.protocol import CONSENSUS, NO_PATTERN, SENSING
-from camo_core.sensing import Calibration
 from camo_core.shutdown import StopFlag
+from camo_droplet.firmware import FirmwareState
+from camo_droplet.link import DropletDisconnected, DropletError, DropletLink
+from camo_droplet.rig import DropletLed, DropletSensor, Reconnector, parse_rgb
 from camo_msgs.msg import Host, RobotStatus
 from camo_nodes.robot_node import ROBOT_PARAMETERS, host_robots, robot_parameters
 from camo_nodes.topics import (
@@ -40,10 +43,6 @@ from camo_nodes.topics import (
     run_ended,
     start_ros,
 )
-
-from .firmware import FirmwareState
-from .link import DropletDisconnected, DropletError, DropletLink
-from .rig import DropletLed, DropletSensor, Reconnector, parse_rgb
 
 BRIDGE_PARAMETERS = {
     "port": "",

@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from camo_core.backgrounds import BACKGROUNDS, background
+from camo_core.algorithm.backgrounds import BACKGROUNDS, background
+from camo_core.algorithm.sensing import block_means, load_image
+from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.options import Parser
-from camo_core.sensing import block_means, load_image
 from camo_core.shutdown import interrupt_on_signals
 
 

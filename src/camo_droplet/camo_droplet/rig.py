@@ -11,11 +11,10 @@ from __future__ import annotations
 import logging
 import time
 
+from camo_core.algorithm.params import ParameterError
+from camo_core.algorithm.sensing import Calibration, Reading, rgb_to_gray
 from camo_core.exceptions import CamoError
-from camo_core.params import ParameterError
-from camo_core.sensing import Calibration, Reading, rgb_to_gray
-
-from .link import DropletDisconnected, DropletError, DropletLink
+from camo_droplet.link import DropletDisconnected, DropletError, DropletLink
 
 MAX_BACKOFF = 8.0
 log = logging.getLogger("camo.droplet")

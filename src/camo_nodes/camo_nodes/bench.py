@@ -32,13 +32,12 @@ import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from camo_core.grid import neighbor_ids
-from camo_core.params import CamoParams
+from camo_core.algorithm.grid import neighbor_ids
+from camo_core.algorithm.params import CamoParams
 from camo_msgs.msg import Vote, VoteArray
-
-from .launch_config import split_cells
-from .topics import LEAN_NODE, RunTopics, history_qos, start_ros, tile_name
-from .transport import edge_of, listener_qos
+from camo_nodes.launch_config import split_cells
+from camo_nodes.topics import LEAN_NODE, RunTopics, history_qos, start_ros, tile_name
+from camo_nodes.transport import edge_of, listener_qos
 
 BARE_RUN = "bench_bare"
 PACKED_RUN = "bench_packed"

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import rclpy
 
+from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.options import Parser
 
 SERVER = "fast-discovery-server"
 

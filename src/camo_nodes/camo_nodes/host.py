@@ -19,12 +19,17 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
-from camo_core.protocol import TICK
-from camo_core.sensing import ImageError, Projection, image_digest
-
-from .topics import LATCHED_READER, LEAN_NODE, ImageEncodingError, RunTopics, image_from_msg
-from .transport import Transport
-from .trust import BackgroundCheck
+from camo_core.algorithm.protocol import TICK
+from camo_core.algorithm.sensing import ImageError, Projection, image_digest
+from camo_nodes.topics import (
+    LATCHED_READER,
+    LEAN_NODE,
+    ImageEncodingError,
+    RunTopics,
+    image_from_msg,
+)
+from camo_nodes.transport import Transport
+from camo_nodes.trust import BackgroundCheck
 
 # The loop polls the transport's edge readers between turns of the executor (timers, the
 # background, hosts' announcements). While messages flow it waits at most POLL_BUSY for the

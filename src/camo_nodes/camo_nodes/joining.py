@@ -7,7 +7,7 @@ import time
 
 from std_msgs.msg import String
 
-from .topics import LATCHED_READER, NoRun, RunTopics, setup_from
+from camo_nodes.topics import LATCHED_READER, NoRun, RunTopics, setup_from
 
 
 def wait_for_setup(node, spin, topics: RunTopics, timeout: float, stop=None) -> dict:

@@ -13,9 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from camo_core.backgrounds import BACKGROUNDS, background
-from camo_core.exceptions import UsageError
-from camo_core.options import (
+from camo_core.algorithm.backgrounds import BACKGROUNDS, background
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.sensing import Calibration, image_digest, load_image, sense_image
+from camo_core.cli.options import (
     Parser,
     add_network_options,
     add_run_options,
@@ -27,10 +28,8 @@ from camo_core.options import (
     params_from,
     parse_ranges,
 )
-from camo_core.params import CamoParams
-from camo_core.sensing import Calibration, image_digest, load_image, sense_image
-
-from .topics import RunTopics, check_run_id, new_run_id, use_camo_dds_settings
+from camo_core.exceptions import UsageError
+from camo_nodes.topics import RunTopics, check_run_id, new_run_id, use_camo_dds_settings
 
 
 def build_parser() -> Parser:

@@ -27,16 +27,15 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
+from camo_core.cli.options import contiguous
+from camo_core.cli.params_file import write_params_file
 from camo_core.exceptions import EXIT_USAGE, CamoError
-from camo_core.options import contiguous
-from camo_core.params_file import write_params_file
 from camo_core.shutdown import StopFlag
-
-from .launch_config import RunConfig, build_parser, config_from
-from .monitor_node import MonitorNode
-from .processes import ProcessGroup
-from .round_report import report_round, write_partial
-from .topics import LATCHED, LATCHED_READER
+from camo_nodes.launch_config import RunConfig, build_parser, config_from
+from camo_nodes.monitor_node import MonitorNode
+from camo_nodes.processes import ProcessGroup
+from camo_nodes.round_report import report_round, write_partial
+from camo_nodes.topics import LATCHED, LATCHED_READER
 
 
 class RunFailed(CamoError):

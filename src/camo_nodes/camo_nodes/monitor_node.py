@@ -30,29 +30,28 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 from visualization_msgs.msg import MarkerArray
 
-from camo_core.animation import Snapshots, write_animation
-from camo_core.exceptions import CamoError
-from camo_core.options import (
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.result import RunResult
+from camo_core.algorithm.robot_io import CONSENSUS, PHASE_NAMES
+from camo_core.algorithm.sensing import image_digest
+from camo_core.algorithm.validation import report_problem
+from camo_core.cli.options import (
     Parser,
     add_network_options,
     add_out_options,
     network_env,
     out_dir,
 )
-from camo_core.output import run_title, write_round
-from camo_core.params import CamoParams
-from camo_core.record import Backgrounds, RoundRecord, Rounds
-from camo_core.result import RunResult
-from camo_core.robot_io import CONSENSUS, PHASE_NAMES
-from camo_core.sensing import image_digest
+from camo_core.exceptions import CamoError
+from camo_core.results.animation import Snapshots, write_animation
+from camo_core.results.output import run_title, write_round
+from camo_core.results.record import Backgrounds, RoundRecord, Rounds
 from camo_core.shutdown import StopFlag
-from camo_core.validation import report_problem
 from camo_msgs.msg import Host, RobotStatus
-
-from . import scene
-from .joining import wait_for_setup
-from .polled import PolledTopics
-from .topics import (
+from camo_nodes import scene
+from camo_nodes.joining import wait_for_setup
+from camo_nodes.polled import PolledTopics
+from camo_nodes.topics import (
     LATCHED_READER,
     ImageEncodingError,
     RunTopics,
@@ -62,7 +61,7 @@ from .topics import (
     start_ros,
     wait_for_run,
 )
-from .trust import BackgroundCheck, Hosts, Rejections, merged
+from camo_nodes.trust import BackgroundCheck, Hosts, Rejections, merged
 
 
 class MonitorNode(Node):

@@ -12,8 +12,8 @@ from collections.abc import Callable
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
-from .rcl_take import Taker
-from .topics import LEAN_NODE
+from camo_nodes.rcl_take import Taker
+from camo_nodes.topics import LEAN_NODE
 
 Handler = Callable[[bytes, bytes], None]
 

@@ -16,9 +16,8 @@ import sys
 import time
 from collections.abc import Callable
 
-from camo_core.options import contiguous
-
-from .launch_config import RunConfig, worker_groups
+from camo_core.cli.options import contiguous
+from camo_nodes.launch_config import RunConfig, worker_groups
 
 PR_SET_PDEATHSIG = 1
 

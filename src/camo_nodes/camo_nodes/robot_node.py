@@ -1,6 +1,6 @@
 """One robot of the swarm as an rclpy node: an adapter around its step protocol.
 
-The protocol (camo_core.protocol) decides when the robot steps and what it
+The protocol (camo_core.algorithm.protocol) decides when the robot steps and what it
 sends; this node only carries events in and output out: messages its
 process's transport delivers, clock ticks, new backgrounds; messages to send,
 statuses to report, warnings to log. Its sensor and display are objects handed
@@ -21,17 +21,16 @@ import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from camo_core.algorithm.layout import layout_for, sense_at
+from camo_core.algorithm.params import CamoParams, ParameterError
+from camo_core.algorithm.protocol import StepProtocol
+from camo_core.algorithm.robot_io import NOTHING, Display, Message, Output, Sensor
+from camo_core.algorithm.sensing import ProjectedSensor, Projection
+from camo_core.cli.options import layout_options, node_help, wants_help
 from camo_core.exceptions import CamoError
-from camo_core.layout import layout_for, sense_at
-from camo_core.options import layout_options, node_help, wants_help
-from camo_core.params import CamoParams, ParameterError
-from camo_core.protocol import StepProtocol
-from camo_core.robot_io import NOTHING, Display, Message, Output, Sensor
-from camo_core.sensing import ProjectedSensor, Projection
 from camo_core.shutdown import StopFlag
-
-from .host import Host, host_node
-from .topics import (
+from camo_nodes.host import Host, host_node
+from camo_nodes.topics import (
     LEAN_NODE,
     RunTopics,
     node_parameters,
@@ -39,7 +38,7 @@ from .topics import (
     run_from_parameter,
     start_ros,
 )
-from .transport import Transport
+from camo_nodes.transport import Transport
 
 
 class NoParameterEvents:

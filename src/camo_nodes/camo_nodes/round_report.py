@@ -9,12 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from camo_core.options import contiguous
-from camo_core.result import pattern_said
-from camo_core.robot_io import CONSENSUS
-
-from .launch_config import RunConfig
-from .monitor_node import MonitorNode
+from camo_core.algorithm.result import pattern_said
+from camo_core.algorithm.robot_io import CONSENSUS
+from camo_core.cli.options import contiguous
+from camo_nodes.launch_config import RunConfig
+from camo_nodes.monitor_node import MonitorNode
 
 
 def missing_remote_cells(config: RunConfig, record) -> str:

@@ -23,11 +23,11 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from camo_core import levels
-from camo_core.layout import layout_for
-from camo_core.params import CamoParams
-from camo_core.record import RoundRecord
-from camo_core.robot_io import PHASE_NAMES
+from camo_core.algorithm import levels
+from camo_core.algorithm.layout import layout_for
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.robot_io import PHASE_NAMES
+from camo_core.results.record import RoundRecord
 
 FRAME = "map"
 SPACING = 0.1  # m between robot centres (a Droplet is 4.4 cm across)

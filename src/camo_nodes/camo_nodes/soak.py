@@ -21,8 +21,7 @@ import time
 from pathlib import Path
 
 from camo_core.shutdown import interrupt_on_signals
-
-from .shm import stale_files
+from camo_nodes.shm import stale_files
 
 MODULES = ("camo_nodes.", "camo_projector.", "camo_bag.", "camo_droplet.")
 RESULT_KEYS = ("pattern", "votes", "mean_p", "final")

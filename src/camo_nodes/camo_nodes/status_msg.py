@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from camo_core.robot_io import Report
+from camo_core.algorithm.robot_io import Report
 from camo_msgs.msg import RobotStatus
 
 

@@ -24,12 +24,11 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 
+from camo_core.algorithm.params import CamoParams, ParameterError
+from camo_core.cli.options import node_command_line
+from camo_core.cli.params_file import check_ros_args
 from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
-from camo_core.options import node_command_line
-from camo_core.params import CamoParams, ParameterError
-from camo_core.params_file import check_ros_args
-
-from .shm import remove_stale
+from camo_nodes.shm import remove_stale
 
 FASTDDS_PROFILE = Path(__file__).with_name("fastdds.xml")
 

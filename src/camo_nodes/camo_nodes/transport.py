@@ -33,10 +33,10 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
-from camo_core.layout import slot_ids
-from camo_core.params import CamoParams
-from camo_core.robot_io import PHASE_OF, Message, Report, kinds_of, messages_per_round
-from camo_core.validation import message_problem, phase_problem
+from camo_core.algorithm.layout import slot_ids
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.robot_io import PHASE_OF, Message, Report, kinds_of, messages_per_round
+from camo_core.algorithm.validation import message_problem, phase_problem
 from camo_msgs.msg import (
     Color,
     ColorArray,
@@ -53,11 +53,10 @@ from camo_msgs.msg import (
     Vote,
     VoteArray,
 )
-
-from .polled import PolledTopics
-from .status_msg import status_msg
-from .topics import LATCHED, LATCHED_READER, RunTopics, history_qos, tile_name
-from .trust import Hosts, Rejections
+from camo_nodes.polled import PolledTopics
+from camo_nodes.status_msg import status_msg
+from camo_nodes.topics import LATCHED, LATCHED_READER, RunTopics, history_qos, tile_name
+from camo_nodes.trust import Hosts, Rejections
 
 MESSAGE_TYPES = {
     "hello": Hello,

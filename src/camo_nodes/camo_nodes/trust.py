@@ -21,8 +21,7 @@ from __future__ import annotations
 from collections import Counter
 
 from camo_msgs.msg import Host
-
-from .rcl_take import PREFIX
+from camo_nodes.rcl_take import PREFIX
 
 
 class Rejections:

@@ -19,14 +19,13 @@ import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from camo_core.algorithm.params import CamoParams
+from camo_core.cli.options import Parser, add_network_options, network_env, parse_ranges
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.options import Parser, add_network_options, network_env, parse_ranges
-from camo_core.params import CamoParams
 from camo_core.shutdown import StopFlag
-
-from .joining import wait_for_setup
-from .robot_node import host_robots
-from .topics import (
+from camo_nodes.joining import wait_for_setup
+from camo_nodes.robot_node import host_robots
+from camo_nodes.topics import (
     LEAN_NODE,
     RunTopics,
     check_run_id,

@@ -17,10 +17,10 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
-from camo_core.backgrounds import BACKGROUNDS, background
+from camo_core.algorithm.backgrounds import BACKGROUNDS, background
+from camo_core.algorithm.sensing import load_image
+from camo_core.cli.options import node_help, wants_help
 from camo_core.exceptions import CamoError
-from camo_core.options import node_help, wants_help
-from camo_core.sensing import load_image
 from camo_nodes.topics import (
     LATCHED,
     LEAN_NODE,

@@ -19,11 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
-
-from . import engines
-from .spec import SweepSpec
-from .sweep import run_sweep
-from .trials import reference_of, simulate_options
+from camo_sweep import engines
+from camo_sweep.spec import SweepSpec
+from camo_sweep.sweep import run_sweep
+from camo_sweep.trials import reference_of, simulate_options
 
 
 def the_spec(trials: int) -> SweepSpec:

@@ -9,12 +9,11 @@ from pathlib import Path
 
 import yaml
 
+from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError, UsageError, reported
-from camo_core.options import Parser
-
-from . import engines
-from .spec import DRIVERS, SweepSpec, build_spec, spec_from_yaml
-from .sweep import plan, run_sweep
+from camo_sweep import engines
+from camo_sweep.spec import DRIVERS, SweepSpec, build_spec, spec_from_yaml
+from camo_sweep.sweep import plan, run_sweep
 
 SPEC_FILE = "sweep.yaml"
 
@@ -211,7 +210,7 @@ def cmd_sweep(argv: list[str]) -> int:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["plot"]:
-        from .plot import cmd_plot
+        from camo_sweep.plot import cmd_plot
 
         return reported("camo sweep", lambda: cmd_plot(argv[1:]))
     return reported("camo sweep", lambda: cmd_sweep(argv))

@@ -67,7 +67,7 @@ class DaskEngine:
 
     def warm(self) -> None:
         """Compile the kernels once on every worker, before the first task."""
-        from .trials import warm
+        from camo_sweep.trials import warm
 
         self.client.run(warm)
 

@@ -18,9 +18,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from camo_core import figures
-from camo_core.exceptions import UsageError, reported
-from camo_core.options import (
+from camo_core.cli.options import (
     Parser,
     add_contrast_option,
     add_run_options,
@@ -28,12 +26,13 @@ from camo_core.options import (
     out_dir,
     params_from,
 )
-
-from . import engines
-from .cli import SPEC_FILE, check_folder
-from .spec import SweepSpec
-from .sweep import plan, run_sweep
-from .table import read
+from camo_core.exceptions import UsageError, reported
+from camo_core.results import figures
+from camo_sweep import engines
+from camo_sweep.cli import SPEC_FILE, check_folder
+from camo_sweep.spec import SweepSpec
+from camo_sweep.sweep import plan, run_sweep
+from camo_sweep.table import read
 
 MODES = ("measurement", "communication", "both")
 CSV_COLUMNS = (

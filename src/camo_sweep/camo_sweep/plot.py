@@ -12,10 +12,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from camo_core.cli.options import Parser
 from camo_core.exceptions import UsageError
-from camo_core.options import Parser
-
-from .table import read
+from camo_sweep.table import read
 
 METRICS = (
     "diff_cells",

@@ -25,9 +25,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from camo_core.cli import add_sim_arguments
+from camo_core.cli.commands import add_sim_arguments
+from camo_core.cli.options import Parser
 from camo_core.exceptions import UsageError
-from camo_core.options import Parser
 
 DRIVERS = ("sim", "ros")
 # Options of ./camo sim that are not a trial's: where it writes, the seed (a trial's own, from the

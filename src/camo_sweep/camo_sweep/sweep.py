@@ -10,12 +10,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from camo_core.cli.progress import ProgressBar
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.progress import ProgressBar
-
-from .spec import SweepSpec, Trial, canonical, sim_args
-from .table import Layout, TableWriter, done_ids, drop_failed
-from .trials import (
+from camo_sweep.spec import SweepSpec, Trial, canonical, sim_args
+from camo_sweep.table import Layout, TableWriter, done_ids, drop_failed
+from camo_sweep.trials import (
     Reference,
     check_options,
     reference_of,

@@ -19,10 +19,9 @@ import pyarrow.compute
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
+from camo_core.algorithm.rules import PATTERN_NAMES
 from camo_core.exceptions import CamoError
-from camo_core.rules import PATTERN_NAMES
-
-from .spec import SweepSpec, Trial
+from camo_sweep.spec import SweepSpec, Trial
 
 TABLE = "trials"
 

@@ -17,16 +17,16 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.result import SUMMARY_KEYS, RunResult, mean_p, pattern_of
+from camo_core.algorithm.rules import PATTERN_NAMES
+from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.simulator import simulate
+from camo_core.cli.options import image_from, params_from
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.options import image_from, params_from
-from camo_core.params import CamoParams
-from camo_core.result import SUMMARY_KEYS, RunResult, mean_p, pattern_of, summary_bytes
-from camo_core.rules import PATTERN_NAMES
-from camo_core.sensing import sense_image
-from camo_core.simulator import simulate
-
-from .spec import Trial, defaults, sim_args
-from .table import Layout, rows_table
+from camo_core.results.summary import summary_bytes
+from camo_sweep.spec import Trial, defaults, sim_args
+from camo_sweep.table import Layout, rows_table
 
 # Up to this many robots a trial's kernels run on one thread: a small grid gains nothing from
 # numba's threads and loses much to their start-up when the cores are busy (an 8x8 trial takes

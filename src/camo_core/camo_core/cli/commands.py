@@ -13,11 +13,13 @@ import sys
 
 import numpy as np
 
-from . import bench, figures
-from .animation import Snapshots, write_animation
-from .exceptions import UsageError, reported
-from .layout import layout_for, sense_at
-from .options import (
+from camo_core.algorithm.layout import layout_for, sense_at
+from camo_core.algorithm.perrobot import run_per_robot
+from camo_core.algorithm.result import pattern_said
+from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.simulator import simulate
+from camo_core.cli import bench
+from camo_core.cli.options import (
     Parser,
     add_contrast_option,
     add_run_options,
@@ -25,13 +27,13 @@ from .options import (
     out_dir,
     params_from,
 )
-from .output import run_title
-from .params_file import write_params_file
-from .perrobot import run_per_robot
-from .progress import ProgressBar
-from .result import pattern_said, write_summary
-from .sensing import sense_image
-from .simulator import simulate
+from camo_core.cli.params_file import write_params_file
+from camo_core.cli.progress import ProgressBar
+from camo_core.exceptions import UsageError, reported
+from camo_core.results import figures
+from camo_core.results.animation import Snapshots, write_animation
+from camo_core.results.output import run_title
+from camo_core.results.summary import write_summary
 
 
 def sensed_overrides(texts: list[str], rows: int, cols: int) -> dict[tuple[int, int], float]:

@@ -18,10 +18,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .backgrounds import background
-from .params import CamoParams
-from .perrobot import run_per_robot
-from .simulator import simulate
+from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.perrobot import run_per_robot
+from camo_core.algorithm.simulator import simulate
 
 SIZES = (64, 256, 1024)
 TARGETS = {0.0: 10.0, 0.1: 60.0}  # ratio to the copy baseline, per rho_comm

@@ -13,12 +13,20 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from .layout import MAX_SLOTS
-from .levels import BIN_WIDTH, BINS
-from .orientation import CODES
-from .params import CamoParams
-from .robot_io import CONSENSUS, DONE, FORMATION, NO_PATTERN, PHASE_OF, SENSING, Message
-from .rules import MOTTLED
+from camo_core.algorithm.layout import MAX_SLOTS
+from camo_core.algorithm.levels import BIN_WIDTH, BINS
+from camo_core.algorithm.orientation import CODES
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.robot_io import (
+    CONSENSUS,
+    DONE,
+    FORMATION,
+    NO_PATTERN,
+    PHASE_OF,
+    SENSING,
+    Message,
+)
+from camo_core.algorithm.rules import MOTTLED
 
 TOLERANCE = 1e-9  # a consensus p sums to 1 up to rounding
 REPORT_TOLERANCE = 1e-3  # a Droplet's own firmware prints p with 4 decimals

@@ -14,12 +14,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from . import kernels, levels, orientation, rng, rules
-from .grid import NEIGHBOR_OFFSETS, NUM_SLOTS
-from .params import CamoParams
-from .result import RunResult, p_stats
-from .rules import select_pattern
-from .sensing import apply_noise
+from camo_core.algorithm import kernels, levels, orientation, rng, rules
+from camo_core.algorithm.grid import NEIGHBOR_OFFSETS, NUM_SLOTS
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.result import RunResult, p_stats
+from camo_core.algorithm.rules import select_pattern
+from camo_core.algorithm.sensing import apply_noise
 
 PAD = 2  # slots reach two cells away
 

@@ -11,9 +11,9 @@ import cv2
 import numpy as np
 import yaml
 
-from . import rng
-from .exceptions import CamoError
-from .params import ParameterError
+from camo_core.algorithm import rng
+from camo_core.algorithm.params import ParameterError
+from camo_core.exceptions import CamoError
 
 
 class ImageError(CamoError):

@@ -20,11 +20,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from . import rng
-from .exceptions import CamoError
-from .grid import neighbor_ids
-from .params import MAX_COORDINATE, CamoParams
-from .sensing import to_gray
+from camo_core.algorithm import rng
+from camo_core.algorithm.grid import neighbor_ids
+from camo_core.algorithm.params import MAX_COORDINATE, CamoParams
+from camo_core.algorithm.sensing import to_gray
+from camo_core.exceptions import CamoError
 
 NEAR = 1.5
 FAR = 2.3

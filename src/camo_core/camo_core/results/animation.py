@@ -25,11 +25,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 from PIL import Image
 
-from . import levels
-from .figures import PATTERN_COLORS, draw_discs, mark
-from .layout import layout_for
-from .params import CamoParams
-from .tensor_colours import direction_legend, tensor_rgb
+from camo_core.algorithm import levels
+from camo_core.results.figures import PATTERN_COLORS, draw_discs, mark
+from camo_core.algorithm.layout import layout_for
+from camo_core.algorithm.params import CamoParams
+from camo_core.results.tensor_colours import direction_legend, tensor_rgb
 
 MAX_FRAMES = 80
 MAX_SIDE = 256  # robots per side a frame shows: one pixel each at most, in a 3 inch panel

@@ -15,8 +15,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from . import orientation
-from .params import CamoParams
+from camo_core.algorithm import orientation
+from camo_core.algorithm.params import CamoParams
 
 STRIPE_REACH = 2.25  # an along-stripe activator is at most this far
 MOTTLED_ACTIVATOR = 1.2

@@ -21,9 +21,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from .grid import NEIGHBOR_OFFSETS
-from .params import CamoParams
-from .rules import (
+from camo_core.algorithm.grid import NEIGHBOR_OFFSETS
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.rules import (
     ACTIVATORS,
     DIAGONAL_FALLBACKS,
     INHIBITORS,

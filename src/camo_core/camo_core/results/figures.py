@@ -15,11 +15,11 @@ import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 
-from . import levels
-from .orientation import CODES, COHERENCE_MIN, ORIENTED, STEP_DEG
-from .result import RunResult
-from .rules import MOTTLED
-from .tensor_colours import direction_legend, tensor_at, tensor_rgb
+from camo_core.algorithm import levels
+from camo_core.algorithm.orientation import CODES, COHERENCE_MIN, ORIENTED, STEP_DEG
+from camo_core.algorithm.result import RunResult
+from camo_core.algorithm.rules import MOTTLED
+from camo_core.results.tensor_colours import direction_legend, tensor_at, tensor_rgb
 
 PATTERN_COLORS = {"horizontal": "tab:blue", "vertical": "tab:green", "mottled": "tab:orange"}
 TENSOR_COLORS = {"Jxx": "tab:blue", "Jyy": "tab:green", "Jxy": "tab:purple"}

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import yaml
 
-from .exceptions import UsageError
+from camo_core.exceptions import UsageError
 
 PARAMETERS_KEY = "ros__parameters"
 MAX_BYTES = 16 * 1024 * 1024  # a parameters file is a few lines; anything bigger is not one

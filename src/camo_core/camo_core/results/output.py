@@ -8,9 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import figures
-from .params import CamoParams
-from .result import RunResult, write_summary
+from camo_core.results import figures
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.result import RunResult
+from camo_core.results.summary import write_summary
 
 
 def run_title(label: str, params: CamoParams, robots: str = "robots") -> str:

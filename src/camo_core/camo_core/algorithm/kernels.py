@@ -13,9 +13,15 @@ import hashlib
 import numpy as np
 from numba import njit, prange
 
-from . import orientation, rng
-from .orientation import KNIGHT_FALLBACKS, OFFSETS, ORIENTED, RELAY_PATHS
-from .rules import DIAGONAL_FALLBACKS, HORIZONTAL, MOTTLED, OPPOSITE_CARDINAL, VERTICAL
+from camo_core.algorithm import orientation, rng
+from camo_core.algorithm.orientation import KNIGHT_FALLBACKS, OFFSETS, ORIENTED, RELAY_PATHS
+from camo_core.algorithm.rules import (
+    DIAGONAL_FALLBACKS,
+    HORIZONTAL,
+    MOTTLED,
+    OPPOSITE_CARDINAL,
+    VERTICAL,
+)
 
 # Offsets 0-11 are the slots, 12-19 the knight cells of --orientation any (orientation.OFFSETS).
 DI = np.array([o[0] for o in OFFSETS], dtype=np.int64)

@@ -11,10 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from . import rng
-from .grid import NUM_SLOTS
-from .params import CamoParams
-from .sensing import Reading
+from camo_core.algorithm import rng
+from camo_core.algorithm.grid import NUM_SLOTS
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.sensing import Reading
 
 DISCOVERY, SENSING, CONSENSUS, FORMATION, DONE = range(5)
 PHASE_NAMES = ("discovery", "sensing", "consensus", "formation", "done")

@@ -12,11 +12,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .layout import layout_for
-from .orientation import selector
-from .params import CamoParams
-from .result import RunResult, mean_p, p_stats
-from .robot_io import CONSENSUS, DONE, FORMATION
+from camo_core.algorithm.layout import layout_for
+from camo_core.algorithm.orientation import selector
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.result import RunResult, mean_p, p_stats
+from camo_core.algorithm.robot_io import CONSENSUS, DONE, FORMATION
 
 
 @dataclass

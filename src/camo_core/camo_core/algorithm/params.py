@@ -6,7 +6,7 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
-from .exceptions import CamoError
+from camo_core.exceptions import CamoError
 
 PROFILES = ("paper", "droplet")
 # --orientation: the paper's two stripe directions (axes), or stripes at any angle (any).

@@ -13,11 +13,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .backgrounds import BACKGROUNDS, background
-from .exceptions import UsageError
-from .layout import file_positions
-from .params import AUTO, ORIENTATIONS, PROFILES, CamoParams, auto_consensus_steps
-from .sensing import load_image, with_contrast
+from camo_core.algorithm.backgrounds import BACKGROUNDS, background
+from camo_core.algorithm.layout import file_positions
+from camo_core.algorithm.params import (
+    AUTO,
+    ORIENTATIONS,
+    PROFILES,
+    CamoParams,
+    auto_consensus_steps,
+)
+from camo_core.algorithm.sensing import load_image, with_contrast
+from camo_core.exceptions import UsageError
 
 
 class Parser(argparse.ArgumentParser):
@@ -58,7 +64,9 @@ class Parser(argparse.ArgumentParser):
         path = getattr(first, "params_file", None)
         if path is None:
             return super().parse_known_args(args, namespace)
-        from .params_file import options_from_file  # the YAML reader, only when a file is given
+        from camo_core.cli.params_file import (
+            options_from_file,  # the YAML reader, only when a file is given
+        )
 
         # The file's values as defaults, so that what the command line gives wins.
         self.set_defaults(**options_from_file(self, path, first.params_node))

@@ -12,11 +12,17 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from . import layout_rules, levels, orientation, rng, rules
-from .grid import CONSENSUS_SLOTS, DESCRIPTOR_SLOTS, NUM_SLOTS, neighbor_ids, robot_id
-from .layout import places_for
-from .params import CamoParams, ParameterError
-from .sensing import noisy_value
+from camo_core.algorithm import layout_rules, levels, orientation, rng, rules
+from camo_core.algorithm.grid import (
+    CONSENSUS_SLOTS,
+    DESCRIPTOR_SLOTS,
+    NUM_SLOTS,
+    neighbor_ids,
+    robot_id,
+)
+from camo_core.algorithm.layout import places_for
+from camo_core.algorithm.params import CamoParams, ParameterError
+from camo_core.algorithm.sensing import noisy_value
 
 Vote = tuple[Sequence[float], int]
 

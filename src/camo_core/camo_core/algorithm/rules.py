@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .params import CamoParams
+from camo_core.algorithm.params import CamoParams
 
 HORIZONTAL, VERTICAL, MOTTLED = 0, 1, 2
 PATTERN_NAMES = ("horizontal", "vertical", "mottled")

@@ -27,9 +27,9 @@ import math
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from .params import CamoParams
-from .robot import RobotCore
-from .robot_io import (
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.robot import RobotCore
+from camo_core.algorithm.robot_io import (
     CONSENSUS,
     DISCOVERY,
     DONE,

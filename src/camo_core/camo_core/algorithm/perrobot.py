@@ -11,11 +11,11 @@ import time
 
 import numpy as np
 
-from .layout import layout_for
-from .params import CamoParams
-from .result import RunResult, mean_p
-from .robot import RobotCore
-from .simulator import Observer
+from camo_core.algorithm.layout import layout_for
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.result import RunResult, mean_p
+from camo_core.algorithm.robot import RobotCore
+from camo_core.algorithm.simulator import Observer
 
 
 def run_per_robot(
