@@ -54,7 +54,7 @@ NAN = math.nan
 KINDS = ("hello", "color", "vote", "state")
 
 
-def forged(cls, k: int, count: int, cols: int):
+def forged(cls, k: int, count: int, cols: int):  # noqa: PLR0911 - one forgery a case
     """The k-th forgery of a message type: NaN, out of range, or plausible and wrong."""
     if cls in ARRAYS:  # what a tile topic carries: several forged robot messages at once
         return cls(messages=[forged(ARRAYS[cls], k * 3 + j, count, cols) for j in range(3)])

@@ -28,6 +28,22 @@ settings.register_profile(
 settings.load_profile("explore" if os.environ.get("CAMO_FUZZ") == "explore" else "camo")
 
 
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers",
+        "slow(why): a test that takes seconds, with the reason (support.SWARM, PROCESS, CLUSTER, "
+        "COMPUTE); ./camo test --fast leaves it out",
+    )
+
+
+def pytest_collection_modifyitems(config, items):
+    """A slow test names why it is slow."""
+    for item in items:
+        for mark in item.iter_markers("slow"):
+            if not (mark.args and isinstance(mark.args[0], str) and mark.args[0].strip()):
+                raise pytest.UsageError(f"{item.nodeid}: @pytest.mark.slow(WHY) needs its reason")
+
+
 @pytest.fixture
 def count_round_records(monkeypatch) -> list[int]:
     """Counts RoundRecord constructions (each allocates traces of consensus steps x robots)."""

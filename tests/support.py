@@ -21,6 +21,12 @@ from camo_core.algorithm.robot_io import Message
 from camo_core.algorithm.sensing import Reading
 
 ROOT = Path(__file__).resolve().parents[1]
+
+# Why a test is slow (`@pytest.mark.slow(WHY)`): `./camo test --fast` leaves these out.
+SWARM = "starts ROS 2 processes: a swarm, a recorder or a node of its own"
+PROCESS = "runs a camo command in a process of its own"
+CLUSTER = "starts a Dask cluster"
+COMPUTE = "computes for seconds: large grids, many trials, serial timeouts or a type check"
 FOXGLOVE_CLIENT = ROOT / "tests" / "foxglove_client"  # Foxglove's libraries, pinned (npm ci)
 
 
@@ -83,7 +89,7 @@ def ros_context(domain_id: int | None = None):
 def camo_run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
     """`./camo run` with a domain of its own."""
     return subprocess.run(
-        [sys.executable, "-m", "camo_nodes.launcher", *args, "--domain-id", str(domain())],
+        [sys.executable, "-m", "camo_bringup.launcher", *args, "--domain-id", str(domain())],
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -119,7 +125,8 @@ class StatusListener:
         from rclpy.executors import SingleThreadedExecutor
 
         from camo_msgs.msg import RobotStatus
-        from camo_nodes.topics import LATCHED_READER, RunTopics
+        from camo_nodes.topics.names import RunTopics
+        from camo_nodes.topics.qos import LATCHED_READER
 
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)

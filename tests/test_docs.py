@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
-from support import ROOT, domain
+from support import ROOT, SWARM, domain
 
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 FRESH_SHELL = {"HOME": os.environ.get("HOME", "/root"), "PATH": "/usr/local/bin:/usr/bin:/bin"}
@@ -77,7 +77,7 @@ def rule_of(command: str) -> tuple[str, str]:
 
 
 def parse_run_options(command: str) -> None:
-    from camo_nodes.launch_config import build_parser
+    from camo_bringup.run_config import build_parser
 
     words = [w for w in command.split()[2:] if w != "..."]
     build_parser().parse_args(words)  # raises the project's UsageError if an option drifted
@@ -126,6 +126,7 @@ def serve_until_up(command: str, folder: Path, env: dict) -> None:
     assert "Traceback" not in seen, seen[-2000:]
 
 
+@pytest.mark.slow(SWARM)
 @pytest.mark.parametrize("doc", DOCS, ids=[d.name for d in DOCS])
 def test_every_command_of_the_doc_works(doc, tmp_path):
     env = {

@@ -7,12 +7,13 @@ import subprocess
 import sys
 
 import pytest
-from support import ROOT
+from support import PROCESS, ROOT
 
 sys.path.insert(0, str(ROOT / "tools"))
 import write_help
 
 
+@pytest.mark.slow(PROCESS)
 @pytest.mark.parametrize("key", sorted([*write_help.HELP, *write_help.STATIC]))
 def test_the_committed_help_text_is_what_the_parser_prints(key):
     committed = (write_help.FOLDER / f"{key}.txt").read_text()

@@ -27,12 +27,12 @@ HELP = {
     "sweep-plot": ["camo_sweep.cli", "plot"],
     "bench": ["camo_core.cli", "bench"],
     "bench-sim": ["camo_core.cli", "bench"],
-    "bench-ros": ["camo_nodes.bench"],
-    "bench-soak": ["camo_nodes.soak"],
+    "bench-ros": ["camo_bringup.bench"],
+    "bench-soak": ["camo_bringup.soak"],
     "bench-sweep": ["camo_sweep.bench"],
-    "run": ["camo_nodes.launcher"],
-    "demo": ["camo_nodes.launcher"],  # after DEMO below
-    "worker": ["camo_nodes.worker"],
+    "run": ["camo_bringup.launcher"],
+    "demo": ["camo_bringup.launcher"],  # after DEMO below
+    "worker": ["camo_bringup.worker"],
     "discovery-server": ["camo_nodes.discovery_server"],
     "record": ["camo_bag.recorder_node"],
     "view": ["camo_bag.view_node"],

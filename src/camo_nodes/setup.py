@@ -15,14 +15,12 @@ setup(
     zip_safe=True,
     maintainer="camo developers",
     maintainer_email="camo@example.org",
-    description="The camouflage swarm: robot nodes, workers, the monitor and the launcher.",
+    description="The camouflage swarm's nodes: robots, their transport, the monitor.",
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
             "robot_node = camo_nodes.robot_node:main",
             "monitor_node = camo_nodes.monitor_node:main",
-            "swarm_worker = camo_nodes.worker:main",
-            "camo_run = camo_nodes.launcher:main",
         ],
     },
 )

@@ -2,9 +2,11 @@
 
 import re
 
-from support import BAG_STEPS, bag_tool, robot_messages_in
+import pytest
+from support import BAG_STEPS, SWARM, bag_tool, robot_messages_in
 
 
+@pytest.mark.slow(SWARM)
 def test_bag_info_lists_topics_types_and_counts(recorded):
     bag, _ = recorded
     out = bag_tool("cli", "info", str(bag))

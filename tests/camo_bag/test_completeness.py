@@ -6,7 +6,7 @@ import json
 import math
 
 import pytest
-from support import BAG_COLS, BAG_ROWS, BAG_RUN, bag_tool
+from support import BAG_COLS, BAG_ROWS, BAG_RUN, SWARM, bag_tool
 
 from camo_bag.completeness import examine, message_fields
 from camo_bag.container import BagWriter, TopicInfo, read_messages, read_summary
@@ -101,6 +101,7 @@ def test_robot_message_fields_are_read_from_cdr_as_rclpy_would_decode_them():
             assert message_fields(kind, serialize_message(msg)) == expected, (kind, frame)
 
 
+@pytest.mark.slow(SWARM)
 def test_a_whole_recording_is_complete(recorded):
     bag, _ = recorded
     ledger = examine(bag)
@@ -109,6 +110,7 @@ def test_a_whole_recording_is_complete(recorded):
     assert info.returncode == 0 and "Run:               complete" in info.stdout
 
 
+@pytest.mark.slow(SWARM)
 def test_a_bag_that_lost_robots_votes_is_incomplete_and_render_refuses_it(recorded, tmp_path):
     bag, live = recorded
     lost = {3, 4, 5, 11}
@@ -139,6 +141,7 @@ def test_a_bag_that_lost_robots_votes_is_incomplete_and_render_refuses_it(record
     assert summary["final"] == live["final"]  # the statuses are all there
 
 
+@pytest.mark.slow(SWARM)
 def test_a_bag_without_statuses_or_result_names_every_robot_and_writes_null_not_nan(
     recorded, tmp_path
 ):
@@ -168,6 +171,7 @@ def test_a_bag_without_statuses_or_result_names_every_robot_and_writes_null_not_
     assert all(v is None or math.isfinite(v) for row in summary["sensed"] for v in row)
 
 
+@pytest.mark.slow(SWARM)
 @pytest.mark.parametrize("ended", ["interrupted", "failed"])
 def test_a_run_that_ended_early_makes_an_incomplete_bag(recorded, tmp_path, ended):
     from camo_bag.ledger import Ledger

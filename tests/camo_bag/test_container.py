@@ -1,9 +1,19 @@
 """Bags as rosbag2 writes them with MCAP: read back by two independent readers; bad files
 refused in one line; a cut file repaired."""
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from support import BAG_COLS, BAG_FORMATION, BAG_ROWS, BAG_RUN, BAG_STEPS, bag_tool, tile_range
+from support import (
+    BAG_COLS,
+    BAG_FORMATION,
+    BAG_ROWS,
+    BAG_RUN,
+    BAG_STEPS,
+    SWARM,
+    bag_tool,
+    tile_range,
+)
 
 
 def deserialize(data: bytes) -> str:
@@ -13,6 +23,7 @@ def deserialize(data: bytes) -> str:
     return deserialize_message(data, String).data
 
 
+@pytest.mark.slow(SWARM)
 def test_bag_is_a_rosbag2_folder_with_an_indexed_ros2_mcap(recorded):
     from mcap.reader import make_reader
 
@@ -40,6 +51,7 @@ def test_bag_is_a_rosbag2_folder_with_an_indexed_ros2_mcap(recorded):
     assert "durability: transient_local" in background.metadata["offered_qos_profiles"]
 
 
+@pytest.mark.slow(SWARM)
 def test_mcap_ros2_decoder_reads_every_robot_message(recorded):
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
@@ -65,6 +77,7 @@ def test_mcap_ros2_decoder_reads_every_robot_message(recorded):
     assert publish_before_log
 
 
+@pytest.mark.slow(SWARM)
 def test_rosbags_anyreader_reads_the_bag_folder(recorded):
     from rosbags.highlevel import AnyReader
 
@@ -91,6 +104,7 @@ def test_rosbags_anyreader_reads_the_bag_folder(recorded):
     ]
 
 
+@pytest.mark.slow(SWARM)
 def test_truncated_and_foreign_files_get_one_line_errors(recorded, tmp_path):
     bag, _ = recorded
     data = (bag / "bag_0.mcap").read_bytes()
@@ -183,6 +197,7 @@ def mutated(data: bytes, changes) -> bytes:
     return data
 
 
+@pytest.mark.slow(SWARM)
 @given(changes=st.lists(mutations(), min_size=1, max_size=3))
 def test_a_damaged_bag_gives_a_one_line_error_or_what_it_holds(
     recorded, tmp_path_factory, changes

@@ -10,7 +10,7 @@ import sys
 import time
 
 import pytest
-from support import ROOT, bag_tool, domain
+from support import COMPUTE, ROOT, SWARM, bag_tool, domain
 
 TALKER = """
 import sys, rclpy
@@ -45,6 +45,7 @@ def camo(*args: str) -> subprocess.CompletedProcess:
     return bag_tool("introspect", *args)
 
 
+@pytest.mark.slow(COMPUTE)
 def test_topic_list_shows_names_and_types_as_ros2_does(talker):
     out = camo("topic", "list", "-t", "--domain-id", talker)
     assert out.returncode == 0, out.stderr
@@ -53,12 +54,14 @@ def test_topic_list_shows_names_and_types_as_ros2_does(talker):
     assert "/chatter" in names and names == sorted(names)
 
 
+@pytest.mark.slow(COMPUTE)
 def test_topic_echo_once_prints_the_message_as_yaml(talker):
     out = camo("topic", "echo", "/chatter", "--once", "--domain-id", talker)
     assert out.returncode == 0, out.stderr
     assert out.stdout == "data: hello\n---\n"
 
 
+@pytest.mark.slow(SWARM)
 def test_topic_hz_measures_the_rate(talker):
     proc = subprocess.Popen(
         [sys.executable, "-m", "camo_bag.introspect", "topic", "hz", "/chatter"]
@@ -76,6 +79,7 @@ def test_topic_hz_measures_the_rate(talker):
     assert 7.0 < rates[-1] < 13.0  # the talker publishes at 10 Hz
 
 
+@pytest.mark.slow(COMPUTE)
 def test_node_list_names_nodes_with_their_namespace(talker):
     out = camo("node", "list", "--domain-id", talker)
     assert out.returncode == 0, out.stderr
@@ -83,6 +87,7 @@ def test_node_list_names_nodes_with_their_namespace(talker):
     assert not any("_camo" in line for line in out.stdout.splitlines())
 
 
+@pytest.mark.slow(COMPUTE)
 def test_a_topic_nobody_publishes_is_one_line():
     out = camo("topic", "echo", "/nothing", "--wait", "1", "--domain-id", str(domain()))
     assert out.returncode == 2

@@ -7,14 +7,8 @@ import subprocess
 import sys
 import time
 
-from support import (
-    ROOT,
-    bag_tool,
-    camo_run,
-    domain,
-    robot_messages_in,
-    wait_for_line,
-)
+import pytest
+from support import ROOT, SWARM, bag_tool, camo_run, domain, robot_messages_in, wait_for_line
 
 
 def deserialize(data: bytes) -> str:
@@ -49,6 +43,7 @@ def recorded_so_far(
         time.sleep(0.5)
 
 
+@pytest.mark.slow(SWARM)
 def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers(tmp_path):
     from rosbags.highlevel import AnyReader
 
@@ -75,7 +70,7 @@ def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers
         [
             sys.executable,
             "-m",
-            "camo_nodes.launcher",
+            "camo_bringup.launcher",
             "--rows",
             "2",
             "--cols",
@@ -133,6 +128,7 @@ def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers
     assert refused.returncode == 1 and "is incomplete" in refused.stderr
 
 
+@pytest.mark.slow(SWARM)
 def test_a_recorder_started_before_a_run_records_all_of_it_and_stops_at_its_end(tmp_path):
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain())}
     options = ["--rows", "4", "--cols", "5", "--pattern", "forest", "--seed", "3"]
@@ -146,7 +142,7 @@ def test_a_recorder_started_before_a_run_records_all_of_it_and_stops_at_its_end(
     try:
         time.sleep(4)  # the recorder waits for a run to appear
         run = subprocess.run(
-            [sys.executable, "-m", "camo_nodes.launcher", *options, "--procs", "2"]
+            [sys.executable, "-m", "camo_bringup.launcher", *options, "--procs", "2"]
             + ["--out", str(tmp_path / "live")],
             cwd=ROOT,
             env=env,
@@ -169,6 +165,7 @@ def test_a_recorder_started_before_a_run_records_all_of_it_and_stops_at_its_end(
     }
 
 
+@pytest.mark.slow(SWARM)
 def test_ctrl_c_during_a_recorded_run_leaves_a_complete_indexed_bag(tmp_path):
     from camo_bag.container import read_summary
 
@@ -176,7 +173,7 @@ def test_ctrl_c_during_a_recorded_run_leaves_a_complete_indexed_bag(tmp_path):
         [
             sys.executable,
             "-m",
-            "camo_nodes.launcher",
+            "camo_bringup.launcher",
             "--pattern",
             "forest",
             "--procs",
@@ -214,6 +211,7 @@ def test_ctrl_c_during_a_recorded_run_leaves_a_complete_indexed_bag(tmp_path):
     assert (tmp_path / "bag" / "metadata.yaml").exists()
 
 
+@pytest.mark.slow(SWARM)
 def test_recording_into_an_existing_bag_is_refused_before_anything_starts(tmp_path):
     (tmp_path / "bag").mkdir()
     (tmp_path / "bag" / "x").write_text("keep me")

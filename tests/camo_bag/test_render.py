@@ -2,9 +2,11 @@
 
 import json
 
-from support import ROOT, Bus, bag_tool, camo_run, robot_messages_in
+import pytest
+from support import COMPUTE, ROOT, SWARM, Bus, bag_tool, camo_run, robot_messages_in
 
 
+@pytest.mark.slow(SWARM)
 def test_render_reads_a_bag_into_one_record_per_round(recorded, count_round_records):
     from camo_bag.render import load_run
 
@@ -14,6 +16,7 @@ def test_render_reads_a_bag_into_one_record_per_round(recorded, count_round_reco
     assert run.rounds[0].finished.all()
 
 
+@pytest.mark.slow(SWARM)
 def test_render_rebuilds_the_live_summary_from_the_bag_alone(recorded, tmp_path):
     bag, live = recorded
     out = bag_tool("render", str(bag), "--out", str(tmp_path))
@@ -30,6 +33,7 @@ def test_render_rebuilds_the_live_summary_from_the_bag_alone(recorded, tmp_path)
         assert gif.n_frames >= 10
 
 
+@pytest.mark.slow(SWARM)
 def test_render_of_a_run_with_three_backgrounds_writes_each_round_from_a_complete_bag(tmp_path):
     # A small swarm finishes a round in a fraction of a second, before the recorder may have
     # discovered its topics; each round must still be in the bag whole.
@@ -69,6 +73,7 @@ def test_render_of_a_run_with_three_backgrounds_writes_each_round_from_a_complet
     assert len(votes) == 3 * 4 * 5 * consensus_steps
 
 
+@pytest.mark.slow(COMPUTE)
 def test_render_refuses_a_bag_whose_messages_do_not_decode(tmp_path):
     from camo_bag.container import BagWriter, TopicInfo
     from camo_bag.msgdefs import message_definition
@@ -86,6 +91,7 @@ def test_render_refuses_a_bag_whose_messages_do_not_decode(tmp_path):
     assert len(out.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow(SWARM)
 def test_render_reads_a_bag_of_the_older_layout_with_its_older_status_type(tmp_path):
     """A bag recorded before runs had ids: /swarm/params and /swarm/status at the root, one
     status a step, of a RobotStatus without the newer fields. Render still rebuilds the run."""

@@ -4,18 +4,21 @@ import json
 import subprocess
 import sys
 
+import pytest
 from support import (
     BAG_COLS,
     BAG_OPTIONS,
     BAG_ROWS,
     BAG_RUN,
     ROOT,
+    SWARM,
     StatusListener,
     bag_tool,
     domain,
 )
 
 
+@pytest.mark.slow(SWARM)
 def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded, tmp_path):
     bag, live = recorded
     domain_id = domain()
@@ -23,7 +26,7 @@ def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded
         [
             sys.executable,
             "-m",
-            "camo_nodes.launcher",
+            "camo_bringup.launcher",
             *BAG_OPTIONS,
             "--run-id",
             "again",  # the last --run-id counts: a run of its own, driven by the bag
@@ -59,6 +62,7 @@ def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded
         assert again[key] == live[key], key
 
 
+@pytest.mark.slow(SWARM)
 def test_replay_publishes_recorded_messages_with_their_qos(recorded):
     bag, live = recorded
     domain_id = domain()

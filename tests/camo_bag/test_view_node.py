@@ -9,8 +9,9 @@ import socket
 import subprocess
 import sys
 
+import pytest
 from support import FOXGLOVE_CLIENT as CLIENT
-from support import ROOT, assert_like_sim, domain, run_camo, wait_for_line
+from support import ROOT, SWARM, assert_like_sim, domain, run_camo, wait_for_line
 
 OPTIONS = ["--pattern", "forest", "--rows", "6", "--cols", "6", "--consensus-steps", "3000"]
 
@@ -21,10 +22,11 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
+@pytest.mark.slow(SWARM)
 def test_foxglove_client_lists_subscribes_and_decodes_a_live_run(tmp_path, foxglove_client):
     port = free_port()
     run = subprocess.Popen(
-        [sys.executable, "-m", "camo_nodes.launcher", *OPTIONS, "--procs", "2"]
+        [sys.executable, "-m", "camo_bringup.launcher", *OPTIONS, "--procs", "2"]
         + ["--foxglove", str(port), "--domain-id", str(domain()), "--out", str(tmp_path / "run")],
         cwd=ROOT,
         stdout=subprocess.PIPE,
@@ -72,6 +74,7 @@ def test_foxglove_client_lists_subscribes_and_decodes_a_live_run(tmp_path, foxgl
     assert_like_sim(tmp_path / "run", tmp_path / "sim")
 
 
+@pytest.mark.slow(SWARM)
 def test_a_port_in_use_is_one_line(tmp_path):
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
@@ -79,7 +82,7 @@ def test_a_port_in_use_is_one_line(tmp_path):
         port = taken.getsockname()[1]
         env = {**os.environ, "ROS_DOMAIN_ID": str(domain())}
         run = subprocess.Popen(
-            [sys.executable, "-m", "camo_nodes.launcher", *OPTIONS, "--procs", "1"]
+            [sys.executable, "-m", "camo_bringup.launcher", *OPTIONS, "--procs", "1"]
             + ["--foxglove", str(port), "--out", str(tmp_path / "run")],
             cwd=ROOT,
             env=env,
@@ -96,7 +99,7 @@ def test_a_port_in_use_is_one_line(tmp_path):
 def test_the_foxglove_layout_opens_topics_a_run_called_demo_has():
     import re
 
-    from camo_nodes.topics import RunTopics
+    from camo_nodes.topics.names import RunTopics
 
     layout = json.loads((ROOT / "docs" / "foxglove" / "camo_layout.json").read_text())
     run = RunTopics("demo")

@@ -1,7 +1,8 @@
 """run.gif: the simulator and the swarm feed the same frames, and the GIF shows the round."""
 
 import numpy as np
-from support import Bus, run_camo
+import pytest
+from support import PROCESS, Bus, run_camo
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.simulator import simulate
@@ -20,6 +21,7 @@ def gif_frames(path) -> list[bytes]:
     return frames
 
 
+@pytest.mark.slow(PROCESS)
 def test_sim_writes_a_small_animation_that_changes_over_many_frames(tmp_path):
     out = run_camo("sim", "--rho-meas", "0.1", "--rho-comm", "0.1", "--out", str(tmp_path))
     assert out.returncode == 0, out.stderr

@@ -5,11 +5,12 @@ import json
 import cv2
 import numpy as np
 import pytest
-from support import run_camo
+from support import PROCESS, run_camo
 
 from camo_core.algorithm.result import SUMMARY_KEYS
 
 
+@pytest.mark.slow(PROCESS)
 def test_sim_writes_summary_and_figure(tmp_path):
     out = run_camo(
         "sim",
@@ -40,6 +41,7 @@ def test_sim_writes_summary_and_figure(tmp_path):
     assert figure is not None and figure.shape[1] > 3 * figure.shape[0]  # one row of five panels
 
 
+@pytest.mark.slow(PROCESS)
 def test_sim_accepts_a_colour_image_file(tmp_path):
     image = np.zeros((64, 64, 3), np.uint8)
     image[:, ::16] = (0, 0, 255)
@@ -53,6 +55,7 @@ def test_sim_accepts_a_colour_image_file(tmp_path):
     assert json.loads((tmp_path / "o" / "summary.json").read_text())["profile"] == "droplet"
 
 
+@pytest.mark.slow(PROCESS)
 @pytest.mark.parametrize(
     "args, message",
     [
@@ -73,6 +76,7 @@ def test_bad_input_is_one_line_and_exit_2(args, message, tmp_path):
     assert len(out.stderr.strip().splitlines()) == 1 and "Traceback" not in out.stderr
 
 
+@pytest.mark.slow(PROCESS)
 def test_corrupt_image_is_one_line_and_exit_2(tmp_path):
     bad = tmp_path / "bad.png"
     bad.write_bytes(b"not a png at all")
@@ -81,6 +85,7 @@ def test_corrupt_image_is_one_line_and_exit_2(tmp_path):
     assert len(out.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow(PROCESS)
 def test_bench_prints_json_with_ratios():
     out = run_camo("bench", "sim", "--json", "--sizes", "16,32")
     assert out.returncode == 0, out.stderr
@@ -91,6 +96,7 @@ def test_bench_prints_json_with_ratios():
     assert "whole_process" not in report  # only with --whole
 
 
+@pytest.mark.slow(PROCESS)
 def test_sim_takes_real_readings_without_noise(tmp_path):
     out = run_camo("sim", "--rho-meas", "1.0", "--sensed", "2,3=201.5", "--out", str(tmp_path))
     assert out.returncode == 0, out.stderr
@@ -104,6 +110,7 @@ def test_sim_takes_real_readings_without_noise(tmp_path):
         assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
 
 
+@pytest.mark.slow(PROCESS)
 def test_bench_whole_process_times_camo_sim_in_a_subprocess():
     from camo_core.cli import bench
 
@@ -117,6 +124,7 @@ def test_bench_whole_process_times_camo_sim_in_a_subprocess():
     assert "whole process: python -m camo_core.cli sim" in bench.format_table(report)
 
 
+@pytest.mark.slow(PROCESS)
 def test_an_output_folder_that_holds_something_is_refused_unless_forced(tmp_path):
     out = tmp_path / "taken"
     out.mkdir()
@@ -129,16 +137,18 @@ def test_an_output_folder_that_holds_something_is_refused_unless_forced(tmp_path
     assert (out / "summary.json").exists() and (out / "mine.txt").read_text() == "keep me"
 
 
+@pytest.mark.slow(PROCESS)
 def test_an_abbreviated_option_is_refused():
     out = run_camo("sim", "--row", "8", "--out", "unused")
     assert out.returncode == 2 and "unrecognized arguments: --row" in out.stderr
 
 
+@pytest.mark.slow(PROCESS)
 @pytest.mark.parametrize(
     "module, args",
     [
         ("camo_nodes.monitor_node", ["--run-i", "x"]),
-        ("camo_nodes.worker", ["--cells", "0-3", "--run-i", "x"]),
+        ("camo_bringup.worker", ["--cells", "0-3", "--run-i", "x"]),
         ("camo_bag.view_node", ["--prt", "9001"]),
         ("camo_bag.recorder_node", ["B", "--topic", "x"]),
     ],

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 import yaml
-from support import run_camo
+from support import PROCESS, run_camo
 
 from camo_core.algorithm.backgrounds import background
 from camo_core.algorithm.params import ParameterError, auto_consensus_steps
@@ -39,6 +39,7 @@ def test_auto_steps_bring_a_large_swarm_close_to_agreement_where_35_do_not():
     assert spread_after(32, "auto") < 0.05
 
 
+@pytest.mark.slow(PROCESS)
 def test_sim_with_auto_runs_the_scaled_steps_and_its_params_file_repeats_it(tmp_path):
     out = run_camo("sim", "--rows", "16", "--cols", "16", "--consensus-steps", "auto",
                    "--out", str(tmp_path / "a"))  # fmt: skip
@@ -56,9 +57,10 @@ def test_sim_with_auto_runs_the_scaled_steps_and_its_params_file_repeats_it(tmp_
     }
 
 
+@pytest.mark.slow(PROCESS)
 def test_a_parameters_file_with_steps_that_are_not_whole_is_one_line(tmp_path):
     path = tmp_path / "p.yaml"
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": {"consensus_steps": 2.5}}}))
     out = run_camo("sim", "--params-file", str(path), "--out", str(tmp_path / "o"))
     assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
-    assert "consensus_steps must be a valid value (got 2.5)" in out.stderr
+    assert "consensus_steps must be an integer (got 2.5)" in out.stderr

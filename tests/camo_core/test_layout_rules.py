@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from support import brick_courses, run_camo
+from support import COMPUTE, PROCESS, brick_courses, run_camo
 
 from camo_core.algorithm import orientation
 from camo_core.algorithm.backgrounds import background, stripes
@@ -104,6 +104,7 @@ def test_a_layout_needs_orientation_any_and_a_file_layout_its_positions():
     assert made.positions == ((0.0, 0.0), (1.0, 0.0)) and hash(made)  # lists become tuples
 
 
+@pytest.mark.slow(COMPUTE)
 def test_on_a_hexagonal_swarm_trunks_are_vertical_courses_horizontal_gravel_mottled():
     assert run(background("forest"), "hex").majority_label == "stripes at 90°"
     assert run(brick_courses(), "hex", threshold_auto=True).majority_label == "stripes at 0°"
@@ -112,12 +113,14 @@ def test_on_a_hexagonal_swarm_trunks_are_vertical_courses_horizontal_gravel_mott
     assert run(gravel, "hex").majority_pattern == "mottled"
 
 
+@pytest.mark.slow(COMPUTE)
 def test_a_jittered_swarm_reads_45_degree_stripes_within_15_degrees():
     result = run(stripes(45, period=48, seed=3), "jitter:0.3")
     assert abs(result.orientation_deg - 45) <= 15
     assert np.mean(result.final == (result.sensed < 127)) >= 0.8
 
 
+@pytest.mark.slow(PROCESS)
 def test_sim_on_a_layout_writes_its_positions_and_refuses_what_it_cannot(tmp_path):
     options = ["--layout", "hex", "--orientation", "any", "--rows", "6", "--cols", "6"]
     out = run_camo("sim", *options, "--levels", "3", "--rho-comm", "0.2",

@@ -4,7 +4,7 @@ import json
 
 import numpy as np
 import pytest
-from support import Bus, assert_drivers_agree, brick_courses, run_camo
+from support import COMPUTE, PROCESS, Bus, assert_drivers_agree, brick_courses, run_camo
 
 from camo_core.algorithm import levels
 from camo_core.algorithm.backgrounds import background, stripes
@@ -17,6 +17,7 @@ from camo_core.algorithm.validation import message_problem
 FIELDS = ("sensed", "votes", "p", "selected", "initial", "final", "palette", "display")
 
 
+@pytest.mark.slow(COMPUTE)
 @pytest.mark.parametrize("k", [2, 3, 4, 8])
 @pytest.mark.parametrize("rho", [0.0, 0.3])
 def test_the_drivers_agree_with_levels(k, rho):
@@ -29,6 +30,7 @@ def test_the_drivers_agree_with_levels(k, rho):
         assert_drivers_agree(params, raw, FIELDS, (rows, cols))
 
 
+@pytest.mark.slow(COMPUTE)
 def test_one_robots_palette_is_the_grids_bit_for_bit():
     generator = np.random.default_rng(0)
     vectors = []
@@ -78,6 +80,7 @@ def test_more_levels_show_the_background_more_closely():
     assert paper > 2 * two and two > four
 
 
+@pytest.mark.slow(PROCESS)
 def test_the_paper_shows_black_and_white_and_summary_json_says_how_far_that_is(tmp_path):
     result = simulate(CamoParams(), sense_image(background("forest"), 8, 8, "paper"))
     assert np.array_equal(result.display, np.where(result.final == 1, 0, 255))

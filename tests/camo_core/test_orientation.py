@@ -4,7 +4,15 @@ import json
 
 import numpy as np
 import pytest
-from support import Bus, assert_drivers_agree, brick_courses, drawn_direction, run_camo
+from support import (
+    COMPUTE,
+    PROCESS,
+    Bus,
+    assert_drivers_agree,
+    brick_courses,
+    drawn_direction,
+    run_camo,
+)
 
 from camo_core.algorithm import orientation, rules
 from camo_core.algorithm.backgrounds import stripes
@@ -29,6 +37,7 @@ def test_the_drivers_agree_with_orientation_any(profile, rho, auto):
         assert_drivers_agree(params, raw, FIELDS, (rows, cols))
 
 
+@pytest.mark.slow(COMPUTE)
 def test_the_drivers_agree_on_stripes_at_every_angle_with_loss():
     # Random greys seldom agree on a direction: stripes do, so every oriented kernel (and its
     # relayed knight cells, lost or not) is exercised.
@@ -186,6 +195,7 @@ def test_orientation_must_be_axes_or_any():
         CamoParams(orientation="diagonal")
 
 
+@pytest.mark.slow(PROCESS)
 def test_sim_writes_stripes_and_their_direction_to_summary_json(tmp_path):
     image = tmp_path / "stripes.png"
     import cv2

@@ -10,6 +10,7 @@ import pytest
 import yaml
 from hypothesis import event, given
 from hypothesis import strategies as st
+from support import PROCESS, SWARM
 
 from camo_core.cli.params_file import ParamsFileError, check_params_file, check_ros_args
 
@@ -113,13 +114,14 @@ def texts():
     )
 
 
+@pytest.mark.slow(SWARM)
 @given(text=texts())
 def test_anything_in_a_params_file_ends_in_one_line_or_a_start(tmp_path_factory, capsys, text):
     """Whatever the reader lets through, rcl accepts, or start_ros says why not in one line
     and exits 2: never a traceback."""
     import rclpy
 
-    from camo_nodes.topics import start_ros
+    from camo_nodes.topics.startup import start_ros
 
     path = write(tmp_path_factory.mktemp("params"), text)
     try:
@@ -158,6 +160,7 @@ def test_a_node_takes_its_own_keys_over_the_general_ones(tmp_path):
     assert parameters_for(path, "other") == {"rows": 4, "cols": 4}
 
 
+@pytest.mark.slow(PROCESS)
 def test_sim_writes_params_yaml_that_repeats_it_and_the_command_line_wins(tmp_path):
     from support import run_camo
 
@@ -197,6 +200,7 @@ def test_sim_writes_params_yaml_that_repeats_it_and_the_command_line_wins(tmp_pa
     assert written["ros__parameters"]["rows"] == 4 and written["ros__parameters"]["cols"] == 5
 
 
+@pytest.mark.slow(PROCESS)
 @pytest.mark.parametrize(
     "text, said",
     [

@@ -9,6 +9,7 @@ import cv2
 import matplotlib.axes
 import numpy as np
 import pytest
+from support import COMPUTE
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import SUMMARY_KEYS, RunResult
@@ -120,6 +121,7 @@ def test_values_orjson_would_write_otherwise_go_through_json(tmp_path):
     assert exact(written(summary, tmp_path)) == exact(reference)
 
 
+@pytest.mark.slow(COMPUTE)
 def test_without_orjson_the_summary_goes_through_json(run, tmp_path, monkeypatch):
     monkeypatch.setattr(result, "orjson", None)
     nan_run = RunResult(**{**vars(run), "sensed": run.sensed.copy()})
@@ -162,6 +164,7 @@ def synthetic_run(rows: int, cols: int, dead: bool = False) -> RunResult:
     )
 
 
+@pytest.mark.slow(COMPUTE)
 def test_large_grid_figure_is_drawn_from_resized_grids(tmp_path, monkeypatch):
     rows, cols = 1100, 400
     calls = drawn_panels(monkeypatch)

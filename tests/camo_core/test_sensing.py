@@ -8,6 +8,7 @@ import pytest
 import yaml
 from hypothesis import given
 from hypothesis import strategies as st
+from support import COMPUTE, PROCESS
 
 from camo_core.algorithm import sensing
 from camo_core.algorithm.params import ParameterError
@@ -97,6 +98,7 @@ def test_calibration_is_identity_by_default_and_reads_yaml(tmp_path):
         Calibration.from_yaml(path)
 
 
+@pytest.mark.slow(COMPUTE)
 @given(
     content=st.one_of(
         st.binary(max_size=64),
@@ -129,6 +131,7 @@ def test_contrast_pulls_every_value_toward_the_images_mean():
             sensing.with_contrast(image, bad)
 
 
+@pytest.mark.slow(PROCESS)
 def test_sim_at_a_contrast_senses_what_it_senses_on_that_image_written_out(tmp_path):
     from support import run_camo
 

@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 import pytest
-from support import assert_drivers_agree
+from support import PROCESS, assert_drivers_agree
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.perrobot import run_per_robot
@@ -85,6 +85,7 @@ print(kernels.frozen_tables() == kernels.TABLES, np.array_equal(grid.final, robo
 """
 
 
+@pytest.mark.slow(PROCESS)
 def test_cached_kernels_of_other_tables_are_built_again(tmp_path):
     # numba keys its cache on kernels.py alone; the tables it freezes come from rules.py.
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from support import Bus, assert_drivers_agree, brick_courses, run_camo
+from support import PROCESS, Bus, assert_drivers_agree, brick_courses, run_camo
 
 from camo_core.algorithm import rules
 from camo_core.algorithm.params import CamoParams
@@ -64,6 +64,7 @@ def test_the_step_protocol_in_any_delivery_order_equals_the_simulator_with_auto(
         assert np.array_equal(np.reshape([r.state for r in robots], (rows, cols)), reference.final)
 
 
+@pytest.mark.slow(PROCESS)
 def test_sim_takes_threshold_auto_and_its_params_file_repeats_it(tmp_path):
     out = run_camo("sim", "--threshold", "auto", "--rho-comm", "0.2", "--out", str(tmp_path / "a"))
     assert out.returncode == 0, out.stderr

@@ -8,7 +8,16 @@ import sys
 import cv2
 import numpy as np
 import pytest
-from support import ROOT, StatusListener, assert_like_sim, camo_run, domain, run_camo
+from support import (
+    COMPUTE,
+    ROOT,
+    SWARM,
+    StatusListener,
+    assert_like_sim,
+    camo_run,
+    domain,
+    run_camo,
+)
 
 from camo_core.algorithm.backgrounds import background
 from camo_core.algorithm.sensing import Calibration, rgb_to_gray
@@ -77,6 +86,7 @@ def bridged_run(tmp_path, emulator, faults: list[Faults]) -> list[DropletEmulato
     return emulators
 
 
+@pytest.mark.slow(SWARM)
 def test_monitor_mode_turns_a_transcript_into_status_messages():
     from camo_msgs.msg import RobotStatus
 
@@ -129,12 +139,14 @@ def bridge(*ros_args: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow(COMPUTE)
 def test_bridge_without_a_port_exits_with_one_line():
     out = bridge("-p", "rows:=4", "-p", "cols:=4")
     assert out.returncode == 2 and "serial port" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow(COMPUTE)
 def test_a_port_that_is_not_there_is_said_at_once_not_after_waiting_for_a_run(tmp_path):
     # No run is in this domain: had the bridge waited for one, it would say so after 60 s.
     out = bridge("-p", "rows:=4", "-p", "cols:=4", "-p", f"port:={tmp_path / 'ttyUSB9'}")
@@ -144,10 +156,12 @@ def test_a_port_that_is_not_there_is_said_at_once_not_after_waiting_for_a_run(tm
     assert out.stderr.strip() == said
 
 
+@pytest.mark.slow(COMPUTE)
 def test_bridged_droplets_give_the_simulators_states_for_their_readings(tmp_path, emulator):
     bridged_run(tmp_path, emulator, [Faults(), Faults()])
 
 
+@pytest.mark.slow(COMPUTE)
 def test_bridged_run_finishes_through_garbage_and_a_reconnect(tmp_path, emulator):
     emulators = bridged_run(
         tmp_path,
@@ -160,6 +174,7 @@ def test_bridged_run_finishes_through_garbage_and_a_reconnect(tmp_path, emulator
     assert emulators[1].disconnects >= 1
 
 
+@pytest.mark.slow(SWARM)
 def test_bad_bridge_options_are_one_line_errors(tmp_path):
     for bad in (
         ["--bridge", "2,3"],
@@ -171,6 +186,7 @@ def test_bad_bridge_options_are_one_line_errors(tmp_path):
         assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, (bad, out.stderr)
 
 
+@pytest.mark.slow(COMPUTE)
 @pytest.mark.parametrize(
     "options, named",
     [

@@ -6,6 +6,7 @@ import time
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from support import COMPUTE
 
 from camo_droplet.emulator import Faults
 from camo_droplet.link import (
@@ -32,6 +33,7 @@ def test_line_reader_splits_crlf_and_discards_garbage_and_long_lines():
     assert reader.discarded == 2
 
 
+@pytest.mark.slow(COMPUTE)
 def test_link_reads_id_and_colour_and_sets_the_led(emulator):
     em = emulator(rgb=(200, 100, 50), droplet_id=0x00C3)
     link = connected(em)
@@ -42,6 +44,7 @@ def test_link_reads_id_and_colour_and_sets_the_led(emulator):
     assert json.loads((em.led_log).read_text().splitlines()[-1])["rgb"] == [255, 0, 0]
 
 
+@pytest.mark.slow(COMPUTE)
 def test_unknown_command_is_an_error_naming_it(emulator):
     link = connected(emulator())
     with pytest.raises(DropletError, match="does not know the command 'blink'"):
@@ -49,6 +52,7 @@ def test_unknown_command_is_an_error_naming_it(emulator):
     assert link.get_rgb() == (10, 20, 30)  # and the link still works
 
 
+@pytest.mark.slow(COMPUTE)
 def test_link_survives_garbage_chatter_and_dropped_replies(emulator):
     em = emulator(faults=Faults(drop=0.3, garbage=0.5, chatter=0.5))
     link = connected(em, timeout=0.2, retries=8)
@@ -58,12 +62,14 @@ def test_link_survives_garbage_chatter_and_dropped_replies(emulator):
     assert any(line.startswith("Px:") for line in link.poll())
 
 
+@pytest.mark.slow(COMPUTE)
 def test_a_robot_that_never_answers_gives_a_clear_error(emulator):
     link = connected(emulator(faults=Faults(drop=1.0)), timeout=0.1, retries=2)
     with pytest.raises(DropletError, match="did not answer 'get_rgb' \\(3 tries"):
         link.get_rgb()
 
 
+@pytest.mark.slow(COMPUTE)
 def test_a_port_that_disappears_raises_and_can_be_reopened(emulator):
     em = emulator(faults=Faults(disconnect_after=2, disconnect_for=0.5))
     link = connected(em)
@@ -113,6 +119,7 @@ REPLIES = [b"get_rgb\r\n", b"r: 1, g: 2, b: 3\r\n", b"r: 999, g: 0, b: 0\r\n", b
 REPLIES += [b"My ID is: 00C3\r\n", b"\tCommand ( get_rgb ) not recognized.\r\n", b"\xff\x00"]
 
 
+@pytest.mark.slow(COMPUTE)
 @given(st.lists(st.one_of(st.sampled_from(REPLIES), st.binary(max_size=80)), max_size=12))
 def test_a_command_answered_with_anything_returns_or_raises_a_droplet_error(chunks):
     link = DropletLink("/dev/fuzz", opener=lambda path: ScriptedPort(chunks), timeout=0.01)

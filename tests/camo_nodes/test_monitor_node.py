@@ -4,9 +4,11 @@ import subprocess
 import sys
 import time
 
-from support import ROOT, domain, ros_context
+import pytest
+from support import ROOT, SWARM, domain, ros_context
 
 
+@pytest.mark.slow(SWARM)
 def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
     import rclpy
     from sensor_msgs.msg import Image
@@ -17,7 +19,7 @@ def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
         [
             sys.executable,
             "-m",
-            "camo_nodes.launcher",
+            "camo_bringup.launcher",
             "--pattern",
             "forest",
             "--rows",
@@ -98,7 +100,7 @@ def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(coun
     # A record allocated per status made a long run's monitor fall far behind its robots.
     from camo_core.algorithm.params import CamoParams
     from camo_nodes.monitor_node import MonitorNode
-    from camo_nodes.topics import RunTopics
+    from camo_nodes.topics.names import RunTopics
 
     made = count_round_records
     with ros_context() as context:
@@ -120,7 +122,7 @@ def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(coun
 def test_monitor_counts_bridged_robots_whose_hardware_is_offline():
     from camo_core.algorithm.params import CamoParams
     from camo_nodes.monitor_node import MonitorNode
-    from camo_nodes.topics import RunTopics
+    from camo_nodes.topics.names import RunTopics
 
     with ros_context() as context:
         monitor = MonitorNode(

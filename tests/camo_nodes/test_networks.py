@@ -7,7 +7,7 @@ import sys
 import time
 
 import pytest
-from support import assert_like_sim, domain, run_camo
+from support import SWARM, assert_like_sim, domain, run_camo
 from two_hosts import TwoHosts, netns_available
 
 OK, WHY = netns_available()
@@ -39,6 +39,7 @@ def discovery_server(net: TwoHosts, env: dict[str, str]) -> str:
     return f"{net.addr['a']}:{port}"
 
 
+@pytest.mark.slow(SWARM)
 @pytest.mark.parametrize("mode", ["multicast", "discovery server"])
 def test_a_swarm_split_across_two_hosts_equals_the_simulator(tmp_path, mode):
     half = ROWS * COLS // 2
@@ -51,14 +52,14 @@ def test_a_swarm_split_across_two_hosts_equals_the_simulator(tmp_path, mode):
         before = net.traffic("a")
         launcher = net.popen(
             "a",
-            [sys.executable, "-m", "camo_nodes.launcher", *OPTIONS, "--procs", "1"]
+            [sys.executable, "-m", "camo_bringup.launcher", *OPTIONS, "--procs", "1"]
             + ["--remote-cells", f"{half}-{ROWS * COLS - 1}", "--run-id", "split"]
             + ["--out", str(tmp_path / "run"), *network],
             env,
         )
         worker = net.popen(
             "b",
-            [sys.executable, "-m", "camo_nodes.worker", "--cells", f"{half}-{ROWS * COLS - 1}"]
+            [sys.executable, "-m", "camo_bringup.worker", "--cells", f"{half}-{ROWS * COLS - 1}"]
             + ["--run-id", "split", *network],
             env,
         )

@@ -5,7 +5,8 @@ import os
 import subprocess
 import sys
 
-from support import ROOT, assert_like_sim, domain, run_camo
+import pytest
+from support import ROOT, SWARM, assert_like_sim, domain, run_camo
 
 
 def test_robot_with_cell_outside_grid_exits_with_one_line():
@@ -33,6 +34,7 @@ def test_robot_with_cell_outside_grid_exits_with_one_line():
     assert "outside the 4x4 grid" in out.stderr and len(out.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow(SWARM)
 def test_robot_with_negative_rho_exits_with_one_line():
     out = subprocess.run(
         [sys.executable, "-m", "camo_nodes.robot_node", "--ros-args", "-p", "rho_comm:=-0.5"],
@@ -45,6 +47,7 @@ def test_robot_with_negative_rho_exits_with_one_line():
     assert "rho_comm must be" in out.stderr and len(out.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow(SWARM)
 def test_robots_started_alone_and_a_remote_worker_join_a_run_and_equal_the_simulator(tmp_path):
     domain_id = domain()
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
@@ -52,7 +55,7 @@ def test_robots_started_alone_and_a_remote_worker_join_a_run_and_equal_the_simul
     options += ["--rho-comm", "0.2"]
     # The launcher starts no robot: row 0 is a worker's, row 1 three robots alone.
     launcher = subprocess.Popen(
-        [sys.executable, "-m", "camo_nodes.launcher", *options, "--remote-cells", "0-2"]
+        [sys.executable, "-m", "camo_bringup.launcher", *options, "--remote-cells", "0-2"]
         + ["--remote-cells", "3-5", "--run-id", "alone", "--out", str(tmp_path / "run")],
         env=env,
         cwd=ROOT,
@@ -74,7 +77,7 @@ def test_robots_started_alone_and_a_remote_worker_join_a_run_and_equal_the_simul
         )
     # The other row's robots share one process, as a second machine might; it finds the run.
     worker = subprocess.Popen(
-        [sys.executable, "-m", "camo_nodes.worker", "--cells", "0-2"],
+        [sys.executable, "-m", "camo_bringup.worker", "--cells", "0-2"],
         env=env,
         stderr=subprocess.PIPE,
         text=True,
@@ -106,6 +109,7 @@ def robot_node(*ros_args: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow(SWARM)
 def test_wrong_kinds_and_unknown_parameters_are_one_line_not_a_traceback():
     wrong = robot_node("-p", "rows:=eight", "-p", "run_id:=x")
     assert wrong.returncode == 2 and "rows must be an integer (got 'eight')" in wrong.stderr
@@ -129,6 +133,7 @@ def test_an_integer_where_a_number_is_declared_is_that_number():
     assert out.returncode == 2 and "outside the 8x8 grid" in out.stderr, out.stderr
 
 
+@pytest.mark.slow(SWARM)
 def test_a_params_file_key_naming_the_robot_applies_to_it(tmp_path):
     params = tmp_path / "params.yaml"
     params.write_text(

@@ -7,9 +7,10 @@ import json
 import subprocess
 
 import numpy as np
+import pytest
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus
-from support import BAG_COLS, BAG_ROWS, FOXGLOVE_CLIENT
+from support import BAG_COLS, BAG_ROWS, FOXGLOVE_CLIENT, SWARM
 from visualization_msgs.msg import Marker
 
 from camo_core.algorithm.params import CamoParams
@@ -67,6 +68,7 @@ def test_diagnostics_say_ok_warn_or_error_per_robot():
     assert array.status[5].hardware_id == "droplet"
 
 
+@pytest.mark.slow(SWARM)
 def test_a_recorded_scene_and_diagnostics_decode_in_foxglove_libraries(recorded, foxglove_client):
     bag, _ = recorded
     out = subprocess.run(

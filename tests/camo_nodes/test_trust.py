@@ -8,10 +8,11 @@ import subprocess
 import sys
 
 import pytest
-from support import ROOT, assert_like_sim, domain, run_camo, wait_for_line
+from support import ROOT, SWARM, assert_like_sim, domain, run_camo, wait_for_line
 
+from camo_core.algorithm.run_setup import RunSetup
 from camo_msgs.msg import Host
-from camo_nodes.topics import setup_from
+from camo_nodes.topics.runs import setup_from
 from camo_nodes.trust import BackgroundCheck, Hosts, Rejections, merged
 
 OPTIONS = ["--pattern", "forest", "--rows", "6", "--cols", "6", "--seed", "2"]
@@ -26,10 +27,11 @@ SETUP = {
 }
 
 
+@pytest.mark.slow(SWARM)
 def test_a_run_under_attack_equals_the_simulator_and_reports_what_it_refused(tmp_path):
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain())}
     run = subprocess.Popen(
-        [sys.executable, "-m", "camo_nodes.launcher", *OPTIONS, "--procs", "2"]
+        [sys.executable, "-m", "camo_bringup.launcher", *OPTIONS, "--procs", "2"]
         + ["--run-id", "attacked", "--out", str(tmp_path / "run")],
         cwd=ROOT,
         env=env,
@@ -95,7 +97,7 @@ def test_rejections_count_every_message_and_log_each_process_once():
 
 def test_a_tile_belongs_to_the_process_that_announced_it_first_and_only_tiles_of_the_run():
     rejections = Rejections(Log())
-    hosts = Hosts(36, rejections, {"tiles": [[0, 17], [18, 35]], "remote": []})
+    hosts = Hosts(36, rejections, RunSetup.from_dict(SETUP))
     assert hosts.learn(Host(name="w1", first=[0], last=[17]), A) == [(0, 17)]
     assert hosts.learn(Host(name="x", first=[0], last=[17]), B) == []
     assert hosts.learn(Host(name="x", first=[0], last=[35]), B) == []
@@ -110,12 +112,13 @@ def test_a_tile_belongs_to_the_process_that_announced_it_first_and_only_tiles_of
 
 
 def test_cells_left_to_remote_workers_may_be_announced_in_any_tiling():
-    hosts = Hosts(36, Rejections(Log()), {"tiles": [[0, 17]], "remote": [[18, 35]]})
+    setup = RunSetup.from_dict({**SETUP, "tiles": [[0, 17]], "remote": [[18, 35]]})
+    hosts = Hosts(36, Rejections(Log()), setup)
     assert hosts.learn(Host(name="far", first=[18, 27], last=[26, 35]), B) == [(18, 26), (27, 35)]
 
 
 def test_a_background_is_taken_only_as_the_runs_next_one():
-    check = BackgroundCheck({"background_digests": ["d0", "d1"]})
+    check = BackgroundCheck(RunSetup.from_dict({**SETUP, "background_digests": ["d0", "d1"]}))
     assert check.problem("dx", A) == "a background that is not the run's next one"
     assert check.problem("d1", A) == "a background that is not the run's next one"
     assert check.problem("d0", B) is None
@@ -141,6 +144,8 @@ def test_without_the_runs_digests_the_first_writer_of_the_background_is_trusted(
         json.dumps({**SETUP, "step_timeout": "soon"}),
         json.dumps({**SETUP, "tiles": [[0]]}),
         json.dumps({**SETUP, "backgrounds": "forest"}),
+        json.dumps({**SETUP, "params": {"rows": 6, "cols": 6, "speed": 3}}),
+        json.dumps({**SETUP, "tiles": [[0, 40]]}),
     ],
 )
 def test_a_strangers_parameters_message_is_not_taken_for_the_runs(text):
@@ -148,4 +153,12 @@ def test_a_strangers_parameters_message_is_not_taken_for_the_runs(text):
 
 
 def test_the_launchers_parameters_message_is_taken():
-    assert setup_from(json.dumps(SETUP), "r") == SETUP
+    setup = setup_from(json.dumps(SETUP), "r")
+    assert setup is not None and setup.params.count == 36 and setup.tiles == ((0, 17), (18, 35))
+    assert json.loads(setup.to_json()) == {
+        **SETUP,
+        "params": setup.params.as_dict(),
+        "remote": [],
+        "background_digests": [],
+        "bridged": [],
+    }

@@ -9,9 +9,10 @@ import sys
 import time
 
 import pytest
-from camo_sweep.table import parts
-from support import ROOT, sweep
+from support import CLUSTER, ROOT, SWARM, sweep
 from support import sweep_table as table
+
+from camo_sweep.table import parts
 
 
 def free_port() -> int:
@@ -62,6 +63,7 @@ def cluster():
             stop(proc)
 
 
+@pytest.mark.slow(SWARM)
 def test_a_worker_killed_mid_sweep_costs_only_its_tasks(cluster, tmp_path):
     address, workers = cluster
     args = ["--axis", "rho_comm=0:0.5:0.05", "--set", "pattern=forest", "--trials", "200"]
@@ -87,6 +89,7 @@ def test_a_worker_killed_mid_sweep_costs_only_its_tasks(cluster, tmp_path):
     assert table(out) == table(tmp_path / "one")
 
 
+@pytest.mark.slow(CLUSTER)
 def test_workers_elsewhere_never_open_the_sweeps_images(cluster, tmp_path):
     # The workers run in the repository's folder; the sweep, and its relative image, here.
     import cv2
@@ -110,6 +113,7 @@ def test_workers_elsewhere_never_open_the_sweeps_images(cluster, tmp_path):
     assert all(r["status"] == "ok" for r in runs["far"]) and runs["far"] == runs["one"]
 
 
+@pytest.mark.slow(CLUSTER)
 def test_swarm_trials_need_a_worker_with_the_ros_resource(cluster, tmp_path):
     address, _ = cluster
     done = sweep(
@@ -130,6 +134,7 @@ def _square(x: int) -> int:
     return x * x
 
 
+@pytest.mark.slow(CLUSTER)
 def test_a_local_cluster_listens_on_loopback_and_keeps_few_tasks_in_flight():
     from camo_sweep.engines import local_engine
 

@@ -6,8 +6,10 @@ import subprocess
 import sys
 
 import cv2
+import pytest
+from support import COMPUTE, ROOT, sweep_table
+
 from camo_sweep.errors import CSV_COLUMNS
-from support import ROOT, sweep_table
 
 
 def errors(*args: str) -> subprocess.CompletedProcess:
@@ -20,6 +22,7 @@ def errors(*args: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow(COMPUTE)
 def test_errors_writes_csv_figure_and_the_table_they_come_from(tmp_path):
     out = errors("--pattern", "forest", "--trials", "4", "--rhos", "0,0.4", "--out", str(tmp_path))
     assert out.returncode == 0, out.stderr
@@ -43,6 +46,7 @@ def test_errors_writes_csv_figure_and_the_table_they_come_from(tmp_path):
     )
 
 
+@pytest.mark.slow(COMPUTE)
 def test_errors_rejects_bad_rhos_and_a_used_folder(tmp_path):
     out = errors("--rhos", "0,2", "--out", str(tmp_path / "a"))
     assert out.returncode == 2 and "probabilities" in out.stderr
@@ -52,6 +56,7 @@ def test_errors_rejects_bad_rhos_and_a_used_folder(tmp_path):
     assert out.returncode == 2 and "not empty" in out.stderr
 
 
+@pytest.mark.slow(COMPUTE)
 def test_errors_again_in_its_folder_is_the_same_analysis_or_refused(tmp_path):
     base = ["--trials", "2", "--rhos", "0,0.4", "--quiet", "--out", str(tmp_path)]
     assert errors(*base).returncode == 0
@@ -65,6 +70,7 @@ def test_errors_again_in_its_folder_is_the_same_analysis_or_refused(tmp_path):
     assert noisy.returncode == 2 and "give them as --rhos" in noisy.stderr
 
 
+@pytest.mark.slow(COMPUTE)
 def test_at_lower_contrast_measurement_errors_change_the_forests_pattern(tmp_path):
     def measurement_diff(folder, *extra):
         out = errors("--trials", "10", "--rhos", "0.4", "--quiet", "--out", str(folder), *extra)

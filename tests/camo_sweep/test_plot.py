@@ -3,7 +3,7 @@ another axis, a heat map of two, and one-line errors."""
 
 import cv2
 import pytest
-from support import sweep
+from support import PROCESS, sweep
 
 
 @pytest.fixture(scope="module")
@@ -26,6 +26,7 @@ def swept(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow(PROCESS)
 @pytest.mark.parametrize(
     "extra, name",
     [
@@ -43,6 +44,7 @@ def test_plot_draws_a_picture_of_the_table(swept, extra, name):
 
 def test_the_band_of_a_count_never_goes_below_zero(swept):
     import matplotlib.pyplot as plt
+
     from camo_sweep.plot import plot
 
     captured = {}
@@ -62,6 +64,7 @@ def test_the_band_of_a_count_never_goes_below_zero(swept):
     assert all(p.vertices[:, 1].min() >= 0 for c in ax.collections for p in c.get_paths())
 
 
+@pytest.mark.slow(PROCESS)
 def test_an_axis_the_sweep_does_not_have_is_one_line(swept):
     done = sweep("plot", str(swept), "--x", "rows")
     assert done.returncode == 2 and "'rows' is not an axis of this sweep" in done.stderr

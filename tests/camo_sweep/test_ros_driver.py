@@ -6,9 +6,11 @@ import os
 import subprocess
 import sys
 
-from support import ROOT, domain, sweep_table
+import pytest
+from support import CLUSTER, ROOT, domain, sweep_table
 
 
+@pytest.mark.slow(CLUSTER)
 def test_swarm_trials_fill_the_table_and_equal_the_simulator(tmp_path):
     args = ["--axis", "rho_comm=0,0.2", "--set", "rows=3", "--set", "cols=3", "--trials", "2"]
     done = subprocess.run(
@@ -38,6 +40,7 @@ def test_swarm_trials_fill_the_table_and_equal_the_simulator(tmp_path):
     assert by_seed(rows) == by_seed(sweep_table(tmp_path / "sim"))
 
 
+@pytest.mark.slow(CLUSTER)
 def test_a_trial_that_failed_runs_again_and_leaves_one_row(tmp_path):
     out = tmp_path / "s"
     args = ["--axis", "rho_comm=0.1", "--set", "rows=2", "--set", "cols=2", "--driver", "ros"]

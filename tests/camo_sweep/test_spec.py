@@ -5,9 +5,10 @@ import hashlib
 
 import numpy as np
 import pytest
-from camo_sweep.spec import SweepSpec, axis_values, build_spec, spec_from_yaml
+from support import PROCESS
 
 from camo_core.exceptions import UsageError
+from camo_sweep.spec import SweepSpec, axis_values, build_spec, spec_from_yaml
 
 
 def test_a_range_includes_its_end_and_keeps_integers_integers():
@@ -149,6 +150,7 @@ def test_a_sweep_file_and_the_command_line_combine(tmp_path):
     assert spec.count() == 3 * 2 * 2 * 2
 
 
+@pytest.mark.slow(PROCESS)
 def test_millisecond_trials_are_batched_into_tasks_of_about_batch_s(tmp_path):
     from camo_sweep.engines import InProcess
     from camo_sweep.sweep import run_sweep

@@ -12,14 +12,14 @@ import sys
 import cv2
 import pyarrow.dataset as ds
 import pytest
-from camo_sweep.spec import sim_parser
-from support import ROOT, run_camo, sweep
+from support import CLUSTER, PROCESS, ROOT, SWARM, run_camo, sweep
 from support import sweep_table as table
 
 from camo_core.algorithm.backgrounds import background
 from camo_core.algorithm.sensing import sense_image
 from camo_core.algorithm.simulator import simulate
 from camo_core.cli.options import params_from
+from camo_sweep.spec import sim_parser
 
 
 @pytest.fixture(scope="module")
@@ -42,6 +42,7 @@ def in_process(tmp_path_factory, two_images):
     return args, out, done
 
 
+@pytest.mark.slow(CLUSTER)
 def test_two_workers_over_tcp_give_the_table_of_one_process(in_process, tmp_path):
     args, one, _ = in_process
     two = tmp_path / "two"
@@ -57,6 +58,7 @@ def test_two_workers_over_tcp_give_the_table_of_one_process(in_process, tmp_path
     assert all(r["diff_cells"] == 0 and r["correct"] for r in rows if r["rho_comm"] == 0)
 
 
+@pytest.mark.slow(PROCESS)
 def test_every_row_is_reproduced_by_camo_sim(in_process, tmp_path):
     _, one, _ = in_process
     rows = table(one)
@@ -91,6 +93,7 @@ def test_every_row_is_reproduced_by_camo_sim(in_process, tmp_path):
     ]
 
 
+@pytest.mark.slow(CLUSTER)
 def test_the_same_command_again_runs_nothing_and_duplicates_nothing(in_process):
     args, one, _ = in_process
     before = table(one)
@@ -105,6 +108,7 @@ def test_the_same_command_again_runs_nothing_and_duplicates_nothing(in_process):
     assert len(rows) == 126 and [r for r in rows if r["replicate"] < 20] == before
 
 
+@pytest.mark.slow(SWARM)
 def test_ctrl_c_mid_sweep_then_the_same_command_gives_the_same_table(tmp_path):
     args = ["--axis", "rho_comm=0:0.5:0.05", "--set", "pattern=forest", "--trials", "300"]
     args += ["--workers", "1", "--batch-s", "0.02"]
@@ -143,6 +147,7 @@ def test_ctrl_c_mid_sweep_then_the_same_command_gives_the_same_table(tmp_path):
     assert table(out) == table(tmp_path / "whole")
 
 
+@pytest.mark.slow(CLUSTER)
 def test_a_table_part_that_is_not_a_sweeps_is_named_in_one_line(tmp_path):
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -162,6 +167,7 @@ def test_a_table_part_that_is_not_a_sweeps_is_named_in_one_line(tmp_path):
         )
 
 
+@pytest.mark.slow(CLUSTER)
 @pytest.mark.parametrize(
     "args, said",
     [
@@ -196,6 +202,7 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, said):
     assert os.listdir(out) == ["keep.txt"]
 
 
+@pytest.mark.slow(CLUSTER)
 def test_a_folder_of_another_sweep_is_refused(in_process):
     _, one, _ = in_process
     parts = sorted(p.name for p in (one / "trials").iterdir())
@@ -204,6 +211,7 @@ def test_a_folder_of_another_sweep_is_refused(in_process):
     assert sorted(p.name for p in (one / "trials").iterdir()) == parts
 
 
+@pytest.mark.slow(CLUSTER)
 def test_slurm_prints_a_job_script_that_starts_a_dask_worker(tmp_path):
     options = ["--slurm-queue", "short", "--slurm-cores", "4", "--slurm-walltime", "00:30:00"]
     done = subprocess.run(
@@ -224,6 +232,7 @@ def test_slurm_prints_a_job_script_that_starts_a_dask_worker(tmp_path):
     assert missing.returncode == 2 and "required: --out" in missing.stderr
 
 
+@pytest.mark.slow(CLUSTER)
 def test_an_axis_of_numbers_and_auto_is_written_as_text(tmp_path):
     out = tmp_path / "s"
     done = sweep(
@@ -235,6 +244,7 @@ def test_an_axis_of_numbers_and_auto_is_written_as_text(tmp_path):
     assert {r["sim_args"] for r in rows} == {"--consensus-steps 10", "--consensus-steps auto"}
 
 
+@pytest.mark.slow(PROCESS)
 def test_a_sweep_refuses_a_layout_it_would_not_run(tmp_path):
     out = sweep("--axis", "rho_comm=0,0.1", "--set", "layout=hex", "--out", str(tmp_path / "s"))
     assert out.returncode == 2, out.stderr

@@ -11,7 +11,6 @@ run holds millions of messages, and a full decode of each costs ten times more).
 
 from __future__ import annotations
 
-import json
 import struct
 from pathlib import Path
 
@@ -22,11 +21,11 @@ from std_msgs.msg import String
 from camo_bag.container import BagError, BagSummary, damaged, read_messages, read_summary
 from camo_bag.ledger import ARRAY_KINDS, SINGLE_KINDS, Ledger
 from camo_bag.msgdefs import full_name, message_class, message_definition
-from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.protocol import DONE
-from camo_core.exceptions import CamoError
+from camo_core.algorithm.run_setup import RunSetup, SetupError
 from camo_msgs.msg import RobotStatus
-from camo_nodes.topics import PARAMS_SUFFIX, result_from
+from camo_nodes.topics.names import PARAMS_SUFFIX
+from camo_nodes.topics.runs import result_from
 
 
 def message_fields(kind: str, data: bytes) -> tuple[int, int, int]:
@@ -84,16 +83,12 @@ def status_decoder(summary: BagSummary, topic: str):
         raise damaged(summary.path, exc, f"holds an unreadable schema for {topic}") from None
 
 
-def setup_in(data: bytes) -> dict | None:
+def setup_in(data: bytes) -> RunSetup | None:
     """A parameters message of the bag's run (of any camo version), or None."""
     try:
-        setup = json.loads(deserialize_message(data, String).data)
-        CamoParams(**setup["params"])
-        if not isinstance(setup.get("backgrounds", []), list):
-            return None
-    except (ValueError, KeyError, TypeError, CamoError):
+        return RunSetup.from_json(deserialize_message(data, String).data)
+    except SetupError:
         return None
-    return setup
 
 
 def examine(path: str | Path) -> Ledger:
@@ -133,8 +128,7 @@ def examine(path: str | Path) -> Ledger:
             elif topic == params and ledger.params is None:
                 setup = setup_in(data)
                 if setup is not None:
-                    backgrounds = len(setup.get("backgrounds", [])) or 1
-                    ledger.set_run(CamoParams(**setup["params"]), backgrounds)
+                    ledger.set_run(setup.params, len(setup.backgrounds) or 1)
             elif topic == result:
                 found = result_from(deserialize_message(data, String).data, run)
                 if found is not None:

@@ -24,8 +24,8 @@ from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
-from camo_core.cli.options import new_folder_problem
 from camo_core.exceptions import CamoError
+from camo_core.results.folders import new_folder_problem
 
 MAGIC = b"\x89MCAP0\r\n"
 ROSBAG2_VERSION = 9  # Jazzy's metadata version

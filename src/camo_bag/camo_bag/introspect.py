@@ -22,10 +22,10 @@ from rclpy.signals import SignalHandlerOptions
 
 from camo_bag import msgdefs
 from camo_bag.graph_topics import taking_qos
-from camo_core.cli.options import Parser, add_network_options, network_env
+from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
-from camo_nodes.topics import start_ros
+from camo_nodes.topics.startup import add_network_options, network_env, start_ros
 
 # Before listing: at least DISCOVERY s for the graph to fill (ros2cli's daemon keeps it filled),
 # then until it has not changed for SETTLED s, MAX_DISCOVERY s at most (a loaded machine is slow).

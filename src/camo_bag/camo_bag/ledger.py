@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import messages_per_round
-from camo_core.cli.options import contiguous
+from camo_core.algorithm.run_setup import contiguous
 
 MAX_STEP = 1_000_000  # before the run's parameters are known: no step of a run is beyond this
 # The robots' message types, and the kind of message each carries. A tile topic carries arrays

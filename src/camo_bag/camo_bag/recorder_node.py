@@ -39,22 +39,15 @@ from camo_bag import msgdefs, qos_yaml
 from camo_bag.container import BagWriter, TopicInfo
 from camo_bag.graph_topics import new_topics, taking_qos
 from camo_bag.ledger import ROBOT_KINDS, Ledger, robot_messages
-from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.protocol import DONE
-from camo_core.cli.options import Parser, add_network_options, network_env, new_folder_problem
+from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError, UsageError
+from camo_core.results.folders import new_folder_problem
 from camo_core.shutdown import StopFlag
-from camo_nodes.topics import (
-    LATCHED,
-    LEAN_NODE,
-    RunTopics,
-    check_run_id,
-    result_from,
-    run_ended,
-    setup_from,
-    start_ros,
-    wait_for_run,
-)
+from camo_nodes.topics.names import RunTopics, check_run_id
+from camo_nodes.topics.qos import LATCHED
+from camo_nodes.topics.runs import result_from, run_ended, setup_from, wait_for_run
+from camo_nodes.topics.startup import LEAN_NODE, add_network_options, network_env, start_ros
 
 RESULT_GRACE = 10.0  # s a recorder waits, after the run's result, for what the result names
 
@@ -162,7 +155,7 @@ class RecorderNode(Node):
             if setup is None:
                 self.get_logger().warning(f"{topic}: a message that is not the run's parameters")
             elif ledger.params is None:
-                ledger.set_run(CamoParams(**setup["params"]), len(setup["backgrounds"]))
+                ledger.set_run(setup.params, len(setup.backgrounds))
         elif topic == self.run.result:
             result = result_from(msg.data, self.run.run)
             if result is None:

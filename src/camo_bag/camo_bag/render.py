@@ -34,7 +34,7 @@ from camo_core.results.animation import Snapshots, write_animation
 from camo_core.results.output import run_title, write_round
 from camo_core.results.record import Backgrounds, Rounds
 from camo_msgs.msg import RobotStatus
-from camo_nodes.topics import image_from_msg
+from camo_nodes.topics.images import image_from_msg
 
 
 @dataclass
@@ -60,7 +60,7 @@ def load_run(path: str | Path) -> RecordedRun:
     try:
         for message in read_messages(path, [params_topic, status_topic, background_topic]):
             if message.topic == params_topic and setup is None:
-                setup = setup_in(message.data) or {}
+                setup = setup_in(message.data) or False
             elif message.topic == background_topic:
                 msg = deserialize_message(message.data, Image)
                 stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
@@ -75,7 +75,7 @@ def load_run(path: str | Path) -> RecordedRun:
         raise BagError(f"{path} has no message on {params_topic}")
     if not setup:
         raise BagError(f"{path}: {params_topic} does not hold a run's parameters")
-    params = CamoParams(**setup["params"])
+    params = setup.params
     rounds = Rounds(params)
     times: dict[int, list[int]] = {}
     try:
@@ -88,8 +88,8 @@ def load_run(path: str | Path) -> RecordedRun:
     if not rounds:
         raise BagError(f"{path} holds no robot status: nothing to render")
     elapsed = {index: (max(t) - min(t)) / 1e9 for index, t in times.items()}
-    bridged = frozenset(setup.get("bridged", []))
-    return RecordedRun(params, setup.get("backgrounds", []), rounds, images, elapsed, bridged)
+    bridged = frozenset(setup.bridged)
+    return RecordedRun(params, list(setup.backgrounds), rounds, images, elapsed, bridged)
 
 
 class IncompleteBag(CamoError):

@@ -19,11 +19,12 @@ from rclpy.signals import SignalHandlerOptions
 
 from camo_bag import msgdefs, qos_yaml
 from camo_bag.container import BagSummary, read_messages, read_summary
-from camo_core.cli.options import Parser, add_network_options, network_env
+from camo_core.cli.options import Parser
 from camo_core.cli.progress import ProgressBar
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
-from camo_nodes.topics import LEAN_NODE, check_run_id, start_ros
+from camo_nodes.topics.names import check_run_id
+from camo_nodes.topics.startup import LEAN_NODE, add_network_options, network_env, start_ros
 
 
 def build_parser() -> Parser:

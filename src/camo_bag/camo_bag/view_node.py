@@ -25,10 +25,12 @@ from rclpy.signals import SignalHandlerOptions
 from camo_bag import msgdefs
 from camo_bag.graph_topics import new_topics, taking_qos
 from camo_bag.recorder_node import join
-from camo_core.cli.options import Parser, add_network_options, network_env
+from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
-from camo_nodes.topics import RunTopics, check_run_id, run_ended, start_ros
+from camo_nodes.topics.names import RunTopics, check_run_id
+from camo_nodes.topics.runs import run_ended
+from camo_nodes.topics.startup import add_network_options, network_env, start_ros
 
 DEFAULT_PORT = 8765
 

@@ -19,43 +19,58 @@ from __future__ import annotations
 
 import os
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from camo_core.algorithm.params import CamoParams, ParameterError
+from camo_core.algorithm.params import AUTO, CamoParams, ParameterError
 from camo_core.algorithm.protocol import CONSENSUS, NO_PATTERN, SENSING
 from camo_core.algorithm.sensing import Calibration
-from camo_core.cli.options import node_help, wants_help
 from camo_core.exceptions import CamoError
+from camo_core.schema import check_fields, declared, param
 from camo_core.shutdown import StopFlag
 from camo_droplet.firmware import FirmwareState
 from camo_droplet.link import DropletDisconnected, DropletError, DropletLink
 from camo_droplet.rig import DropletLed, DropletSensor, Reconnector, parse_rgb
 from camo_msgs.msg import Host, RobotStatus
-from camo_nodes.robot_node import ROBOT_PARAMETERS, host_robots, robot_parameters
-from camo_nodes.topics import (
-    LATCHED,
-    RunTopics,
-    history_qos,
-    run_ended,
-    start_ros,
+from camo_nodes.robot_node import (
+    ROBOT_PARAMETERS,
+    RobotSetup,
+    host_robots,
+    robot_parameters,
+    robot_setup,
 )
+from camo_nodes.topics.names import RunTopics
+from camo_nodes.topics.parameters import parameters_help
+from camo_nodes.topics.qos import LATCHED, history_qos
+from camo_nodes.topics.runs import run_ended
+from camo_nodes.topics.startup import node_help, start_ros, wants_help
 
-BRIDGE_PARAMETERS = {
-    "port": "",
-    "monitor": False,
-    "transcript": "",
-    "calibration": "",
-    "gain": 1.0,
-    "offset": 0.0,
-    "led_on": "255 0 0",
-    "led_off": "255 255 255",
-    "serial_timeout": 0.5,
-    "retries": 3,
-}
+
+@dataclass(frozen=True)
+class BridgeParams:
+    """A bridge's own ROS parameters (besides a robot node's)."""
+
+    port: str = param("", "the Droplet's serial port, e.g. /dev/ttyUSB0")
+    monitor: bool = param(False, "watch a Droplet that runs the camouflage firmware itself")
+    transcript: str = param("", "read a recorded printout of the firmware instead of a port")
+    calibration: str = param("", "a YAML file of the gain and offset of the grey reading")
+    gain: float = param(1.0, "gain of the grey reading (without a calibration file)")
+    offset: float = param(0.0, "offset of the grey reading (without a calibration file)")
+    led_on: str = param("255 0 0", "the LED's colour for state on (R G B)")
+    led_off: str = param("255 255 255", "the LED's colour for state off (R G B)")
+    serial_timeout: float = param(0.5, "seconds to wait for an answer", low=0.0, above=True)
+    retries: int = param(3, "times a command is retried", low=0, high=100)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+    @classmethod
+    def from_values(cls, values: dict) -> BridgeParams:
+        return cls(**{name: values[name] for name in declared(cls)})
 
 
 class DropletMonitorNode(Node):
@@ -145,26 +160,25 @@ class DropletMonitorNode(Node):
         self.status_pub.publish(status)
 
 
-def run_bridge(
-    params: CamoParams, topics: RunTopics, row: int, col: int, values: dict, timeouts, stop
-) -> int:
+def run_bridge(robot: RobotSetup, topics: RunTopics, bridge: BridgeParams, stop) -> int:
     """Robot mode: this cell's robot, with the Droplet's sensor and LED."""
-    link = DropletLink(values["port"], timeout=values["serial_timeout"], retries=values["retries"])
-    if values["calibration"]:
-        calibration = Calibration.from_yaml(values["calibration"])
+    params, row, col = robot.params, robot.cell.row, robot.cell.col
+    link = DropletLink(bridge.port, timeout=bridge.serial_timeout, retries=bridge.retries)
+    if bridge.calibration:
+        calibration = Calibration.from_yaml(bridge.calibration)
     else:
-        calibration = Calibration(values["gain"], values["offset"])
+        calibration = Calibration(bridge.gain, bridge.offset)
     reconnector = Reconnector(link)
     cell = row * params.cols + col
     sensor = DropletSensor(link, reconnector, params.profile, calibration)
     led = DropletLed(
-        link, reconnector, parse_rgb(values["led_on"]), parse_rgb(values["led_off"]), (row, col)
+        link, reconnector, parse_rgb(bridge.led_on), parse_rgb(bridge.led_off), (row, col)
     )
     host = host_robots(
         params,
+        robot.protocol,
         topics,
         [(cell, cell)],
-        *timeouts,
         lean=False,
         sensors={cell: sensor},
         displays={cell: led},
@@ -178,16 +192,13 @@ def run_bridge(
         link.close()
 
 
-def run_monitor(
-    params: CamoParams, topics: RunTopics, row: int, col: int, values: dict, stop
-) -> int:
+def run_monitor(robot: RobotSetup, topics: RunTopics, bridge: BridgeParams, stop) -> int:
     """Monitor mode: a Droplet running the firmware, or a transcript of one."""
+    params, row, col = robot.params, robot.cell.row, robot.cell.col
     link = None
-    if values["port"]:
-        link = DropletLink(
-            values["port"], timeout=values["serial_timeout"], retries=values["retries"]
-        )
-    transcript = Path(values["transcript"]) if values["transcript"] else None
+    if bridge.port:
+        link = DropletLink(bridge.port, timeout=bridge.serial_timeout, retries=bridge.retries)
+    transcript = Path(bridge.transcript) if bridge.transcript else None
     if transcript is not None and not transcript.is_file():
         raise ParameterError(f"transcript not found: {transcript}")
     node = DropletMonitorNode(params, topics, row, col, link=link, transcript=transcript)
@@ -203,53 +214,52 @@ def run_monitor(
     return 0
 
 
-def firmware_lacks(values: dict) -> list[str]:
-    """The options of a run that a Droplet's own firmware has no rules for."""
-    lacks = ["threshold_auto (--threshold auto)"] if values["threshold_auto"] else []
-    if values["orientation"] != "axes":
-        lacks.append(
-            f"orientation {values['orientation']} (--orientation {values['orientation']})"
-        )
-    if values["levels"]:
-        lacks.append(f"levels {values['levels']} (--levels {values['levels']})")
+def firmware_lacks(params: CamoParams) -> list[str]:
+    """The options of a run that a Droplet's own firmware has no rules for (it runs the
+    paper's, with a fixed threshold and two stripe directions)."""
+    paper = CamoParams()
+    beyond = {"threshold_auto": params.threshold_auto, "orientation": params.orientation}
+    beyond["levels"] = params.levels
+    lacks = []
+    for name, value in beyond.items():
+        if value != getattr(paper, name):
+            d = declared(CamoParams)[name]
+            said = f"{d.option} {value}" if d.spec.cli else f"--threshold {AUTO}"
+            lacks.append(f"{name} {value} ({said})")
     return lacks
 
 
-def check_bridge_values(values: dict) -> None:
-    if not values["port"] and not values["transcript"]:
+def check_bridge(values: dict) -> None:
+    """A bridge's parameters, said at once (not after waiting up to a minute for a run)."""
+    bridge = BridgeParams.from_values(values)
+    if not bridge.port and not bridge.transcript:
         raise ParameterError("give the Droplet's serial port: -p port:=/dev/ttyUSB0")
-    if values["port"] and not os.path.exists(values["port"]):
-        # Said at once, not after waiting up to a minute for a run to join.
-        raise ParameterError(f"no serial port {values['port']} (is the Droplet plugged in?)")
-    beyond = firmware_lacks(values)
-    if (values["monitor"] or values["transcript"]) and beyond:
-        # There the Droplet runs its own firmware's rules: the paper's, with a fixed threshold
-        # and two stripe directions.
+    if bridge.port and not os.path.exists(bridge.port):
+        raise ParameterError(f"no serial port {bridge.port} (is the Droplet plugged in?)")
+    beyond = firmware_lacks(robot_setup(values).params)
+    if (bridge.monitor or bridge.transcript) and beyond:
         raise ParameterError(
             f"a Droplet's firmware cannot run {' or '.join(beyond)}: monitor mode shows the "
             "firmware's own rules (bridged, without monitor, the bridge runs camo's rules and can)"
         )
-    if not (values["serial_timeout"] > 0 and values["retries"] >= 0):
-        raise ParameterError("serial_timeout must be positive and retries not negative")
 
 
 def main(args=None) -> int:
     """droplet_bridge --ros-args -p rows:=8 -p cols:=8 -p row:=R -p col:=C -p port:=/dev/ttyUSB0"""
     if wants_help(args):
         about = "A real Droplet on a serial port as one robot of the swarm (see docs/hardware.md)."
-        print(node_help("droplet_bridge", about, {**ROBOT_PARAMETERS, **BRIDGE_PARAMETERS}))
+        print(node_help("droplet_bridge", about, parameters_help(*ROBOT_PARAMETERS, BridgeParams)))
         return 0
     stop = StopFlag()
     start_ros(
         "droplet_bridge", args, node_options=True, signal_handler_options=SignalHandlerOptions.NO
     )
     try:
-        params, row, col, *timeouts, topics, values = robot_parameters(
-            {**ROBOT_PARAMETERS, **BRIDGE_PARAMETERS}, stop, check_bridge_values
-        )
-        if values["monitor"] or values["transcript"]:
-            return run_monitor(params, topics, row, col, values, stop)
-        return run_bridge(params, topics, row, col, values, timeouts, stop)
+        robot, topics, values = robot_parameters(stop, check_bridge, (BridgeParams,))
+        bridge = BridgeParams.from_values(values)
+        if bridge.monitor or bridge.transcript:
+            return run_monitor(robot, topics, bridge, stop)
+        return run_bridge(robot, topics, bridge, stop)
     except CamoError as exc:
         print(f"droplet_bridge: error: {exc}", file=sys.stderr)
         return 2

@@ -29,8 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
+from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import block_means, load_image
-from camo_core.cli.options import Parser
+from camo_core.cli.options import Parser, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import interrupt_on_signals
 
@@ -200,8 +201,7 @@ def build_parser() -> Parser:
     source.add_argument(
         "--pattern", choices=BACKGROUNDS, default=None, help="built-in background (default forest)"
     )
-    parser.add_argument("--rows", type=int, default=8)
-    parser.add_argument("--cols", type=int, default=8)
+    add_options(parser, CamoParams, only=("rows", "cols"))  # the arena's grid of robots
     parser.add_argument("--cell", default="0,0", help="ROW,COL of this Droplet in the arena")
     parser.add_argument(
         "--led-log", default=None, help="append every LED setting here (JSON lines)"
@@ -225,6 +225,7 @@ def build_parser() -> Parser:
 
 
 def emulator_from(args: argparse.Namespace) -> DropletEmulator:
+    arena = CamoParams.from_options(**options_of(args, CamoParams))
     try:
         droplet_id = int(args.id, 16)
         row, col = (int(x) for x in args.cell.split(","))
@@ -232,9 +233,9 @@ def emulator_from(args: argparse.Namespace) -> DropletEmulator:
         raise UsageError(
             f"--id takes 4 hex digits and --cell ROW,COL (got {args.id!r}, {args.cell!r})"
         ) from None
-    if not (0 <= droplet_id <= 0xFFFF and 0 <= row < args.rows and 0 <= col < args.cols):
+    if not (0 <= droplet_id <= 0xFFFF and 0 <= row < arena.rows and 0 <= col < arena.cols):
         raise UsageError(
-            f"--id must be 0000..FFFF and --cell inside the {args.rows}x{args.cols} arena"
+            f"--id must be 0000..FFFF and --cell inside the {arena.rows}x{arena.cols} arena"
         )
     for name in ("drop", "garbage", "chatter"):
         if not 0 <= getattr(args, name) <= 1:
@@ -242,8 +243,8 @@ def emulator_from(args: argparse.Namespace) -> DropletEmulator:
     if args.delay < 0 or args.disconnect_after < 0 or args.disconnect_for < 0:
         raise UsageError("--delay, --disconnect-after and --disconnect-for must not be negative")
     image = load_image(args.image) if args.image else background(args.pattern or "forest")
-    if image.shape[0] < args.rows or image.shape[1] < args.cols:
-        raise UsageError(f"the image is smaller than the {args.rows}x{args.cols} arena")
+    if image.shape[0] < arena.rows or image.shape[1] < arena.cols:
+        raise UsageError(f"the image is smaller than the {arena.rows}x{arena.cols} arena")
     faults = Faults(
         args.drop,
         args.delay,
@@ -255,7 +256,7 @@ def emulator_from(args: argparse.Namespace) -> DropletEmulator:
     return DropletEmulator(
         args.link,
         droplet_id,
-        emulated_rgb(image, args.rows, args.cols, row, col),
+        emulated_rgb(image, arena.rows, arena.cols, row, col),
         faults,
         args.led_log,
         args.seed,

@@ -21,13 +21,10 @@ from sensor_msgs.msg import Image
 
 from camo_core.algorithm.protocol import TICK
 from camo_core.algorithm.sensing import ImageError, Projection, image_digest
-from camo_nodes.topics import (
-    LATCHED_READER,
-    LEAN_NODE,
-    ImageEncodingError,
-    RunTopics,
-    image_from_msg,
-)
+from camo_nodes.topics.images import ImageEncodingError, image_from_msg
+from camo_nodes.topics.names import RunTopics
+from camo_nodes.topics.qos import LATCHED_READER
+from camo_nodes.topics.startup import LEAN_NODE
 from camo_nodes.transport import Transport
 from camo_nodes.trust import BackgroundCheck
 

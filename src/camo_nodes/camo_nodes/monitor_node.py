@@ -33,15 +33,10 @@ from visualization_msgs.msg import MarkerArray
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult
 from camo_core.algorithm.robot_io import CONSENSUS, PHASE_NAMES
+from camo_core.algorithm.run_setup import RunSetup
 from camo_core.algorithm.sensing import image_digest
 from camo_core.algorithm.validation import report_problem
-from camo_core.cli.options import (
-    Parser,
-    add_network_options,
-    add_out_options,
-    network_env,
-    out_dir,
-)
+from camo_core.cli.options import Parser, add_out_options, out_dir
 from camo_core.exceptions import CamoError
 from camo_core.results.animation import Snapshots, write_animation
 from camo_core.results.output import run_title, write_round
@@ -49,24 +44,18 @@ from camo_core.results.record import Backgrounds, RoundRecord, Rounds
 from camo_core.shutdown import StopFlag
 from camo_msgs.msg import Host, RobotStatus
 from camo_nodes import scene
-from camo_nodes.joining import wait_for_setup
 from camo_nodes.polled import PolledTopics
-from camo_nodes.topics import (
-    LATCHED_READER,
-    ImageEncodingError,
-    RunTopics,
-    check_run_id,
-    image_from_msg,
-    image_to_msg,
-    start_ros,
-    wait_for_run,
-)
+from camo_nodes.topics.images import ImageEncodingError, image_from_msg, image_to_msg
+from camo_nodes.topics.names import RunTopics, check_run_id
+from camo_nodes.topics.qos import LATCHED_READER
+from camo_nodes.topics.runs import wait_for_run, wait_for_setup
+from camo_nodes.topics.startup import add_network_options, network_env, start_ros
 from camo_nodes.trust import BackgroundCheck, Hosts, Rejections, merged
 
 
 class MonitorNode(Node):
     def __init__(
-        self, params: CamoParams, topics: RunTopics, setup: dict | None = None, **kwargs
+        self, params: CamoParams, topics: RunTopics, setup: RunSetup | None = None, **kwargs
     ) -> None:
         super().__init__("monitor", namespace=topics.swarm_namespace, **kwargs)
         self.params = params
@@ -92,7 +81,7 @@ class MonitorNode(Node):
         self.create_timer(0.02, self.polled.poll)
         self.pattern_pub = self.create_publisher(Image, topics.pattern, 10)
         self.create_timer(0.2, self._publish_pattern)
-        self.bridged = set((setup or {}).get("bridged", []))
+        self.bridged = set(setup.bridged if setup is not None else ())
         self.markers_pub = self.create_publisher(MarkerArray, topics.markers, 1)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.diagnostics, 1)
         self.create_timer(0.5, self.publish_views)
@@ -262,10 +251,10 @@ def main(argv: list[str] | None = None) -> int:
 
         topics = RunTopics(wait_for_run(reader, spin, run_id, args.wait, stop))
         setup = wait_for_setup(reader, spin, topics, args.wait, stop)
-        monitor = MonitorNode(CamoParams(**setup["params"]), topics, setup)
+        monitor = MonitorNode(setup.params, topics, setup)
         nodes.append(monitor)
         executor.add_node(monitor)
-        labels = setup.get("backgrounds") or ["background"]
+        labels = list(setup.backgrounds) or ["background"]
         for index, label in enumerate(labels):
             last = 0.0
             while not monitor.complete(index) and not stop:

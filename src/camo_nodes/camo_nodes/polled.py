@@ -13,7 +13,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from camo_nodes.rcl_take import Taker
-from camo_nodes.topics import LEAN_NODE
+from camo_nodes.topics.startup import LEAN_NODE
 
 Handler = Callable[[bytes, bytes], None]
 

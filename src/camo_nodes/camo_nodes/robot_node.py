@@ -16,28 +16,31 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from camo_core.algorithm.layout import layout_for, sense_at
-from camo_core.algorithm.params import CamoParams, ParameterError
+from camo_core.algorithm.params import MAX_SIDE, CamoParams, ParameterError
 from camo_core.algorithm.protocol import StepProtocol
 from camo_core.algorithm.robot_io import NOTHING, Display, Message, Output, Sensor
+from camo_core.algorithm.run_setup import ProtocolParams, RunSetup
 from camo_core.algorithm.sensing import ProjectedSensor, Projection
-from camo_core.cli.options import layout_options, node_help, wants_help
 from camo_core.exceptions import CamoError
+from camo_core.schema import param
 from camo_core.shutdown import StopFlag
 from camo_nodes.host import Host, host_node
-from camo_nodes.topics import (
-    LEAN_NODE,
-    RunTopics,
+from camo_nodes.topics.names import RunTopics
+from camo_nodes.topics.parameters import (
+    JoinParams,
+    declarations,
     node_parameters,
-    run_ended,
-    run_from_parameter,
-    start_ros,
+    parameters_help,
 )
+from camo_nodes.topics.runs import run_ended, run_from_parameter
+from camo_nodes.topics.startup import LEAN_NODE, node_help, start_ros, wants_help
 from camo_nodes.transport import Transport
 
 
@@ -105,26 +108,17 @@ class RobotNode(Node):
 REPORT_PERIOD = 0.25
 REPORTS_PER_PROCESS = 2000.0
 
-ROBOT_PARAMETERS = {
-    "rows": 8,
-    "cols": 8,
-    "row": 0,
-    "col": 0,
-    "profile": "paper",
-    "seed": 0,
-    "rho_meas": 0.0,
-    "rho_comm": 0.0,
-    "threshold": 50.0,
-    "threshold_auto": False,
-    "orientation": "axes",
-    "levels": 0,
-    "layout": "",
-    "consensus_steps": -1,
-    "formation_steps": -1,
-    "step_timeout": 10.0,
-    "discovery_timeout": 300.0,
-    "run_id": "",
-}
+
+@dataclass(frozen=True)
+class RobotCell:
+    """Where a robot alone stands."""
+
+    row: int = param(0, "the robot's row", low=0, high=MAX_SIDE - 1)
+    col: int = param(0, "the robot's column", low=0, high=MAX_SIDE - 1)
+
+
+# A robot node's ROS parameters: the run's, the protocol's, its cell and the run it joins.
+ROBOT_PARAMETERS = (CamoParams, ProtocolParams, RobotCell, JoinParams)
 
 
 def projected_on(params: CamoParams):
@@ -137,117 +131,107 @@ def projected_on(params: CamoParams):
     return lambda image: sense_at(image, layout, params.profile).reshape(shape)
 
 
-def params_from_values(values: dict) -> tuple[CamoParams, int, int, float, float]:
-    """A standalone robot's ROS parameters as (params, row, col, step timeout, discovery timeout);
-    raises ParameterError."""
-    params = CamoParams(
-        profile=values["profile"],
-        **layout_options(values["layout"], values["rows"], values["cols"]),
-        threshold=values["threshold"],
-        threshold_auto=values["threshold_auto"],
-        orientation=values["orientation"],
-        levels=values["levels"],
-        seed=values["seed"],
-        rho_meas=values["rho_meas"],
-        rho_comm=values["rho_comm"],
-        consensus_steps=None if values["consensus_steps"] < 0 else values["consensus_steps"],
-        formation_steps=None if values["formation_steps"] < 0 else values["formation_steps"],
-    )
-    if not (0 <= values["row"] < params.rows and 0 <= values["col"] < params.cols):
+@dataclass(frozen=True)
+class RobotSetup:
+    """A robot alone, as its ROS parameters describe it."""
+
+    params: CamoParams
+    protocol: ProtocolParams
+    cell: RobotCell
+
+
+def robot_setup(values: dict) -> RobotSetup:
+    """A standalone robot's ROS parameters, checked (ParameterError in one line)."""
+    declared = declarations(CamoParams)
+    params = CamoParams.from_options(**{k: v for k, v in values.items() if k in declared})
+    protocol = ProtocolParams(values["step_timeout"], values["discovery_timeout"])
+    cell = RobotCell(values["row"], values["col"])
+    if not (cell.row < params.rows and cell.col < params.cols):
         raise ParameterError(
-            f"cell ({values['row']}, {values['col']}) is outside the "
-            f"{params.rows}x{params.cols} grid"
+            f"cell ({cell.row}, {cell.col}) is outside the {params.rows}x{params.cols} grid"
         )
-    for name in ("step_timeout", "discovery_timeout"):
-        if not values[name] > 0:
-            raise ParameterError(f"{name} must be positive (got {values[name]})")
-    return (
-        params,
-        values["row"],
-        values["col"],
-        values["step_timeout"],
-        values["discovery_timeout"],
-    )
+    return RobotSetup(params, protocol.for_swarm(params.count), cell)
 
 
-def robot_parameters(defaults: dict, stop, check=None) -> tuple:
-    """A standalone robot's parameters: (params, row, col, step timeout, discovery timeout, run
-    topics, every value). They are read twice: first as `robot_parameters` (`/**` keys), which
-    says the cell and the run, then as the robot's own node /<run>/camo/robot_<row>_<col>, so
-    that keys naming it in a parameters file apply too. `check(values)` raises ParameterError
-    for what the caller cannot use."""
+def robot_parameters(stop, check=None, classes: tuple = ()) -> tuple[RobotSetup, RunTopics, dict]:
+    """A standalone robot's parameters: (its setup, run topics, every value). They are read
+    twice: first as `robot_parameters` (`/**` keys), which says the cell and the run, then as
+    the robot's own node /<run>/camo/robot_<row>_<col>, so that keys naming it in a parameters
+    file apply too. `classes` declare more parameters (a bridge's); `check(values)` raises
+    ParameterError for what the caller cannot use."""
+    classes = (*ROBOT_PARAMETERS, *classes)
     reader = Node("robot_parameters", **LEAN_NODE)
     try:
-        values = node_parameters(reader, defaults)
-        _, row, col, *_ = params_from_values(values)
+        values = node_parameters(reader, *classes)
+        cell = robot_setup(values).cell
         if check is not None:
             check(values)  # before waiting for a run: a bad value is said at once
         topics = run_from_parameter(reader, stop)
     finally:
         reader.destroy_node()
-    named = Node(f"robot_{row}_{col}", namespace=topics.robot_namespace, **LEAN_NODE)
+    named = Node(f"robot_{cell.row}_{cell.col}", namespace=topics.robot_namespace, **LEAN_NODE)
     try:
-        values = node_parameters(named, defaults)
+        values = node_parameters(named, *classes)
     finally:
         named.destroy_node()
-    params, *cell_and_timeouts = params_from_values(values)
-    if tuple(cell_and_timeouts[:2]) != (row, col):
-        raise ParameterError(f"robot_{row}_{col}'s parameters give it another cell")
-    return (params, *cell_and_timeouts, topics, values)
+    setup = robot_setup(values)
+    if setup.cell != cell:
+        raise ParameterError(f"robot_{cell.row}_{cell.col}'s parameters give it another cell")
+    return setup, topics, values
 
 
 def host_robots(
     params: CamoParams,
+    protocol: ProtocolParams,
     topics: RunTopics,
     tiles: list[tuple[int, int]],
-    step_timeout: float,
-    discovery_timeout: float,
     lean: bool = True,
     sensors: dict[int, Sensor] | None = None,
     displays: dict[int, Display] | None = None,
-    setup: dict | None = None,
+    setup: RunSetup | None = None,
 ) -> Host:
     """This process's robots (tiles of robot ids), ready to run: a projected-image sensor
-    unless `sensors` names another (a Droplet's); `lean` robots have no services of their own."""
+    unless `sensors` names another (a Droplet's); `lean` robots have no services of their own.
+    `setup`: the run's, as its launcher published it (which tiles and backgrounds it has)."""
     node = host_node(topics)
     transport = Transport(node, params, topics, tiles, setup)
     projection = Projection(params.rows, params.cols, params.profile, projected_on(params))
+    protocol = protocol.for_swarm(params.count)
     robots = []
     for cell in sorted(transport.hosted):
         row, col = divmod(cell, params.cols)
         sensor = (sensors or {}).get(cell) or ProjectedSensor(projection, row, col)
         display = (displays or {}).get(cell)
-        protocol = StepProtocol(
+        steps = StepProtocol(
             params,
             row,
             col,
             sensor,
             display,
-            step_timeout,
-            discovery_timeout,
+            protocol.step_timeout,
+            protocol.discovery_timeout,
             transport.hosts,
             max(REPORT_PERIOD, len(transport.hosted) / REPORTS_PER_PROCESS),
         )
-        robots.append(RobotNode(protocol, transport, **(LEAN_NODE if lean else {})))
+        robots.append(RobotNode(steps, transport, **(LEAN_NODE if lean else {})))
     return Host(node, transport, projection, robots, spin_robots=not lean)
 
 
 def main(args=None) -> int:
-    """A single robot in its own process: parameters rows, cols, row, col, profile, seed,
-    rho_*..."""
+    """A single robot in its own process (its ROS parameters: `./camo robot --help`)."""
     if wants_help(args):
-        print(node_help("robot_node", "One robot of the camouflage swarm.", ROBOT_PARAMETERS))
+        about = "One robot of the camouflage swarm."
+        print(node_help("robot_node", about, parameters_help(*ROBOT_PARAMETERS)))
         return 0
     stop = StopFlag()
     start_ros(
         "robot_node", args, node_options=True, signal_handler_options=SignalHandlerOptions.NO
     )
     try:
-        params, row, col, step_timeout, discovery_timeout, topics = robot_parameters(
-            ROBOT_PARAMETERS, stop
-        )[:6]
-        cell = row * params.cols + col
-        host = host_robots(params, topics, [(cell, cell)], step_timeout, discovery_timeout, False)
+        robot, topics, _ = robot_parameters(stop)
+        params, cell = robot.params, robot.cell
+        robot_id = cell.row * params.cols + cell.col
+        host = host_robots(params, robot.protocol, topics, [(robot_id, robot_id)], lean=False)
         return host.run(stop, until=run_ended(host.node, topics))
     except CamoError as exc:
         print(f"robot_node: error: {exc}", file=sys.stderr)

@@ -36,6 +36,7 @@ from rclpy.serialization import deserialize_message
 from camo_core.algorithm.layout import slot_ids
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import PHASE_OF, Message, Report, kinds_of, messages_per_round
+from camo_core.algorithm.run_setup import RunSetup
 from camo_core.algorithm.validation import message_problem, phase_problem
 from camo_msgs.msg import (
     Color,
@@ -54,8 +55,8 @@ from camo_msgs.msg import (
     VoteArray,
 )
 from camo_nodes.polled import PolledTopics
-from camo_nodes.status_msg import status_msg
-from camo_nodes.topics import LATCHED, LATCHED_READER, RunTopics, history_qos, tile_name
+from camo_nodes.topics.names import RunTopics, tile_name
+from camo_nodes.topics.qos import LATCHED, LATCHED_READER, history_qos
 from camo_nodes.trust import Hosts, Rejections
 
 MESSAGE_TYPES = {
@@ -157,6 +158,30 @@ def edge_of(params: CamoParams, hosted: set[int], robots: Iterable[int]) -> set[
     return edge
 
 
+def status_msg(report: Report) -> RobotStatus:
+    return RobotStatus(
+        sender_id=report.sender_id,
+        row=report.row,
+        col=report.col,
+        phase=report.phase,
+        step=report.step,
+        round=report.round,
+        sensed=report.sensed,
+        p=list(report.p),
+        pattern=report.pattern,
+        state=report.state,
+        alive=report.alive,
+        known_slots=report.known_slots,
+        deadlines=report.deadlines,
+        silent=list(report.silent),
+        p_from=report.p_from,
+        p_trace=list(report.p_trace),
+        state_from=report.state_from,
+        state_trace=list(report.state_trace),
+        palette=list(report.palette),
+    )
+
+
 class Batch:
     """What a tile's robots send on one topic, until the next flush: one array message, its
     elements reused from send to send (cheaper than new messages)."""
@@ -201,7 +226,7 @@ class Transport:
         params: CamoParams,
         topics: RunTopics,
         tiles: list[Tile],
-        setup: dict | None = None,
+        setup: RunSetup | None = None,
     ) -> None:
         """`setup`: the run's parameters message, whose layout says which tiles may be hosted."""
         self.node = node

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from collections import Counter
 
+from camo_core.algorithm.run_setup import RunSetup
 from camo_msgs.msg import Host
 from camo_nodes.rcl_take import PREFIX
 
@@ -65,13 +66,13 @@ class Hosts:
     run's layout (its setup's `tiles` and `remote` ranges), only a tile of the layout, or one
     inside the cells left to remote workers, can be announced at all."""
 
-    def __init__(self, count: int, rejections: Rejections, setup: dict | None = None) -> None:
+    def __init__(self, count: int, rejections: Rejections, setup: RunSetup | None = None) -> None:
         self.count = count
         self.rejections = rejections
-        self.layout = None
-        if setup is not None and "tiles" in setup:
-            self.layout = {tuple(t) for t in setup["tiles"]}
-            self.remote = [tuple(r) for r in setup.get("remote", [])]
+        self.layout: set[tuple[int, int]] | None = None
+        if setup is not None and setup.tiles:
+            self.layout = set(setup.tiles)
+            self.remote = list(setup.remote)
         self.owner: dict[int, bytes] = {}  # robot -> the prefix of its host
         self.tiles: dict[tuple[int, int], bytes] = {}
         self.refused: dict[bytes, dict] = {}  # host prefix -> what it reported refusing
@@ -129,8 +130,8 @@ class BackgroundCheck:
 
     REPEAT = ""  # problem() for the background in use, heard again: ignore it quietly
 
-    def __init__(self, setup: dict | None) -> None:
-        self.digests = list((setup or {}).get("background_digests") or ())
+    def __init__(self, setup: RunSetup | None) -> None:
+        self.digests = list(setup.background_digests if setup is not None else ())
         self.taken = 0
         self.first = FirstWriter()
 

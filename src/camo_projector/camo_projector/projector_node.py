@@ -8,6 +8,7 @@ publishes the new background, and the swarm camouflages again on it.
 from __future__ import annotations
 
 import sys
+from dataclasses import dataclass
 
 import numpy as np
 import rclpy
@@ -19,30 +20,35 @@ from std_msgs.msg import String
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.sensing import load_image
-from camo_core.cli.options import node_help, wants_help
 from camo_core.exceptions import CamoError
-from camo_nodes.topics import (
-    LATCHED,
-    LEAN_NODE,
-    RunTopics,
-    image_to_msg,
-    node_parameters,
-    run_from_parameter,
-    start_ros,
-)
+from camo_core.schema import param
+from camo_nodes.topics.images import image_to_msg
+from camo_nodes.topics.names import RunTopics
+from camo_nodes.topics.parameters import JoinParams, node_parameters, parameters_help
+from camo_nodes.topics.qos import LATCHED
+from camo_nodes.topics.runs import run_from_parameter
+from camo_nodes.topics.startup import LEAN_NODE, node_help, start_ros, wants_help
 
 
 def load(image_path: str, pattern: str) -> np.ndarray:
     return load_image(image_path) if image_path else background(pattern or "forest")
 
 
-PROJECTOR_PARAMETERS = {"image": "", "pattern": "forest", "run_id": ""}
+@dataclass(frozen=True)
+class ProjectorParams:
+    """The background a projector shows first: a file, else a built-in pattern."""
+
+    image: str = param("", "background image file (any format OpenCV reads)")
+    pattern: str = param("forest", "built-in background", choices=BACKGROUNDS)
+
+
+PROJECTOR_PARAMETERS = (ProjectorParams, JoinParams)
 
 
 class ProjectorNode(Node):
     def __init__(self, topics: RunTopics, **kwargs) -> None:
         super().__init__("projector", namespace=topics.robot_namespace, **kwargs)
-        values = node_parameters(self, {**PROJECTOR_PARAMETERS, "run_id": topics.run})
+        values = node_parameters(self, *PROJECTOR_PARAMETERS)
         self.publisher = self.create_publisher(Image, topics.background, LATCHED)
         self.image = load(values["image"], values["pattern"])
         self.add_on_set_parameters_callback(self._on_set)
@@ -83,7 +89,7 @@ class ProjectorNode(Node):
 def main(args=None) -> int:
     if wants_help(args):
         about = "Publishes the background image projected onto the arena (latched)."
-        print(node_help("projector_node", about, PROJECTOR_PARAMETERS))
+        print(node_help("projector_node", about, parameters_help(*PROJECTOR_PARAMETERS)))
         return 0
     start_ros("projector_node", args, node_options=True)
     node = None

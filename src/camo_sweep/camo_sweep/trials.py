@@ -100,9 +100,8 @@ def simulate_options(
 
 def check_options(options: dict[str, Any]) -> None:
     """Raise the one-line error of options that cannot make a run (before any is run)."""
-    if options.get("layout"):
+    if params_from(namespace(options, 0)).layout:
         raise UsageError("sweeps run on the grid: --layout is for ./camo sim and run, for now")
-    params_from(namespace(options, 0))
 
 
 def _threads_for(params: CamoParams) -> None:
@@ -185,7 +184,7 @@ def ros_row(trial: Trial, reference: Reference, timeout: float) -> dict[str, Any
         options = dict(trial.options)
         if reference.image:  # where the sweep runs; the same path on this worker's machine
             options["image"] = reference.image
-        command = [sys.executable, "-m", "camo_nodes.launcher", *sim_args(options)]
+        command = [sys.executable, "-m", "camo_bringup.launcher", *sim_args(options)]
         command += ["--seed", str(trial.seed), "--out", out, "--run-id", f"sw{trial.trial_id}"]
         try:
             done = subprocess.run(

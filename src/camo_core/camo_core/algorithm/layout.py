@@ -145,10 +145,10 @@ def read_positions(path: Path) -> np.ndarray:
         raise LayoutError(
             f"layout {path}: {where}: want x,y (two numbers within +-{MAX_COORDINATE:g}) a line"
         )
-    lines = [row for _, row in lines]
-    if len(lines) > MAX_ROBOTS:
-        raise LayoutError(f"layout {path} has {len(lines)} robots, above {MAX_ROBOTS}")
-    positions = np.array([[float(x), float(y)] for x, y in lines])
+    rows = [row for _, row in lines]
+    if len(rows) > MAX_ROBOTS:
+        raise LayoutError(f"layout {path} has {len(rows)} robots, above {MAX_ROBOTS}")
+    positions = np.array([[float(x), float(y)] for x, y in rows])
     close = _closest_pair(positions)
     if close is not None and close < MIN_GAP:
         raise LayoutError(

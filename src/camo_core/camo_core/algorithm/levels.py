@@ -81,6 +81,7 @@ def palette(vector: Sequence[float], levels: int) -> tuple[tuple[int, ...], tupl
             score = score + sums[span][2]
         if score > best:
             best, chosen = score, cuts
+    assert chosen is not None  # every score is >= 0 > -1, so some cut set is chosen
     greys = []
     for lo, hi in _spans(chosen):
         n, total, _ = sums[lo, hi]
@@ -112,7 +113,7 @@ def palettes(vectors: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
         chosen = np.where(better, index, chosen)
         best = np.where(better, score, best)
     table = np.array(sets, dtype=np.int64).reshape(len(sets), levels - 1)
-    cuts = table[chosen]
+    chosen_cuts = table[chosen]
     greys = np.zeros((*shape, levels), dtype=np.int64)
     for index, cut_set in enumerate(sets):
         here = chosen == index
@@ -123,7 +124,7 @@ def palettes(vectors: np.ndarray, levels: int) -> tuple[np.ndarray, np.ndarray]:
             with np.errstate(divide="ignore", invalid="ignore"):
                 mean = np.where(n > 0, total / n, BIN_WIDTH * (lo + hi) / 2)
             greys[..., k] = np.where(here, _greys(mean), greys[..., k])
-    return BIN_WIDTH * cuts, greys
+    return BIN_WIDTH * chosen_cuts, greys
 
 
 def _grey(mean: float) -> int:

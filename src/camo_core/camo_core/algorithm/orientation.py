@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from functools import lru_cache
+from typing import overload
 
 import numpy as np
 
@@ -65,9 +66,10 @@ def _paths(di: int, dj: int) -> tuple[tuple[int, int], tuple[int, int]]:
         ahead, diagonal = (0, dj // 2), (di, dj // 2)
     else:
         ahead, diagonal = (di // 2, 0), (di // 2, dj)
-    return tuple(
+    first, second = (
         (_SLOT_AT[mid], _SLOT_AT[(di - mid[0], dj - mid[1])]) for mid in (ahead, diagonal)
     )
+    return first, second
 
 
 RELAY_PATHS = tuple(_paths(di, dj) for di, dj in KNIGHTS)
@@ -142,6 +144,10 @@ _DIRECTIONS = tuple(
 )
 
 
+@overload
+def choose(p: Sequence[float]) -> int: ...
+@overload
+def choose(p: np.ndarray) -> np.ndarray: ...
 def choose(p: Sequence[float] | np.ndarray) -> int | np.ndarray:
     """Pattern code(s) from averaged tensors (last axis Jxx, Jyy, Jxy): MOTTLED where the
     coherence sqrt((Jxx - Jyy)^2 + 4 Jxy^2) / (Jxx + Jyy) is below COHERENCE_MIN (or the trace

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
-from camo_core.exceptions import CamoError
+from camo_core.schema import ParameterError, check_fields, declared, param, to_dict
 
 PROFILES = ("paper", "droplet")
 # --orientation: the paper's two stripe directions (axes), or stripes at any angle (any).
@@ -36,76 +36,130 @@ AUTO = "auto"
 PAPER_DIAMETER = 7  # hops across the paper's 8x8 swarm, for which its step counts were chosen
 
 
-class ParameterError(CamoError):
-    """A parameter outside its allowed range; the message names it and the range."""
-
-
 @dataclass(frozen=True)
 class CamoParams:
-    """One run's parameters. Fields left as None take the profile's defaults."""
+    """One run's parameters, each declared once (camo_core.schema): the command-line options,
+    the robot nodes' ROS parameters, params.yaml, the run's setup and summary.json's parameter
+    fields all come from these fields. Those declared with a default of None take the profile's
+    (once made, every field holds its value)."""
 
-    profile: str = "paper"
-    rows: int = 8
-    cols: int = 8
-    threshold: float = 50.0
-    consensus_steps: int | None = None
-    formation_steps: int | None = None
-    w2_stripes: float | None = None
-    w2_mottled: float | None = None
-    seed: int = 0
-    rho_meas: float = 0.0
-    rho_comm: float = 0.0
+    rows: int = param(8, "robot rows", low=1, high=MAX_SIDE, unit="robots", summary=True)
+    cols: int = param(8, "robot columns", low=1, high=MAX_SIDE, unit="robots", summary=True)
+    profile: str = param("paper", "paper or droplet rules", choices=PROFILES, summary=True)
+    seed: int = param(0, "seed of every random draw", low=0, high=2**64 - 1, summary=True)
+    rho_meas: float = param(
+        0.0, "measurement error probability", low=0.0, high=1.0, summary=True, noise=True
+    )
+    rho_comm: float = param(
+        0.0, "message loss probability", low=0.0, high=1.0, summary=True, noise=True
+    )
+    threshold: float = param(
+        50.0,
+        "descriptor threshold T; auto: each robot's from the swarm's mean texture energy",
+        low=0.0,
+        high=1020.0,
+        keyword=AUTO,
+        metavar="T|auto",
+    )
     # --threshold auto: each robot's threshold from the swarm's texture energy
     # (docs/algorithm.md, "Threshold auto"); `threshold` is then not used.
-    threshold_auto: bool = False
+    threshold_auto: bool = param(False, "the threshold is auto (--threshold auto)", cli=False)
     # --orientation any: a structure tensor instead of the vote, stripes at multiples of 15
     # degrees (docs/algorithm.md, "Orientation any").
-    orientation: str = "axes"
+    orientation: str = param(
+        "axes",
+        "axes: the paper's horizontal and vertical stripes; any: stripes at any multiple of 15 "
+        "degrees",
+        choices=ORIENTATIONS,
+    )
     # --levels K: K greys of the swarm's choosing instead of black and white (0: the paper's);
     # docs/algorithm.md, "Levels".
-    levels: int = 0
+    levels: int = param(
+        0,
+        "show K greys (2 to 8) the swarm chooses from its averaged histogram, instead of black "
+        "and white",
+        low=2,
+        high=MAX_LEVELS,
+        off=0,
+        metavar="K",
+        none_means="0, the paper's two",
+    )
     # --layout: "" (the grid), "hex", "jitter:A", or "file" with the robots' x, y in
     # `positions` (spacings, y down, one pair per robot id); docs/algorithm.md, "Layout".
-    layout: str = ""
-    positions: tuple[tuple[float, float], ...] = ()
+    layout: str = param(
+        "",
+        "robots at hexagonal positions, at grid positions jittered by up to A spacings, or at a "
+        "CSV file's x,y positions (spacings; a file's robots make one row); needs "
+        "--orientation any",
+        metavar="hex|jitter:A|FILE",
+        none_means="the grid",
+    )
+    positions: tuple[tuple[float, float], ...] = param(
+        (), "a file layout's x, y per robot", cli=False, ros=False
+    )
+    consensus_steps: int = param(
+        None,
+        "consensus steps; auto: the profile's, scaled with the square of the grid's diameter "
+        "over 8x8's",
+        low=0,
+        high=MAX_STEPS,
+        keyword=AUTO,
+        metavar="N|auto",
+        unit="steps",
+        none_means="35 paper, 10 droplet",
+    )
+    formation_steps: int = param(
+        None,
+        "formation steps",
+        low=0,
+        high=MAX_STEPS,
+        unit="steps",
+        none_means="10 paper, 20 droplet",
+    )
+    w2_stripes: float = param(
+        None,
+        "inhibitor weight W2 of the horizontal and vertical stripes kernels",
+        low=-100.0,
+        high=100.0,
+        none_means="the profile's",
+    )
+    w2_mottled: float = param(
+        None,
+        "inhibitor weight W2 of the mottled kernels",
+        low=-100.0,
+        high=100.0,
+        none_means="the profile's",
+    )
     w1: float = field(default=1.0, init=False)
 
     def __post_init__(self) -> None:
-        if self.profile not in PROFILES:
-            raise ParameterError(
-                f"profile must be one of {', '.join(PROFILES)} (got {self.profile!r})"
-            )
-        for name, value in PROFILE_DEFAULTS[self.profile].items():
-            if getattr(self, name) is None:
-                object.__setattr__(self, name, value)
-        if self.orientation not in ORIENTATIONS:
-            raise ParameterError(
-                f"orientation must be one of {', '.join(ORIENTATIONS)} (got {self.orientation!r})"
-            )
-        if self.levels != 0:
-            _int_in("levels", self.levels, 2, MAX_LEVELS)
-        _int_in("rows", self.rows, 1, MAX_SIDE)
-        _int_in("cols", self.cols, 1, MAX_SIDE)
-        _int_in("consensus_steps", self.consensus_steps, 0, MAX_STEPS)
-        _int_in("formation_steps", self.formation_steps, 0, MAX_STEPS)
-        _int_in("seed", self.seed, 0, 2**64 - 1)
-        _float_in("threshold", self.threshold, 0.0, 1020.0)
-        _float_in("rho_meas", self.rho_meas, 0.0, 1.0)
-        _float_in("rho_comm", self.rho_comm, 0.0, 1.0)
-        _float_in("w2_stripes", self.w2_stripes, -100.0, 100.0)
-        _float_in("w2_mottled", self.w2_mottled, -100.0, 100.0)
-        if not isinstance(self.threshold_auto, bool):
-            raise ParameterError(
-                f"threshold_auto must be true or false (got {self.threshold_auto!r})"
-            )
-        for name in ("threshold", "rho_meas", "rho_comm", "w2_stripes", "w2_mottled"):
-            object.__setattr__(self, name, float(getattr(self, name)))
+        if self.profile in PROFILES:
+            for name, value in PROFILE_DEFAULTS[self.profile].items():
+                if getattr(self, name) is None:
+                    object.__setattr__(self, name, value)
+        check_fields(self)
         self._check_layout()
+
+    @classmethod
+    def from_options(cls, **options: Any) -> CamoParams:
+        """The parameters from options as a command line or a node's ROS parameters give them:
+        `auto` for --threshold and --consensus-steps, a layout FILE for --layout (its positions
+        read, its robots one row), None for what is left to the defaults."""
+        options = {k: v for k, v in options.items() if v is not None}
+        if options.get("threshold") == AUTO:
+            options["threshold"], options["threshold_auto"] = THRESHOLD_DEFAULT, True
+        layout = options.get("layout") or ""
+        if layout and layout != "hex" and not layout.startswith("jitter:") and layout != "file":
+            from camo_core.algorithm.layout import file_positions  # a loader; layout imports us
+
+            positions = file_positions(layout)
+            options.update(rows=1, cols=len(positions), layout="file", positions=positions)
+        if options.get("consensus_steps") == AUTO:
+            options["consensus_steps"] = auto_steps_for(options)
+        return cls(**options)
 
     def _check_layout(self) -> None:
         layout = self.layout
-        if not isinstance(layout, str):
-            raise ParameterError(f"layout must be text (got {layout!r})")
         positions = tuple((float(x), float(y)) for x, y in self.positions)
         object.__setattr__(self, "positions", positions)  # hashable, from lists too
         if not layout:
@@ -146,9 +200,20 @@ class CamoParams:
         return replace(self, **changes)
 
     def as_dict(self) -> dict[str, Any]:
-        data = asdict(self)
-        data.pop("w1")
-        return data
+        return to_dict(self)
+
+
+THRESHOLD_DEFAULT = declared(CamoParams)["threshold"].default
+
+
+def auto_steps_for(options: dict[str, Any]) -> int:
+    """--consensus-steps auto for options: the grid's diameter, or a file layout's extent."""
+    rows, cols = options.get("rows", 8), options.get("cols", 8)
+    if options.get("positions"):  # a file's robots: their extent, not one long row
+        xy = [v for xy in options["positions"] for v in xy]
+        extent = max(max(xy[0::2]) - min(xy[0::2]), max(xy[1::2]) - min(xy[1::2]))
+        rows = cols = math.ceil(float(extent)) + 1
+    return auto_consensus_steps(options.get("profile", "paper"), rows, cols)
 
 
 def auto_consensus_steps(profile: str, rows: int, cols: int) -> int:
@@ -167,14 +232,3 @@ def auto_consensus_steps(profile: str, rows: int, cols: int) -> int:
             f"{MAX_STEPS}: give the number of steps"
         )
     return steps
-
-
-def _int_in(name: str, value: Any, low: int, high: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        raise ParameterError(f"{name} must be an integer in {low}..{high} (got {value!r})")
-
-
-def _float_in(name: str, value: Any, low: float, high: float) -> None:
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-    if not ok or not math.isfinite(value) or not low <= value <= high:
-        raise ParameterError(f"{name} must be a number in [{low:g}, {high:g}] (got {value!r})")

@@ -42,10 +42,10 @@ def run_per_robot(
         robot.describe([None if n is None else robots[n].sensed for n in robot.neighbors])
     if params.threshold_auto:
         for step in range(params.consensus_steps):
-            sent = [(r.energy, r.degree) for r in robots]
+            energies = [(r.energy, r.degree) for r in robots]
             for robot in robots:
                 robot.average_energy(
-                    step, [None if n is None else sent[n] for n in robot.neighbors]
+                    step, [None if n is None else energies[n] for n in robot.neighbors]
                 )
     for robot in robots:
         robot.cast_vote()

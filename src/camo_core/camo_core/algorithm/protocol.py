@@ -187,90 +187,110 @@ class StepProtocol:
 
     def _step_once(self, now: float, ticking: bool) -> bool:
         """Take one step if it may be taken; False when the robot must wait."""
-        core, params = self.core, self.params
         if self.phase == DISCOVERY:
-            pending = self._waiting_for("hello", 0, self.listen["hello"], known_only=False)
-            if not self._ready(pending, self.discovery_timeout, now, ticking):
+            return self._discovery_step(now, ticking)
+        if self.phase == SENSING:
+            return self._sensing_step(now, ticking)
+        if self.phase == CONSENSUS:
+            return self._consensus_step(now, ticking)
+        if self.phase == FORMATION:
+            return self._formation_step(now, ticking)
+        if self.newer_background:  # done, and a new background is up
+            self._start_next_round(now)
+            return True
+        return False
+
+    def _discovery_step(self, now: float, ticking: bool) -> bool:
+        pending = self._waiting_for("hello", 0, self.listen["hello"], known_only=False)
+        if not self._ready(pending, self.discovery_timeout, now, ticking):
+            return False
+        hellos = self._take("hello", 0, self.listen["hello"])
+        self.core.discover([h is not None for h in hellos])
+        self._next(SENSING, 0, now)
+        return True
+
+    def _sensing_step(self, now: float, ticking: bool) -> bool:
+        """Sense, describe (with the neighbours' colours), average the energy (--threshold
+        auto), then vote: each a step of its own."""
+        core, params = self.core, self.params
+        if not self.background_up:
+            return False
+        if math.isnan(core.sensed):
+            reading = self.sensor.read()
+            if reading is None:  # not available yet: tried again on the next tick
+                self.hardware_wait = True
                 return False
-            core.discover([h is not None for h in self._take("hello", 0, self.listen["hello"])])
-            self._next(SENSING, 0, now)
-        elif self.phase == SENSING:
-            if not self.background_up:
-                return False
-            if math.isnan(core.sensed):
-                reading = self.sensor.read()
-                if reading is None:  # not available yet: tried again on the next tick
-                    self.hardware_wait = True
-                    return False
-                core.sense(reading.value, reading.real)
-                self._send("color", 0, core.sensed)
-                self.wait_started = now
-            if self.energy_step is None:
-                if not self._ready(
-                    self._waiting_for("color", 0, self.listen["color"]),
-                    self.step_timeout,
-                    now,
-                    ticking,
-                ):
-                    return False
-                core.describe(self._take("color", 0, self.listen["color"]))
-                self.energy_step = 0
-                if params.threshold_auto and params.consensus_steps:
-                    self._wait_anew(now)
-                    self._send_energy()
-                    return True
-            if params.threshold_auto and self.energy_step < params.consensus_steps:
-                step = self.energy_step
-                pending = self._waiting_for("energy", step, self.listen["energy"])
-                if not self._ready(pending, self.step_timeout, now, ticking):
-                    return False
-                core.average_energy(step, self._take("energy", step, self.listen["energy"]))
-                self.energy_step += 1
-                self._wait_anew(now)
-                if self.energy_step < params.consensus_steps:
-                    self._send_energy()
-                return True
-            core.cast_vote()
-            self.traces = Traces(p=list(core.pattern_p))
-            self._next(CONSENSUS, 0, now)
-            self._report(now, forced=True)
-            self._send_vote()
-        elif self.phase == CONSENSUS:
-            if self.step == params.consensus_steps:
-                core.finish_consensus()
-                self.traces.states = [core.state]
-                self._next(FORMATION, 0, now)
-                self._report(now, forced=True)
-                self._send("state", 0, core.state)
-                return True
-            pending = self._waiting_for("vote", self.step, self.listen["vote"])
+            core.sense(reading.value, reading.real)
+            self._send("color", 0, core.sensed)
+            self.wait_started = now
+        if self.energy_step is None:
+            pending = self._waiting_for("color", 0, self.listen["color"])
             if not self._ready(pending, self.step_timeout, now, ticking):
                 return False
-            core.consensus(self.step, self._take("vote", self.step, self.listen["vote"]))
-            self.traces.p.extend(core.pattern_p)
-            self._next(CONSENSUS, self.step + 1, now)
-            self._report(now)
-            if self.step < params.consensus_steps:
-                self._send_vote()
-        elif self.phase == FORMATION:
-            if self.step == params.formation_steps:
-                if not self.display.ready():  # a hardware robot is done once it shows its state
-                    self.hardware_wait = True
-                    return False
-                self._next(DONE, self.step, now)
-                self._report(now, forced=True)
+            core.describe(self._take("color", 0, self.listen["color"]))
+            self.energy_step = 0
+            if params.threshold_auto and params.consensus_steps:
+                self._wait_anew(now)
+                self._send_energy()
                 return True
-            if not self._formed(now, ticking):
-                return False
-            self.traces.states.append(core.state)
-            self._next(FORMATION, self.step + 1, now)
-            self._report(now)
-            if self.step < params.formation_steps:
-                self._send("state", self.step, core.state)
-        elif self.newer_background:  # done, and a new background is up
-            self._start_next_round(now)
-        else:
+        if params.threshold_auto and self.energy_step < params.consensus_steps:
+            return self._energy_step(now, ticking)
+        core.cast_vote()
+        self.traces = Traces(p=list(core.pattern_p))
+        self._next(CONSENSUS, 0, now)
+        self._report(now, forced=True)
+        self._send_vote()
+        return True
+
+    def _energy_step(self, now: float, ticking: bool) -> bool:
+        step = self.energy_step
+        assert step is not None
+        pending = self._waiting_for("energy", step, self.listen["energy"])
+        if not self._ready(pending, self.step_timeout, now, ticking):
             return False
+        self.core.average_energy(step, self._take("energy", step, self.listen["energy"]))
+        self.energy_step = step + 1
+        self._wait_anew(now)
+        if self.energy_step < self.params.consensus_steps:
+            self._send_energy()
+        return True
+
+    def _consensus_step(self, now: float, ticking: bool) -> bool:
+        core, params = self.core, self.params
+        if self.step == params.consensus_steps:
+            core.finish_consensus()
+            self.traces.states = [core.state]
+            self._next(FORMATION, 0, now)
+            self._report(now, forced=True)
+            self._send("state", 0, core.state)
+            return True
+        pending = self._waiting_for("vote", self.step, self.listen["vote"])
+        if not self._ready(pending, self.step_timeout, now, ticking):
+            return False
+        core.consensus(self.step, self._take("vote", self.step, self.listen["vote"]))
+        self.traces.p.extend(core.pattern_p)
+        self._next(CONSENSUS, self.step + 1, now)
+        self._report(now)
+        if self.step < params.consensus_steps:
+            self._send_vote()
+        return True
+
+    def _formation_step(self, now: float, ticking: bool) -> bool:
+        core, params = self.core, self.params
+        if self.step == params.formation_steps:
+            if not self.display.ready():  # a hardware robot is done once it shows its state
+                self.hardware_wait = True
+                return False
+            self._next(DONE, self.step, now)
+            self._report(now, forced=True)
+            return True
+        if not self._formed(now, ticking):
+            return False
+        self.traces.states.append(core.state)
+        self._next(FORMATION, self.step + 1, now)
+        self._report(now)
+        if self.step < params.formation_steps:
+            self._send("state", self.step, core.state)
         return True
 
     def _formed(self, now: float, ticking: bool) -> bool:
@@ -319,7 +339,7 @@ class StepProtocol:
         # a message handled before the tick after a stall would otherwise find the deadline gone.
         if not ticking or now - self.wait_started < timeout:
             return False
-        given_up = sorted(s for s in pending if not self.known_alive(self.core.neighbors[s]))
+        given_up = sorted(s for s in pending if not self.known_alive(self._neighbor(s)))
         if given_up:
             self.silent.update(given_up)
             pending.difference_update(given_up)
@@ -328,6 +348,12 @@ class StepProtocol:
                 f"step deadline passed; neighbours in slots {given_up} are silent"
             )
         return not pending
+
+    def _neighbor(self, slot: int) -> int:
+        """The robot in `slot`: one awaited or silent always has one (arrivals says so)."""
+        robot = self.core.neighbors[slot]
+        assert robot is not None
+        return robot
 
     def _take(self, kind: str, step: int, slots: int) -> list:
         return [self.inbox.pop((self.round, kind, step, s), None) for s in range(slots)]
@@ -360,6 +386,7 @@ class StepProtocol:
         self._out.send.append(Message(kind, self.core.id, self.round, step, value))
 
     def _send_energy(self) -> None:
+        assert self.energy_step is not None  # sent once describing has set it
         self._send("energy", self.energy_step, (self.core.energy, self.core.degree))
 
     def _send_vote(self) -> None:
@@ -389,7 +416,7 @@ class StepProtocol:
                 alive=self.sensor.ok() and self.display.ok(),
                 known_slots=core.known_mask,
                 deadlines=self.deadlines,
-                silent=tuple(sorted(core.neighbors[s] for s in self.silent)),
+                silent=tuple(sorted(self._neighbor(s) for s in self.silent)),
                 palette=core.palette,
                 **self.traces.unreported(),
             )

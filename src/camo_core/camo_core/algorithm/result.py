@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -12,14 +13,12 @@ from camo_core.algorithm.layout import layout_for
 from camo_core.algorithm.orientation import CODES, ORIENTED, angle_of, pattern_name
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.rules import MOTTLED, PATTERN_NAMES
+from camo_core.schema import values, with_role
 
+# What every summary.json holds: the run's parameters that describe it (declared with
+# summary=True), then what it computed.
 SUMMARY_KEYS = (
-    "rows",
-    "cols",
-    "profile",
-    "seed",
-    "rho_meas",
-    "rho_comm",
+    *with_role(CamoParams, "summary"),
     "pattern",
     "votes",
     "mean_p",
@@ -148,14 +147,13 @@ class RunResult:
         either way the written file holds the same values."""
         p = self.p if self.alive is None else self.p[self.alive]
         params = self.params
-        grid = np.ascontiguousarray if arrays and self.alive is None else np.ndarray.tolist
+        grid: Callable[[np.ndarray], Any]  # (a conditional expression of the two is untyped)
+        if arrays and self.alive is None:
+            grid = np.ascontiguousarray
+        else:
+            grid = np.ndarray.tolist
         summary = {
-            "rows": params.rows,
-            "cols": params.cols,
-            "profile": params.profile,
-            "seed": params.seed,
-            "rho_meas": params.rho_meas,
-            "rho_comm": params.rho_comm,
+            **values(params, "summary"),
             "pattern": self.majority_pattern,
             **({"orientation_deg": self.orientation_deg} if params.orientation_any else {}),
             "votes": self.selection_counts,

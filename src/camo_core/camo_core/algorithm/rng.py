@@ -9,6 +9,7 @@ vectorised ones use NumPy uint64, whose arithmetic wraps like the mask does.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 MASK = (1 << 64) - 1
 
@@ -69,7 +70,9 @@ def mix_array(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def uniform_array(seed: int, stream: int, a: int, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+def uniform_array(
+    seed: int, stream: int, a: int, b: npt.ArrayLike, c: npt.ArrayLike
+) -> np.ndarray:
     """`uniform` over broadcast arrays of b and c."""
     h = mix_array(np.asarray(b, dtype=np.uint64) ^ np.uint64(prefix(seed, stream, a)))
     return to_unit(mix_array(h ^ np.asarray(c, dtype=np.uint64)))

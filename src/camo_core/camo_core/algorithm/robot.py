@@ -36,7 +36,7 @@ class RobotCore:
     known: list[bool] = field(default_factory=lambda: [False] * NUM_SLOTS)
     sensed: float = float("nan")
     vote: int = rules.MOTTLED
-    p: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    p: tuple[float, ...] = (0.0, 0.0, 1.0)  # with --levels, the grey histogram follows
     pattern: int | None = None
     state: int = 0
     # The descriptor: scores, and texture energy (averaged with --threshold auto).
@@ -166,7 +166,7 @@ class RobotCore:
 
     # ---- phase 2: consensus -------------------------------------------------
 
-    def consensus(self, step: int, votes: Sequence[Vote | None]) -> tuple[float, float, float]:
+    def consensus(self, step: int, votes: Sequence[Vote | None]) -> tuple[float, ...]:
         """`votes[s]` for slots 0-7: (p, degree) delivered for `step`, or None."""
         received = self._filter(rng.STREAM_CONSENSUS, step, votes, range(self.near))
         self.p = rules.consensus_step(self.p, self.degree, received)
@@ -210,7 +210,7 @@ class RobotCore:
         if self.pattern is None:
             self.finish_consensus()
         received = self._filter(rng.STREAM_STATE, step, states, range(len(self.neighbors)))
-        knights = [None] * 8
+        knights: list[int | None] = [None] * 8
         if self.params.orientation_any and self.place is None:
             relayed = self._filter(rng.STREAM_RELAY, step, relays, CONSENSUS_SLOTS)
             knights = orientation.knight_states(relayed)
@@ -232,6 +232,7 @@ class RobotCore:
         return self.state
 
     def _form_layer(self, state: int, received: list, knights: list) -> int:
+        assert self.pattern is not None  # form() finishes consensus first
         if self.place is not None:
             if self._kernel is None:
                 self._kernel = layout_rules.kernel(self.pattern, self.place.offsets, self.params)

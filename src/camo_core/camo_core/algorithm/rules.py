@@ -7,6 +7,7 @@ reference simulator calls them for every cell. Missing messages are None.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import overload
 
 import numpy as np
 
@@ -137,6 +138,10 @@ def energy_step(energy: float, degree: int, received: Sequence[tuple[float, int]
     return consensus_step((energy, 0.0, 0.0), degree, as_p)[0]
 
 
+@overload
+def select_pattern(p: Sequence[float]) -> int: ...
+@overload
+def select_pattern(p: np.ndarray) -> np.ndarray: ...
 def select_pattern(p: Sequence[float] | np.ndarray) -> int | np.ndarray:
     """The strictly largest entry of p; any tie for the largest goes to mottled.
 
@@ -161,12 +166,12 @@ def initial_state(sensed: float) -> int:
 
 def fill_states(received: Sequence[int | None]) -> list[int]:
     """Mirror rules for missing slots 0-11; fills read only values that arrived."""
-    filled = []
+    filled: list[int] = []
     for slot in range(12):
         value = received[slot]
         if value is None:
             candidates = DIAGONAL_FALLBACKS.get(slot) or (OPPOSITE_CARDINAL[slot],)
-            value = next((received[c] for c in candidates if received[c] is not None), 0)
+            value = next((v for c in candidates if (v := received[c]) is not None), 0)
         filled.append(value)
     return filled
 

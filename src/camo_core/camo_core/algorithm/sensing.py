@@ -33,6 +33,7 @@ def load_image(path: str | Path) -> np.ndarray:
     if image.dtype != np.uint8:
         # 16-bit or float images: bring to 0..255 the way OpenCV's IMREAD_COLOR does.
         image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        assert image is not None  # read as it was a line above, now converted to 8 bits
     if image.ndim == 3 and image.shape[2] == 4:
         image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
     if image.ndim == 3 and image.shape[2] == 1:

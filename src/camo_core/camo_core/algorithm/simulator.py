@@ -138,6 +138,7 @@ def _vote(
     prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_COLOR, 0))
     paper = params.profile == "paper"
     kernels.descriptors_all(sensed, known_mask, prefix, params.rho_comm, paper, *scores, energy)
+    threshold: np.ndarray | float
     if params.threshold_auto:
         energy = _average_energy(params, energy, known_mask, degree)
         threshold = np.maximum(rules.MIN_THRESHOLD, rules.THRESHOLD_SHARE * energy)
@@ -146,6 +147,7 @@ def _vote(
     if params.orientation_any:
         tensor = np.empty(shape), np.empty(shape), np.empty(shape)
         kernels.tensors_all(sensed, known_mask, prefix, params.rho_comm, *tensor)
+        reg: np.ndarray | float
         if params.threshold_auto:
             scale = threshold / rules.MIN_THRESHOLD
             reg = orientation.REGULARISER * scale * scale  # orientation.regulariser's order

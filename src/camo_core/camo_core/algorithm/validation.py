@@ -105,43 +105,69 @@ def message_problem(message: Message, params: CamoParams) -> str | None:
         return "sender is not a robot of the grid"
     if message.round < 0:
         return "round out of range"
-    kind, value, step = message.kind, message.value, message.step
-    most = MAX_SLOTS if params.layout else 8  # neighbours a degree counts
-    if kind == "hello":
-        if step != 0 or tuple(value) != divmod(message.sender, params.cols):
-            return "hello from the wrong cell"
-    elif kind == "color":
-        if step != 0 or not _grey(value):
-            return "colour out of range"
-    elif kind == "energy":
-        energy, degree = value
-        if not params.threshold_auto:
-            return "an energy in a run without --threshold auto"
-        if not 0 <= step < params.consensus_steps:
-            return "step out of range"
-        if not (_finite(energy) and 0.0 <= energy <= MAX_ENERGY) or not 0 <= degree <= most:
-            return "energy out of range"
-    elif kind == "vote":
-        p, degree = value
-        if not 0 <= step < params.consensus_steps:
-            return "step out of range"
-        if not vote_vector(params)(p) or not 0 <= degree <= most:
-            return "vote out of range"
-    elif kind == "state":
-        if not 0 <= step < params.formation_steps:
-            return "step out of range"
-        if value not in states_of(params):
-            return "state out of range"
-    elif kind == "relay":
-        if not params.orientation_any or params.layout:
-            return "a relay in a run without --orientation any on the grid"
-        if not 0 <= step < params.formation_steps:
-            return "step out of range"
-        if len(value) != 8 or any(v is not None and v not in states_of(params) for v in value):
-            return "relay out of range"
-    else:
-        return "unknown kind"
+    check = _KIND_CHECKS.get(message.kind)
+    return "unknown kind" if check is None else check(message, params)
+
+
+def _degree_ok(degree, params: CamoParams) -> bool:
+    return 0 <= degree <= (MAX_SLOTS if params.layout else 8)  # neighbours a degree counts
+
+
+def _hello_problem(message: Message, params: CamoParams) -> str | None:
+    if message.step != 0 or tuple(message.value) != divmod(message.sender, params.cols):
+        return "hello from the wrong cell"
     return None
+
+
+def _color_problem(message: Message, params: CamoParams) -> str | None:
+    return "colour out of range" if message.step != 0 or not _grey(message.value) else None
+
+
+def _energy_problem(message: Message, params: CamoParams) -> str | None:
+    energy, degree = message.value
+    if not params.threshold_auto:
+        return "an energy in a run without --threshold auto"
+    if not 0 <= message.step < params.consensus_steps:
+        return "step out of range"
+    if not (_finite(energy) and 0.0 <= energy <= MAX_ENERGY) or not _degree_ok(degree, params):
+        return "energy out of range"
+    return None
+
+
+def _vote_problem(message: Message, params: CamoParams) -> str | None:
+    p, degree = message.value
+    if not 0 <= message.step < params.consensus_steps:
+        return "step out of range"
+    if not vote_vector(params)(p) or not _degree_ok(degree, params):
+        return "vote out of range"
+    return None
+
+
+def _state_problem(message: Message, params: CamoParams) -> str | None:
+    if not 0 <= message.step < params.formation_steps:
+        return "step out of range"
+    return "state out of range" if message.value not in states_of(params) else None
+
+
+def _relay_problem(message: Message, params: CamoParams) -> str | None:
+    if not params.orientation_any or params.layout:
+        return "a relay in a run without --orientation any on the grid"
+    if not 0 <= message.step < params.formation_steps:
+        return "step out of range"
+    value, states = message.value, states_of(params)
+    if len(value) != 8 or any(v is not None and v not in states for v in value):
+        return "relay out of range"
+    return None
+
+
+_KIND_CHECKS = {
+    "hello": _hello_problem,
+    "color": _color_problem,
+    "energy": _energy_problem,
+    "vote": _vote_problem,
+    "state": _state_problem,
+    "relay": _relay_problem,
+}
 
 
 def phase_problem(kind: str, phase: int) -> str | None:
@@ -160,6 +186,12 @@ def report_problem(status, params: CamoParams) -> str | None:
     limit = {CONSENSUS: params.consensus_steps, FORMATION: params.formation_steps}
     if not SENSING <= phase <= DONE or step < 0 or step > limit.get(phase, step):
         return "phase or step out of range"
+    return _status_values_problem(status, params)
+
+
+def _status_values_problem(status, params: CamoParams) -> str | None:
+    """What a status says of its robot (p, state, pattern, traces, palette), out of range."""
+    phase = status.phase
     check = tensor_vector if params.orientation_any else probability_vector
     states = states_of(params)
 

@@ -41,9 +41,9 @@ def sensed_overrides(texts: list[str], rows: int, cols: int) -> dict[tuple[int, 
     overrides = {}
     for text in texts:
         try:
-            cell, value = text.split("=")
+            cell, grey = text.split("=")
             row, col = (int(x) for x in cell.split(","))
-            value = float(value)
+            value = float(grey)
         except ValueError:
             raise UsageError(f"--sensed takes ROW,COL=VALUE (got {text!r})") from None
         if not (0 <= row < rows and 0 <= col < cols):
@@ -111,13 +111,6 @@ def add_sim_arguments(sim: Parser) -> Parser:
     """`./camo sim`'s options on `sim` (also the options a sweep's trials take)."""
     add_run_options(sim)
     add_contrast_option(sim)
-    for name, what in (("stripes", "horizontal and vertical stripes"), ("mottled", "mottled")):
-        sim.add_argument(
-            f"--w2-{name}",
-            type=float,
-            default=None,
-            help=f"inhibitor weight W2 of the {what} kernels (default: the profile's)",
-        )
     sim.add_argument(
         "--sensed",
         action="append",

@@ -15,7 +15,9 @@ and every run writes the options it ran with as one (`write_params_file`).
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, cast
 
 import yaml
 
@@ -167,12 +169,16 @@ def _option_value(action: argparse.Action, name: str, value, path: Path):
     for item in items:
         if isinstance(item, bool | list | dict) or item is None:
             raise wrong("a number or text")
-        if action.type is int and not isinstance(item, int):
+        kind = getattr(action.type, "kind", action.type)  # an option of a declared parameter
+        keyword = isinstance(item, str) and item == "auto"
+        if kind is int and not isinstance(item, int) and not keyword:
             raise wrong("an integer")
-        if action.type is float and not isinstance(item, int | float):
+        if kind is float and not isinstance(item, int | float) and not keyword:
             raise wrong("a number")
+        # argparse's stubs also allow a str (a type registered by name); ours are callables.
+        convert = cast("Callable[[Any], Any] | None", action.type)
         try:
-            item = action.type(item) if action.type else str(item)
+            item = convert(item) if convert else str(item)
         except (TypeError, ValueError, UsageError, argparse.ArgumentTypeError):
             raise wrong("a valid value") from None
         if action.choices is not None and item not in action.choices:

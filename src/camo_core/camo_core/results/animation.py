@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 import matplotlib
 
@@ -24,6 +25,9 @@ import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 from PIL import Image
+
+if TYPE_CHECKING:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from camo_core.algorithm import levels
 from camo_core.results.figures import PATTERN_COLORS, draw_discs, mark
@@ -155,7 +159,7 @@ def write_animation(
     fig.tight_layout(rect=(0, 0.16, 1, 0.95))
     # Everything that does not change is drawn once; each frame redraws only the right panel's
     # image, caption and marks over it (matplotlib's blitting), 10x quicker than whole figures.
-    canvas = fig.canvas
+    canvas = cast("FigureCanvasAgg", fig.canvas)  # matplotlib.use("Agg") above
     canvas.draw()
     still = canvas.copy_from_bbox(fig.bbox)
     images = []

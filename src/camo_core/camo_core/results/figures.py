@@ -126,11 +126,11 @@ def run_plot(
     if result.orientation_deg is not None:
         if result.positions is not None:
             low, high = result.positions.min(axis=0), result.positions.max(axis=0)
-            extent = (high[1] - low[1] + 1, high[0] - low[0] + 1, *((low + high) / 2)[::-1])
+            box = (high[1] - low[1] + 1, high[0] - low[0] + 1, *((low + high) / 2)[::-1])
         else:
             rows, cols = result.params.rows, result.params.cols
-            extent = (rows, cols, (rows - 1) / 2, (cols - 1) / 2)
-        _direction(axes[4], result.orientation_deg, *extent)
+            box = (rows, cols, (rows - 1) / 2, (cols - 1) / 2)
+        _direction(axes[4], result.orientation_deg, *box)
     all_marks = dict(marks or {})
     if result.alive is not None:
         all_marks["dead"] = ~result.alive

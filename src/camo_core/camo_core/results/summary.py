@@ -5,10 +5,12 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 
+orjson: ModuleType | None
 try:  # pinned in requirements.txt; without it (the Docker image) every summary goes through json
     import orjson
 except ImportError:
@@ -32,7 +34,7 @@ def write_summary(summary: dict, folder: Path) -> Path:
 
 def summary_bytes(summary: dict) -> bytes:
     """The text of summary.json, ASCII as json.dumps writes it."""
-    cells = summary.get("rows", 0) * summary.get("cols", 0)
+    cells = np.size(summary.get("sensed", ()))  # a grid, as NumPy array or nested lists
     if cells <= INDENTED_SUMMARY_CELLS or not all(isinstance(k, str) for k in summary):
         return (json.dumps(summary, indent=1, default=_plain) + "\n").encode("ascii")
     lines = [b" " + _dumps(key) + b": " + _dumps(value) for key, value in summary.items()]

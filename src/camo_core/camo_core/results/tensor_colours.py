@@ -26,8 +26,9 @@ def tensor_rgb(p: np.ndarray) -> np.ndarray:
 def direction_legend() -> list:
     """Legend patches for tensor_rgb's colours."""
     angles = (0, 45, 90, 135)
+    # matplotlib takes an RGB array as a colour, though its ColorType stub lists only tuples.
     patches = [
-        matplotlib.patches.Patch(color=tensor_rgb(np.array(tensor_at(a))), label=f"{a}°")
+        matplotlib.patches.Patch(color=tensor_rgb(np.array(tensor_at(a))), label=f"{a}°")  # type: ignore[arg-type]
         for a in angles
     ]
     return [*patches, matplotlib.patches.Patch(facecolor="white", edgecolor="grey",

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
+from camo_bringup.run_config import RunConfig
 from camo_core.algorithm.result import pattern_said
 from camo_core.algorithm.robot_io import CONSENSUS
-from camo_core.cli.options import contiguous
-from camo_nodes.launch_config import RunConfig
+from camo_core.algorithm.run_setup import contiguous
 from camo_nodes.monitor_node import MonitorNode
 
 

@@ -63,7 +63,7 @@ def one_run(index: int, args: argparse.Namespace, domain: int) -> dict:
     process (wait4 reports the most of the launcher and the processes it waited for)."""
     out = args.out / f"run_{index:03d}"
     out.mkdir(parents=True, exist_ok=True)
-    command = [sys.executable, "-m", "camo_nodes.launcher", "--rows", str(args.side)]
+    command = [sys.executable, "-m", "camo_bringup.launcher", "--rows", str(args.side)]
     command += ["--cols", str(args.side), "--procs", str(args.procs), "--seed", "1"]
     command += ["--consensus-steps", str(args.steps), "--domain-id", str(domain)]
     command += ["--out", str(out / "result")]

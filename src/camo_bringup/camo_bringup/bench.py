@@ -32,11 +32,13 @@ import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from camo_bringup.run_config import split_cells
 from camo_core.algorithm.grid import neighbor_ids
 from camo_core.algorithm.params import CamoParams
 from camo_msgs.msg import Vote, VoteArray
-from camo_nodes.launch_config import split_cells
-from camo_nodes.topics import LEAN_NODE, RunTopics, history_qos, start_ros, tile_name
+from camo_nodes.topics.names import RunTopics, tile_name
+from camo_nodes.topics.qos import history_qos
+from camo_nodes.topics.startup import LEAN_NODE, start_ros
 from camo_nodes.transport import edge_of, listener_qos
 
 BARE_RUN = "bench_bare"
@@ -132,7 +134,7 @@ def bare_exchange(side: int, steps: int, procs: int, domain: int, packed: bool =
         "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
     }
     launched = time.monotonic()
-    command = [sys.executable, "-m", "camo_nodes.bench", "--bare-worker", str(side), str(steps)]
+    command = [sys.executable, "-m", "camo_bringup.bench", "--bare-worker", str(side), str(steps)]
     workers = [
         subprocess.Popen(
             [*command, str(k), str(procs), str(int(packed))],
@@ -164,7 +166,7 @@ def swarm_run(
     length += list(extra)
     launched = time.monotonic()
     proc = subprocess.run(
-        [sys.executable, "-m", "camo_nodes.launcher", "--rows", str(side), "--cols", str(side)]
+        [sys.executable, "-m", "camo_bringup.launcher", "--rows", str(side), "--cols", str(side)]
         + ["--procs", str(procs), "--domain-id", str(domain), "--out", str(out), *length],
         capture_output=True,
         text=True,

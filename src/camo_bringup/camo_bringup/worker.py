@@ -11,7 +11,6 @@ left to remote workers (`./camo run --remote-cells FIRST-LAST`).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 
@@ -19,20 +18,14 @@ import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from camo_core.algorithm.params import CamoParams
-from camo_core.cli.options import Parser, add_network_options, network_env, parse_ranges
+from camo_core.algorithm.run_setup import RunSetup
+from camo_core.cli.options import Parser, parse_ranges
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
-from camo_nodes.joining import wait_for_setup
 from camo_nodes.robot_node import host_robots
-from camo_nodes.topics import (
-    LEAN_NODE,
-    RunTopics,
-    check_run_id,
-    run_ended,
-    start_ros,
-    wait_for_run,
-)
+from camo_nodes.topics.names import RunTopics, check_run_id
+from camo_nodes.topics.runs import run_ended, wait_for_run, wait_for_setup
+from camo_nodes.topics.startup import LEAN_NODE, add_network_options, network_env, start_ros
 
 
 def build_parser() -> Parser:
@@ -56,12 +49,12 @@ def build_parser() -> Parser:
     return parser
 
 
-def tiles_for(setup: dict, params: CamoParams, texts: list[str], launched: bool):
+def tiles_for(setup: RunSetup, texts: list[str], launched: bool):
     """The tiles to host; a worker started by hand may host only cells left to remote workers."""
-    tiles = parse_ranges(texts, params.count)
+    tiles = parse_ranges(texts, setup.params.count)
     if launched:
         return tiles
-    remote = [tuple(r) for r in setup.get("remote", [])]
+    remote = setup.remote
     for first, last in tiles:
         if not any(a <= first and last <= b for a, b in remote):
             left = ", ".join(f"{a}-{b}" for a, b in remote) or "none"
@@ -72,7 +65,7 @@ def tiles_for(setup: dict, params: CamoParams, texts: list[str], launched: bool)
     return tiles
 
 
-def join(node: Node, args, stop) -> tuple[RunTopics, dict]:
+def join(node: Node, args, stop) -> tuple[RunTopics, RunSetup]:
     def spin() -> None:
         rclpy.spin_once(node, timeout_sec=0.1)
 
@@ -101,19 +94,16 @@ def main(argv: list[str] | None = None) -> int:
     try:
         launched = args.setup is not None
         if launched:
-            setup = json.loads(args.setup)
-            topics = RunTopics(check_run_id(setup["run"]))
+            setup = RunSetup.from_json(args.setup)
+            topics = RunTopics(check_run_id(setup.run))
         else:
             finder = Node("worker_join", **LEAN_NODE)
             try:
                 topics, setup = join(finder, args, stop)
             finally:
                 finder.destroy_node()
-        params = CamoParams(**setup["params"])
-        tiles = tiles_for(setup, params, args.cells, launched)
-        host = host_robots(
-            params, topics, tiles, setup["step_timeout"], setup["discovery_timeout"], setup=setup
-        )
+        tiles = tiles_for(setup, args.cells, launched)
+        host = host_robots(setup.params, setup.protocol, topics, tiles, setup=setup)
         if not launched:
             cells = ", ".join(f"{a}-{b}" for a, b in tiles)
             print(f"camo worker: hosting robots {cells} of {topics.run}", file=sys.stderr)

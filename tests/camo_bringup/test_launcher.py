@@ -11,7 +11,10 @@ import time
 
 import pytest
 from support import (
+    COMPUTE,
+    PROCESS,
     ROOT,
+    SWARM,
     assert_like_sim,
     bag_tool,
     camo_run,
@@ -109,6 +112,7 @@ CASES = [
 ]
 
 
+@pytest.mark.slow(COMPUTE)
 @pytest.mark.parametrize("options, procs", CASES)
 def test_swarm_equals_reference_simulator(tmp_path, options, procs):
     swarm, sim = summaries(tmp_path, options, procs)
@@ -118,6 +122,7 @@ def test_swarm_equals_reference_simulator(tmp_path, options, procs):
     assert (tmp_path / "run" / "figure.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow(SWARM)
 def test_run_rejects_bad_options_in_one_line(tmp_path):
     out = camo_run("--procs", "0", "--out", str(tmp_path))
     assert (
@@ -127,6 +132,7 @@ def test_run_rejects_bad_options_in_one_line(tmp_path):
     )
 
 
+@pytest.mark.slow(SWARM)
 def test_switching_the_background_makes_the_same_swarm_camouflage_again(tmp_path):
     out = camo_run(
         "--pattern", "forest", "--then", "desert", "--procs", "2", "--out", str(tmp_path / "run")
@@ -146,6 +152,7 @@ def test_switching_the_background_makes_the_same_swarm_camouflage_again(tmp_path
     assert second["final"] == reference["final"] and second["mean_p"] == reference["mean_p"]
 
 
+@pytest.mark.slow(SWARM)
 def test_two_runs_on_different_domains_do_not_disturb_each_other(tmp_path):
     runs = []
     for _k, pattern in enumerate(("forest", "desert")):
@@ -154,7 +161,7 @@ def test_two_runs_on_different_domains_do_not_disturb_each_other(tmp_path):
                 [
                     sys.executable,
                     "-m",
-                    "camo_nodes.launcher",
+                    "camo_bringup.launcher",
                     "--pattern",
                     pattern,
                     "--procs",
@@ -179,13 +186,14 @@ def test_two_runs_on_different_domains_do_not_disturb_each_other(tmp_path):
         assert sum(summary["votes"].values()) == 64 and "dead" not in summary
 
 
+@pytest.mark.slow(SWARM)
 def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     out_dir = tmp_path / "run"
     proc = subprocess.Popen(
         [
             sys.executable,
             "-m",
-            "camo_nodes.launcher",
+            "camo_bringup.launcher",
             "--pattern",
             "forest",
             "--procs",
@@ -228,13 +236,14 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     assert "step deadlines passed" in rest
 
 
+@pytest.mark.slow(SWARM)
 def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
     out_dir = tmp_path / "run"
     proc = subprocess.Popen(
         [
             sys.executable,
             "-m",
-            "camo_nodes.launcher",
+            "camo_bringup.launcher",
             "--pattern",
             "forest",
             "--procs",
@@ -269,6 +278,7 @@ def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
     assert (out_dir / "figure.png").exists()
 
 
+@pytest.mark.slow(SWARM)
 def test_run_writes_timing(tmp_path):
     out = camo_run("--rows", "4", "--cols", "4", "--procs", "1", "--out", str(tmp_path))
     assert out.returncode == 0, out.stderr[-2000:]
@@ -278,7 +288,7 @@ def test_run_writes_timing(tmp_path):
 
 
 def test_without_a_projector_the_title_names_the_background_topic_not_the_default(tmp_path):
-    from camo_nodes.launch_config import build_parser, config_from
+    from camo_bringup.run_config import build_parser, config_from
 
     args = ["--no-projector", "--out", str(tmp_path / "a")]
     config = config_from(build_parser().parse_args(args))
@@ -287,12 +297,13 @@ def test_without_a_projector_the_title_names_the_background_topic_not_the_defaul
     assert config.labels == ["built-in forest"]
 
 
+@pytest.mark.slow(COMPUTE)
 def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one(tmp_path):
     import rclpy
     from std_msgs.msg import String
 
-    from camo_nodes.launch_config import build_parser, config_from
-    from camo_nodes.launcher import RunFailed, Session
+    from camo_bringup.run_config import build_parser, config_from
+    from camo_bringup.session import RunFailed, Session
 
     config = config_from(build_parser().parse_args(["--rows", "2", "--out", str(tmp_path)]))
     with ros_context() as context:
@@ -314,12 +325,13 @@ def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one
             session.close()
 
 
+@pytest.mark.slow(SWARM)
 def test_two_runs_in_one_domain_each_equal_the_simulator(tmp_path):
     domain_id = str(domain())
     runs = {}
     for pattern in ("forest", "desert"):
         runs[pattern] = subprocess.Popen(
-            [sys.executable, "-m", "camo_nodes.launcher", "--pattern", pattern, "--rows", "6"]
+            [sys.executable, "-m", "camo_bringup.launcher", "--pattern", pattern, "--rows", "6"]
             + ["--cols", "6", "--procs", "1", "--domain-id", domain_id]
             + ["--out", str(tmp_path / pattern)],
             cwd=ROOT,
@@ -348,10 +360,11 @@ def test_two_runs_in_one_domain_each_equal_the_simulator(tmp_path):
         assert ran["final"] == expected["final"] and ran["mean_p"] == expected["mean_p"], pattern
 
 
+@pytest.mark.slow(SWARM)
 def test_a_run_id_in_use_is_refused_in_one_line(tmp_path):
     domain_id = str(domain())
     first = subprocess.Popen(
-        [sys.executable, "-m", "camo_nodes.launcher", "--rows", "3", "--cols", "3"]
+        [sys.executable, "-m", "camo_bringup.launcher", "--rows", "3", "--cols", "3"]
         + ["--consensus-steps", "100000", "--run-id", "taken", "--domain-id", domain_id]
         + ["--procs", "1", "--out", str(tmp_path / "first")],
         cwd=ROOT,
@@ -362,7 +375,7 @@ def test_a_run_id_in_use_is_refused_in_one_line(tmp_path):
     try:
         wait_for_line(first, "consensus 9")
         second = subprocess.run(
-            [sys.executable, "-m", "camo_nodes.launcher", "--rows", "3", "--cols", "3"]
+            [sys.executable, "-m", "camo_bringup.launcher", "--rows", "3", "--cols", "3"]
             + ["--run-id", "taken", "--domain-id", domain_id, "--out", str(tmp_path / "second")],
             cwd=ROOT,
             capture_output=True,
@@ -378,6 +391,7 @@ def test_a_run_id_in_use_is_refused_in_one_line(tmp_path):
     assert not (tmp_path / "second" / "summary.json").exists()
 
 
+@pytest.mark.slow(SWARM)
 def test_remote_cells_whose_worker_never_comes_are_dead_and_named(tmp_path):
     out = camo_run(
         "--rows", "4", "--cols", "4", "--remote-cells", "12-15", "--discovery-timeout", "3",
@@ -389,9 +403,10 @@ def test_remote_cells_whose_worker_never_comes_are_dead_and_named(tmp_path):
     assert "remote cells 12-15 never joined" in out.stdout
 
 
+@pytest.mark.slow(PROCESS)
 def test_a_worker_with_no_run_to_join_says_so_in_one_line():
     out = subprocess.run(
-        [sys.executable, "-m", "camo_nodes.worker", "--cells", "0-3", "--wait", "2"],
+        [sys.executable, "-m", "camo_bringup.worker", "--cells", "0-3", "--wait", "2"],
         capture_output=True,
         text=True,
         timeout=60,
@@ -423,12 +438,13 @@ def running(pid: int) -> bool:
         return False
 
 
+@pytest.mark.slow(SWARM)
 def test_nothing_the_launcher_started_outlives_its_sigkill(tmp_path):
     """Workers, a robot of its own process, the projector and the recorder all exit within
     10 s of the launcher's SIGKILL, and the bag they leave is readable and named incomplete."""
     out_dir = tmp_path / "run"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "camo_nodes.launcher", "--pattern", "forest", "--procs", "2"]
+        [sys.executable, "-m", "camo_bringup.launcher", "--pattern", "forest", "--procs", "2"]
         + ["--own-process", "2,3", "--consensus-steps", "5000", "--domain-id", str(domain())]
         + ["--record", str(tmp_path / "bag"), "--out", str(out_dir)],
         cwd=ROOT,
@@ -451,13 +467,14 @@ def test_nothing_the_launcher_started_outlives_its_sigkill(tmp_path):
     assert "INCOMPLETE" in info.stdout
 
 
+@pytest.mark.slow(SWARM)
 def test_a_robot_stopped_for_seconds_is_waited_for_not_marked_dead(tmp_path):
     """SIGSTOP a robot's process for 5 s mid-consensus, then SIGCONT: its neighbours wait (their
     deadline is longer), nobody reports it silent, and the run equals the simulator."""
     options = ["--pattern", "forest", "--seed", "3", "--consensus-steps", "3000"]
     out_dir = tmp_path / "run"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "camo_nodes.launcher", *options, "--procs", "1"]
+        [sys.executable, "-m", "camo_bringup.launcher", *options, "--procs", "1"]
         + ["--own-process", "4,4", "--step-timeout", "20", "--domain-id", str(domain())]
         + ["--out", str(out_dir)],
         cwd=ROOT,
@@ -481,6 +498,7 @@ def test_a_robot_stopped_for_seconds_is_waited_for_not_marked_dead(tmp_path):
     assert ran["elapsed_s"] > 5.0  # the swarm did wait for it
 
 
+@pytest.mark.slow(SWARM)
 def test_a_runs_params_yaml_repeats_it_bit_for_bit(tmp_path):
     import yaml
 
@@ -515,6 +533,7 @@ def test_a_runs_params_yaml_repeats_it_bit_for_bit(tmp_path):
     assert rewritten["ros__parameters"] == written
 
 
+@pytest.mark.slow(PROCESS)
 def test_the_demo_writes_an_animation_of_the_swarm_at_work(tmp_path):
     from PIL import Image
 
@@ -536,15 +555,16 @@ def test_the_demo_writes_an_animation_of_the_swarm_at_work(tmp_path):
     assert len(frames) >= 10  # consensus and formation change over many steps
 
 
+@pytest.mark.slow(SWARM)
 def test_the_runs_own_recorder_is_waited_for_before_discovery_shows_it(tmp_path, capfd):
     """A loaded machine can take longer to show the recorder it started than a short round
     lasts: the robots must not stop before the recorder has said it holds their round."""
     import rclpy
     from std_msgs.msg import String
 
-    from camo_nodes.launch_config import build_parser, config_from
-    from camo_nodes.launcher import Session
-    from camo_nodes.topics import LATCHED
+    from camo_bringup.run_config import build_parser, config_from
+    from camo_bringup.session import Session
+    from camo_nodes.topics.qos import LATCHED
 
     class NothingFailed:
         def failed(self):
@@ -556,23 +576,23 @@ def test_the_runs_own_recorder_is_waited_for_before_discovery_shows_it(tmp_path,
         session = Session(config, stop=False, context=context)
         recorder = rclpy.create_node("recorder", context=context)
         try:
-            assert session.recorders_present()  # at once: no discovery to wait for
+            assert session.recorders.present()  # at once: no discovery to wait for
             start = time.monotonic()
-            session.recording_holds(0, NothingFailed(), limit=1.0)  # no recorder has spoken
+            session.recorders.hold(0, NothingFailed(), limit=1.0)  # no recorder has spoken
             assert time.monotonic() - start >= 1.0
             assert "1 recordings lack round 0" in capfd.readouterr().err
             report = {"recorder": "r", "result": False, "complete": [0], "lacking": [[]]}
             publisher = recorder.create_publisher(String, config.topics.recorded, LATCHED)
             publisher.publish(String(data=json.dumps(report)))
             session.executor.add_node(recorder)
-            session.recording_holds(0, NothingFailed(), limit=30.0)
+            session.recorders.hold(0, NothingFailed(), limit=30.0)
             assert "lack" not in capfd.readouterr().err
             # Once the run's own recorder is known, another's report does not stand for it.
-            session.own_recorder = "here:1"
-            session.recording_holds(0, NothingFailed(), limit=1.0)
+            session.recorders.own = "here:1"
+            session.recorders.hold(0, NothingFailed(), limit=1.0)
             assert "1 recordings lack round 0" in capfd.readouterr().err
             publisher.publish(String(data=json.dumps({**report, "recorder": "here:1"})))
-            session.recording_holds(0, NothingFailed(), limit=30.0)
+            session.recorders.hold(0, NothingFailed(), limit=30.0)
             assert "lack" not in capfd.readouterr().err
         finally:
             session.executor.remove_node(recorder)
@@ -581,14 +601,15 @@ def test_the_runs_own_recorder_is_waited_for_before_discovery_shows_it(tmp_path,
 
 
 def test_the_swarm_resolves_auto_before_its_robots_get_the_parameters(tmp_path):
-    from camo_nodes.launch_config import build_parser, config_from
+    from camo_bringup.run_config import build_parser, config_from
 
     args = ["--rows", "16", "--cols", "16", "--consensus-steps", "auto", "--out", str(tmp_path)]
     config = config_from(build_parser().parse_args(args))
     assert config.params.consensus_steps == 161
-    assert config.setup()["params"]["consensus_steps"] == 161  # what /swarm/params says
+    assert config.setup().to_dict()["params"]["consensus_steps"] == 161  # what /swarm/params says
 
 
+@pytest.mark.slow(SWARM)
 def test_the_swarm_with_threshold_auto_equals_the_simulator_and_its_bag_holds_the_energies(
     tmp_path,
 ):
@@ -617,6 +638,7 @@ def test_the_swarm_with_threshold_auto_equals_the_simulator_and_its_bag_holds_th
     assert_like_sim(tmp_path / "rendered", tmp_path / "sim")
 
 
+@pytest.mark.slow(SWARM)
 def test_the_swarm_with_orientation_any_threshold_auto_and_levels_equals_the_simulator(tmp_path):
     import cv2
     from rclpy.serialization import deserialize_message
@@ -660,6 +682,7 @@ def test_the_swarm_with_orientation_any_threshold_auto_and_levels_equals_the_sim
     assert f"published {len(arrays)} messages on {len(topics)} topics" in replay.stderr
 
 
+@pytest.mark.slow(SWARM)
 def test_the_swarm_on_a_hexagonal_layout_with_levels_equals_the_simulator(tmp_path):
     from support import bag_tool
 
@@ -680,8 +703,8 @@ def test_the_swarm_on_a_hexagonal_layout_with_levels_equals_the_simulator(tmp_pa
 def test_a_file_layout_reaches_robot_nodes_of_their_own_as_a_csv(tmp_path):
     from pathlib import Path
 
-    from camo_nodes.launch_config import build_parser, config_from
-    from camo_nodes.processes import robot_parameters
+    from camo_bringup.processes import robot_parameters
+    from camo_bringup.run_config import build_parser, config_from
 
     layout = tmp_path / "swarm.csv"
     layout.write_text("0,0\n1,0\n0.5,0.87\n1.5,0.87\n")

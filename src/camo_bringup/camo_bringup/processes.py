@@ -8,7 +8,6 @@ to stop (SIGTERM) when the launcher dies, however it dies.
 from __future__ import annotations
 
 import ctypes
-import json
 import os
 import signal
 import subprocess
@@ -16,8 +15,10 @@ import sys
 import time
 from collections.abc import Callable
 
-from camo_core.cli.options import contiguous
-from camo_nodes.launch_config import RunConfig, worker_groups
+from camo_bringup.run_config import RunConfig, worker_groups
+from camo_core.algorithm.run_setup import contiguous
+from camo_nodes.robot_node import RobotCell
+from camo_nodes.topics.parameters import JoinParams, ros_arguments
 
 PR_SET_PDEATHSIG = 1
 
@@ -44,7 +45,7 @@ def layout_parameter(config: RunConfig) -> str:
     run writes into its folder (the node reads it as --layout FILE would)."""
     params = config.params
     if params.layout != "file":
-        return params.layout or '""'
+        return params.layout
     path = config.folder / "layout.csv"
     if not path.exists():
         path.write_text("".join(f"{x!r},{y!r}\n" for x, y in params.positions))
@@ -52,33 +53,14 @@ def layout_parameter(config: RunConfig) -> str:
 
 
 def robot_parameters(config: RunConfig, robot: int) -> list[str]:
-    """A standalone robot's (or bridge's) ROS parameters, as -p options."""
-    params = config.params
-    row, col = divmod(robot, params.cols)
-    values = {
-        "rows": params.rows,
-        "cols": params.cols,
-        "row": row,
-        "col": col,
-        "profile": params.profile,
-        "seed": params.seed,
-        "rho_meas": float(params.rho_meas),
-        "rho_comm": float(params.rho_comm),
-        "threshold": float(params.threshold),
-        "threshold_auto": str(params.threshold_auto).lower(),
-        "orientation": params.orientation,
-        "levels": params.levels,
-        "layout": layout_parameter(config),
-        "consensus_steps": params.consensus_steps,
-        "formation_steps": params.formation_steps,
-        "step_timeout": float(config.step_timeout),
-        "discovery_timeout": float(config.discovery_timeout),
-        "run_id": config.topics.run,
-    }
+    """A standalone robot's (or bridge's) ROS parameters, as -p options: the run's, the
+    protocol's, its cell and its run."""
+    row, col = divmod(robot, config.params.cols)
     return [
-        x
-        for name, value in values.items()
-        for x in ("-p", f"{name}:={value!r}" if isinstance(value, float) else f"{name}:={value}")
+        *ros_arguments(config.params, layout=layout_parameter(config)),
+        *ros_arguments(config.protocol),
+        *ros_arguments(RobotCell(row, col)),
+        *ros_arguments(JoinParams(config.topics.run)),
     ]
 
 
@@ -141,9 +123,9 @@ class ProcessGroup:
         for cells in worker_groups(config):
             ranges = [f"--cells={a}-{b}" for a, b in contiguous(cells)]
             worker = self._start(
-                "camo_nodes.worker",
+                "camo_bringup.worker",
                 "--setup",
-                json.dumps(config.setup()),
+                config.setup().to_json(),
                 "--run-id",
                 config.topics.run,
                 *ranges,

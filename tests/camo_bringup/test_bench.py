@@ -4,18 +4,20 @@ import subprocess
 import sys
 
 import pytest
-from support import ROOT, domain
+from support import COMPUTE, ROOT, SWARM, domain
 
 
+@pytest.mark.slow(COMPUTE)
 def test_bare_exchange_crosses_processes_and_measures_set_up_rate_and_wall_time():
-    from camo_nodes.bench import bare_exchange
+    from camo_bringup.bench import bare_exchange
 
     bare = bare_exchange(4, 20, 2, domain())
     assert 0 < bare["setup_s"] < bare["wall_s"] and 0 < bare["steps_per_s"] < 100_000
 
 
+@pytest.mark.slow(COMPUTE)
 def test_the_packed_bare_exchange_crosses_processes_in_arrays():
-    from camo_nodes.bench import bare_exchange
+    from camo_bringup.bench import bare_exchange
 
     # It finishes only once each process has had every remote vote its robots need, unpacked
     # from the arrays.
@@ -24,11 +26,11 @@ def test_the_packed_bare_exchange_crosses_processes_in_arrays():
 
 
 def test_bench_runs_are_longer_on_small_grids_and_reject_absurd_step_counts():
-    from camo_nodes.bench import default_steps
+    from camo_bringup.bench import default_steps
 
     assert (default_steps(8), default_steps(16), default_steps(64)) == (1562, 390, 300)
     out = subprocess.run(
-        [sys.executable, "-m", "camo_nodes.bench", "--steps", "5"],
+        [sys.executable, "-m", "camo_bringup.bench", "--steps", "5"],
         cwd=ROOT,
         capture_output=True,
         text=True,
@@ -37,8 +39,9 @@ def test_bench_runs_are_longer_on_small_grids_and_reject_absurd_step_counts():
     assert out.returncode == 2 and "--steps must be in 20..100000" in out.stderr
 
 
+@pytest.mark.slow(SWARM)
 def test_the_cost_of_a_live_view_with_no_client_is_measured_against_plain_runs(tmp_path):
-    from camo_nodes.bench import added_cost
+    from camo_bringup.bench import added_cost
 
     row = added_cost(3, 1, domain(), tmp_path, 1, lambda folder: ["--foxglove", "0"])
     assert row["robots"] == "3x3" and row["plain_s"] > 0 and row["added_s"] > 0
@@ -49,7 +52,7 @@ def test_the_cost_of_a_live_view_with_no_client_is_measured_against_plain_runs(t
 def test_grid_sides_take_a_list_where_0_or_nothing_means_none():
     import argparse
 
-    from camo_nodes.bench import grid_sides
+    from camo_bringup.bench import grid_sides
 
     assert grid_sides("16,32") == [16, 32] and grid_sides("0") == grid_sides("") == []
     for bad in ("x", "300", "-8"):

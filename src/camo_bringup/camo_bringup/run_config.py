@@ -15,21 +15,24 @@ import numpy as np
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.run_setup import ProtocolParams, RunSetup, contiguous
 from camo_core.algorithm.sensing import Calibration, image_digest, load_image, sense_image
 from camo_core.cli.options import (
     Parser,
-    add_network_options,
+    add_options,
     add_run_options,
-    contiguous,
     image_from,
-    network_env,
-    new_folder_problem,
+    options_of,
     out_dir,
     params_from,
     parse_ranges,
 )
 from camo_core.exceptions import UsageError
-from camo_nodes.topics import RunTopics, check_run_id, new_run_id, use_camo_dds_settings
+from camo_core.results.folders import new_folder_problem
+from camo_nodes.topics.names import RunTopics, check_run_id, new_run_id
+from camo_nodes.topics.parameters import ros_arguments
+from camo_nodes.topics.startup import add_network_options, network_env, use_camo_dds_settings
+from camo_projector.projector_node import ProjectorParams
 
 
 def build_parser() -> Parser:
@@ -57,20 +60,7 @@ def build_parser() -> Parser:
         help="robots this run does not start: `./camo worker --cells FIRST-LAST` hosts them, "
         "on this machine or another (repeatable)",
     )
-    add(
-        "--step-timeout",
-        type=float,
-        default=30.0,
-        help="seconds a robot waits for a silent neighbour before moving on (default 30)",
-    )
-    add(
-        "--discovery-timeout",
-        type=float,
-        default=None,
-        help="seconds a robot waits for its neighbours' hellos (default 60 + 0.01 per robot; "
-        "with --remote-cells, time to start the remote workers; a robot that never starts "
-        "costs this once)",
-    )
+    add_options(parser, ProtocolParams)
     add(
         "--own-process",
         action="append",
@@ -128,8 +118,7 @@ def build_parser() -> Parser:
 class RunConfig:
     params: CamoParams
     procs: int
-    step_timeout: float
-    discovery_timeout: float
+    protocol: ProtocolParams
     image: np.ndarray  # the first background
     labels: list[str]  # every round's background: a built-in name or a file
     folder: Path
@@ -149,19 +138,18 @@ class RunConfig:
     def rounds(self) -> int:
         return len(self.labels)
 
-    def setup(self) -> dict:
+    def setup(self) -> RunSetup:
         """What /<run>/swarm/params says of the run: all a worker on another machine needs."""
-        return {
-            "run": self.topics.run,
-            "params": self.params.as_dict(),
-            "backgrounds": self.labels,
-            "step_timeout": self.step_timeout,
-            "discovery_timeout": self.discovery_timeout,
-            "remote": [list(r) for r in self.remote],
-            "tiles": [list(t) for t in self.tiles()],
-            "background_digests": self.digests,
-            "bridged": sorted(self.bridges),
-        }
+        return RunSetup(
+            run=self.topics.run,
+            params=self.params,
+            protocol=self.protocol,
+            backgrounds=tuple(self.labels),
+            remote=tuple(self.remote),
+            tiles=tuple(self.tiles()),
+            background_digests=tuple(self.digests),
+            bridged=tuple(sorted(self.bridges)),
+        )
 
     def tiles(self) -> list[tuple[int, int]]:
         """Every tile the run's own processes host: the workers' blocks, the lone robots."""
@@ -200,12 +188,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
     params = params_from(args)
     if not 1 <= args.procs <= 256:
         raise UsageError(f"--procs must be an integer in 1..256 (got {args.procs})")
-    discovery = args.discovery_timeout
-    if discovery is None:
-        discovery = 60.0 + 0.01 * params.count
-    for name, value in (("--step-timeout", args.step_timeout), ("--discovery-timeout", discovery)):
-        if not value > 0:
-            raise UsageError(f"{name} must be positive (got {value})")
+    protocol = ProtocolParams(**options_of(args, ProtocolParams)).for_swarm(params.count)
     alone = parse_cells(args.own_process, params)
     bridges = parse_bridges(args.bridge, params)
     remote = parse_ranges(args.remote_cells, params.count, "--remote-cells")
@@ -237,14 +220,13 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         # The background is whatever another projector publishes: say so, not the default's name.
         label = f"the background on {topics.background}"
     elif args.image:
-        projector = ["-p", f"image:={Path(args.image).resolve()}"]
+        projector = ros_arguments(ProjectorParams(image=str(Path(args.image).resolve())))
     else:
-        projector = ["-p", f"pattern:={args.pattern or args.default_pattern}"]
+        projector = ros_arguments(ProjectorParams(pattern=args.pattern or args.default_pattern))
     return RunConfig(
         params=params,
         procs=args.procs,
-        step_timeout=args.step_timeout,
-        discovery_timeout=discovery,
+        protocol=protocol,
         image=image,
         labels=[label, *args.then],
         folder=out_dir(args),

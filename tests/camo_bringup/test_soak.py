@@ -9,15 +9,17 @@ import subprocess
 import sys
 import time
 
-from support import ROOT
+import pytest
+from support import PROCESS, ROOT
 
+from camo_bringup.soak import camo_processes
 from camo_nodes.shm import remove_stale, stale_files
-from camo_nodes.soak import camo_processes
 
 
+@pytest.mark.slow(PROCESS)
 def test_consecutive_runs_leave_no_process_no_shared_memory_and_the_same_result(tmp_path):
     out = subprocess.run(
-        [sys.executable, "-m", "camo_nodes.soak", "--runs", "3", "--side", "3", "--json"]
+        [sys.executable, "-m", "camo_bringup.soak", "--runs", "3", "--side", "3", "--json"]
         + ["--steps", "100", "--out", str(tmp_path)],
         capture_output=True,
         text=True,

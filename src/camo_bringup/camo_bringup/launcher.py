@@ -1,0 +1,185 @@
+"""`./camo run`: the distributed swarm, launched from one command.
+
+Three steps: the command line becomes a checked RunConfig (`run_config.py`);
+the run's processes start (`processes.py`: the recorder with --record, the
+projector, a bridge per real Droplet, the workers hosting the robot nodes);
+then the rounds run here, in the launcher's session (`session.py`: the
+monitor, the run's parameters; `recording.py`: what the recorders hold):
+progress, background switches with --then, and each round's summary.json,
+figure.png and timing.json once every live robot has finished. Ctrl-C stops every process and still
+writes what the swarm had reported, bag included.
+"""
+
+from __future__ import annotations
+
+import faulthandler
+import json
+import os
+import socket
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from rclpy.signals import SignalHandlerOptions
+
+from camo_bringup.processes import ProcessGroup
+from camo_bringup.round_report import report_round, write_partial
+from camo_bringup.run_config import RunConfig, build_parser, config_from
+from camo_bringup.session import Interrupted, RunFailed, Session
+from camo_core.algorithm.run_setup import contiguous
+from camo_core.cli.params_file import write_params_file
+from camo_core.exceptions import EXIT_USAGE, CamoError
+from camo_core.shutdown import StopFlag
+from camo_nodes.monitor_node import MonitorNode
+
+
+def run_round(session: Session, index: int, group: ProcessGroup) -> float:
+    """Spin until every live robot has finished round `index`; when they had all voted."""
+    monitor = session.monitor
+    last_print = 0.0
+    all_voted = None
+    while not monitor.complete(index):
+        # Everything that arrives in 0.1 s, then the (numpy) checks below: they cost more than
+        # a status, and a burst of statuses must not wait behind them.
+        session.spin_for(0.1)
+        if all_voted is None and monitor.all_voted(index):
+            all_voted = time.monotonic()
+        if time.monotonic() - last_print > 1.0:
+            print(f"camo run: {monitor.progress_line(index)}", file=sys.stderr)
+            last_print = time.monotonic()
+        problem = group.failed()
+        if problem:
+            raise RunFailed(problem)
+        for robot in group.lost_cells():
+            monitor.lost[robot] = True
+    print(f"camo run: {monitor.progress_line(index)}", file=sys.stderr)
+    session.recorders.views_matched()
+    monitor.publish_views()  # the round's final scene, however short the round was
+    return all_voted or time.monotonic()
+
+
+def round_ran(config: RunConfig, monitor: MonitorNode, index: int, summary: dict) -> dict:
+    """What the result says of round `index`, as written in its summary: who finished, who
+    died (as [first, last] ranges), what was refused."""
+    record = monitor.record(index)
+    cols = config.params.cols
+    dead = [i * cols + j for i, j in summary.get("dead", [])]
+    return {
+        "finished": [list(r) for r in contiguous(np.flatnonzero(record.finished).tolist())],
+        "dead": [list(r) for r in contiguous(dead)],
+        "rejected_messages": summary["rejected_messages"],
+    }
+
+
+def start_processes(config: RunConfig, group: ProcessGroup, session: Session) -> None:
+    """The recorder (it starts with the swarm: the robots' topics keep their history for it),
+    the live view, then the swarm: projector, bridges and workers."""
+    if config.record:
+        recorder = group.start_recorder(str(config.record), config.topics.run)
+        session.recorders.own = f"{socket.gethostname()}:{recorder.pid}"  # as it names itself
+        print(f"camo run: recording every topic to {config.record}/", file=sys.stderr)
+    if config.foxglove is not None:
+        group.start_view(config.topics.run, config.foxglove)  # it says where it serves
+    print(f"camo run: {config.topics.run}: topics under /{config.topics.run}/", file=sys.stderr)
+    group.start_swarm(config)
+    (config.folder / "processes.json").write_text(
+        json.dumps({str(pid): cells for pid, cells in group.cells.items()})
+    )
+
+
+def run_rounds(
+    config: RunConfig, session: Session, group: ProcessGroup, launched: tuple, ran: list[dict]
+) -> None:
+    """Every round, one after another, each written once its live robots have finished (what
+    the result will say of it appended to `ran`). `launched`: (monotonic, wall) times."""
+    for index, label in enumerate(config.labels):
+        if index > 0:
+            if session.recorders.present():
+                session.recorders.hold(index - 1, group)
+            session.switch_background(label)
+        voted = run_round(session, index, group)
+        times = {"launched": launched[0], "voted": voted, "done": time.monotonic()}
+        times["launched_wall"] = launched[1]
+        if index == config.rounds - 1:
+            if session.recorders.present():
+                session.recorders.hold(index, group)
+            # The robots tear down while this process writes the results.
+            group.interrupt(keep=lambda proc: proc is group.recorder)
+        summary = report_round(config, session.monitor, index, times)
+        ran.append(round_ran(config, session.monitor, index, summary))
+
+
+def run(config: RunConfig) -> int:
+    launched = (time.monotonic(), time.time())
+    os.environ.update(config.env)
+    stop = StopFlag()
+    rclpy.init(
+        args=["--ros-args", "--log-level", "warn"], signal_handler_options=SignalHandlerOptions.NO
+    )
+    group = ProcessGroup(config.env)
+    try:
+        session = Session(config, stop)
+    except RunFailed as exc:
+        print(f"camo run: error: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return exc.code
+    code, ended = 0, "failed"
+    ran: list[dict] = []  # per round written: who finished, who died, refusals
+    try:
+        start_processes(config, group, session)
+        run_rounds(config, session, group, launched, ran)
+        ended = "finished"
+    except Interrupted:
+        print("camo run: interrupted; stopping the swarm and writing what it has", file=sys.stderr)
+        code, ended = 130, "interrupted"
+    except RunFailed as exc:
+        print(f"camo run: error: {exc}", file=sys.stderr)
+        code = exc.code
+    finally:
+        stuck = watchdog(config.folder)
+        group.stop(keep=lambda proc: proc is group.recorder)
+        if len(ran) < config.rounds and group.cells:
+            summary = write_partial(config, session.monitor, len(ran))
+            if summary is not None:
+                ran.append(round_ran(config, session.monitor, len(ran), summary))
+        session.recorders.publish_result({"run": config.topics.run, "ended": ended, "rounds": ran})
+        group.stop()  # the recorder last: it closes the bag on SIGINT
+        for module in group.killed:
+            print(f"camo run: warning: {module} did not stop within 5 s; killed", file=sys.stderr)
+        session.close()
+        rclpy.try_shutdown()
+        faulthandler.cancel_dump_traceback_later()
+        stuck.close()
+        Path(stuck.name).unlink()  # it ended in time: nothing to say
+    return code
+
+
+TEARDOWN_LIMIT = 60.0  # s; stopping, writing and the result take 25 s at most
+
+
+def watchdog(folder: Path):
+    """Bound the end of a run. Fast DDS can block a writer for good on the shared-memory port of
+    a process killed at the wrong moment (seen: publishing the result after the recorder was
+    SIGKILLed), holding the interpreter: only a thread outside Python can end the process then.
+    What the run wrote stays; the threads' stacks go to stuck.txt; exit code 1."""
+    stuck = open(folder / "stuck.txt", "w")  # kept open: the watchdog thread writes to it
+    faulthandler.dump_traceback_later(TEARDOWN_LIMIT, exit=True, file=stuck)
+    return stuck
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        config = config_from(args)
+        write_params_file(parser, args, config.folder)  # the run, repeatable with --params-file
+    except CamoError as exc:
+        print(f"camo: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    return run(config)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,143 @@
+"""The recorders of a run, as the launcher follows them: what each bag holds, so that the robots
+neither stop nor start a new round before every recorder has their messages, and the run's
+result (its last word) is in every bag before the launcher exits."""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from typing import TYPE_CHECKING
+
+from rclpy.duration import Duration
+from std_msgs.msg import String
+
+from camo_nodes.topics.qos import LATCHED, LATCHED_READER
+
+if TYPE_CHECKING:
+    from camo_bringup.processes import ProcessGroup
+    from camo_bringup.session import Session
+
+RECORDER_SETTLE = 1.0  # s after the parameters appear that a waiting recorder has joined
+
+
+def recorder_report(text: str) -> dict | None:
+    """A recorder's /<run>/swarm/recorded report, or None if it is not one."""
+    try:
+        report = json.loads(text)
+        valid = (
+            isinstance(report["recorder"], str)
+            and isinstance(report["result"], bool)
+            and all(isinstance(n, int) for n in report["complete"])
+        )
+    except (ValueError, KeyError, TypeError):
+        return None
+    return report if valid else None
+
+
+def holds(report: dict, round_index: int, finished: int) -> bool:
+    """Whether a recorder's bag holds a round of `finished` robots."""
+    complete = report.get("complete", [])
+    return len(complete) > round_index and complete[round_index] >= finished
+
+
+class Recorders:
+    """Every recorder of the run (ours, or one started by hand) reports what its bag holds on
+    /<run>/swarm/recorded; the run's result goes out on /<run>/swarm/result."""
+
+    def __init__(self, session: Session) -> None:
+        self.session = session
+        node, topics = session.node, session.topics
+        self.reports: dict[str, dict] = {}
+        self.own: str | None = None  # our recorder's report's "recorder", once started
+        node.create_subscription(String, topics.recorded, self._on_recorded, LATCHED_READER)
+        # Created now, written at the end: recorders subscribe to it while the run goes on.
+        self.result_pub = node.create_publisher(String, topics.result, LATCHED)
+
+    def _on_recorded(self, msg: String) -> None:
+        report = recorder_report(msg.data)
+        if report is not None:
+            self.reports[report["recorder"]] = report
+
+    def own_heard(self) -> bool:
+        """Whether our own recorder has reported (one started by hand may be seen first)."""
+        return self.own is None or self.own in self.reports
+
+    def count(self) -> int:
+        """The recorders the graph shows, and at least our own: on a loaded machine discovery
+        can show it later than a short round ends, and the robots must not stop before it has
+        their messages."""
+        own = 1 if self.session.config.record else 0
+        return max(own, self.session.node.count_publishers(self.session.topics.recorded))
+
+    def present(self) -> bool:
+        """Whether a recorder records the run. A recorder waiting for a run finds it within
+        about a discovery announcement period (fastdds.xml) of its parameters' appearing: a
+        run shorter than that gives it the time."""
+        if self.session.config.record:
+            return True
+        settle = RECORDER_SETTLE - (time.monotonic() - self.session.started)
+        if settle > 0:
+            self.session.spin_for(settle)
+        return self.count() > 0
+
+    def hold(self, round_index: int, group: ProcessGroup, limit: float = 60.0) -> None:
+        """Before the robots stop or start a new round: a robot's topics keep one round of
+        history for late subscribers, so every recorder must have taken this round in first."""
+        from camo_bringup.session import RunFailed
+
+        session = self.session
+        finished = int(session.monitor.record(round_index).finished.sum())
+
+        def short() -> list[dict]:
+            """The reports of recorders that do not hold the round yet."""
+            reports = list(self.reports.values())
+            if len(reports) < self.count() or not self.own_heard():
+                return [{}]  # a recorder not heard from yet
+            return [r for r in reports if not holds(r, round_index, finished)]
+
+        deadline = time.monotonic() + limit
+        while lacking := short():
+            problem = group.failed()
+            if problem:
+                raise RunFailed(problem)
+            if time.monotonic() > deadline:
+                kinds = [
+                    r["lacking"][round_index]
+                    for r in lacking
+                    if len(r.get("lacking", [])) > round_index
+                ]
+                print(
+                    f"camo run: {len(lacking)} recordings lack round {round_index} of some "
+                    f"robots after {limit:g} s (messages missing, by kind: "
+                    f"{kinds or 'statuses only'})",
+                    file=sys.stderr,
+                )
+                return
+            session.spin()
+
+    def views_matched(self, limit: float = 5.0) -> None:
+        """Before the round's final scene and diagnostics: every recorder subscribes to them
+        (it finds topics as they appear; a short round can end first), or `limit` passes."""
+        recorders = self.count()
+        monitor = self.session.monitor
+        views = (monitor.markers_pub, monitor.diagnostics_pub)
+        deadline = time.monotonic() + limit
+        while recorders and time.monotonic() < deadline:
+            if all(v.get_subscription_count() >= recorders for v in views):
+                return
+            self.session.spin()
+
+    def publish_result(self, result: dict, limit: float = 10.0) -> None:
+        """The run's last word, latched, and waited for: every recorder must hold it (a bag
+        without it is incomplete), and every other reader (a monitor elsewhere) ack it."""
+        self.result_pub.publish(String(data=json.dumps(result)))
+        deadline = time.monotonic() + limit
+        while time.monotonic() < deadline:
+            reports = list(self.reports.values())
+            present = self.count()
+            heard = len(reports) >= present and self.own_heard()
+            if not present or (heard and all(r["result"] for r in reports)):
+                break  # every recorder has it (one that stopped by itself had it)
+            self.session.executor.spin_once(timeout_sec=0.1)  # even after Ctrl-C: it is quick
+        self.result_pub.wait_for_all_acked(Duration(seconds=max(0.1, deadline - time.monotonic())))

@@ -1,0 +1,101 @@
+"""The launcher's own ROS side: its node (the run's parameters, the background switch), the
+monitor, one executor that spins them, and the waits a run needs."""
+
+from __future__ import annotations
+
+import time
+
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from camo_bringup.recording import Recorders
+from camo_bringup.run_config import RunConfig
+from camo_core.exceptions import CamoError
+from camo_core.shutdown import StopFlag
+from camo_nodes.monitor_node import MonitorNode
+from camo_nodes.topics.qos import LATCHED
+
+
+class RunFailed(CamoError):
+    """A process of the run failed, or a wait gave up: exit code 1 (2 when the process said its
+    input was bad)."""
+
+    def __init__(self, message: str, code: int = 1) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+class Interrupted(Exception):
+    """Ctrl-C or SIGTERM reached the launcher."""
+
+
+class Session:
+    """The launcher's nodes (the monitor, and a node that publishes the run's parameters and
+    switches backgrounds) in one executor, the recorders they hear from, and the waits."""
+
+    def __init__(self, config: RunConfig, stop: StopFlag, context=None) -> None:
+        self.config = config
+        self.stop = stop
+        topics = config.topics
+        self.topics = topics
+        self.node = Node("launcher", namespace=topics.swarm_namespace, context=context)
+        self.executor = EventsExecutor(context=context)
+        self.executor.add_node(self.node)
+        if config.named:
+            self.refuse_a_live_run()
+        setup = config.setup()
+        self.monitor = MonitorNode(config.params, topics, setup, context=context)
+        self.executor.add_node(self.monitor)
+        self.loader = self.node.create_publisher(String, topics.load, 10)
+        self.started = time.monotonic()
+        self.node.create_publisher(String, topics.params, LATCHED).publish(
+            String(data=setup.to_json())
+        )
+        self.recorders = Recorders(self)
+
+    def refuse_a_live_run(self, settle: float = 1.0) -> None:
+        """Two launchers of one run id would share its topics: the second refuses to start."""
+        deadline = time.monotonic() + settle  # discovery needs a moment to show a live run
+        while time.monotonic() < deadline:
+            if self.node.count_publishers(self.topics.params):
+                raise RunFailed(
+                    f"a run named {self.topics.run} is already running in this domain; "
+                    f"choose another --run-id (or leave it out for a new one)",
+                    2,
+                )
+            self.spin(0.05)
+
+    def spin(self, seconds: float = 0.1) -> None:
+        if self.stop:
+            raise Interrupted
+        self.executor.spin_once(timeout_sec=seconds)
+
+    def spin_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            self.spin(left)
+
+    def wait(self, done, what: str, limit: float) -> None:
+        deadline = time.monotonic() + limit
+        while not done():
+            if time.monotonic() > deadline:
+                raise RunFailed(f"{what} after {limit:g} s")
+            self.spin()
+
+    def switch_background(self, label: str, limit: float = 60.0) -> None:
+        """/camo/projector/load is volatile: it reaches only a projector matched when sent."""
+        self.wait(
+            lambda: self.loader.get_subscription_count() > 0,
+            f"no projector listens on {self.topics.load}",
+            limit,
+        )
+        self.loader.publish(String(data=label))
+
+    def close(self) -> None:
+        # Executor first, then nodes, then context: the EventsExecutor must let go of the
+        # nodes' handles before they are destroyed, or interpreter exit can crash.
+        self.executor.shutdown()
+        for node in (self.monitor, self.node):
+            self.executor.remove_node(node)
+            node.destroy_node()

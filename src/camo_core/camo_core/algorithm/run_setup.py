@@ -1,0 +1,178 @@
+"""What a distributed run is: its parameters, how long robots wait, and who hosts which robots.
+
+`ProtocolParams` are the step protocol's own parameters (declared once, as CamoParams' are);
+`RunSetup` is the whole description a launcher publishes on /<run>/swarm/params and hands its
+workers (`--setup`): checked once, when it is made or read, so that its users read fields,
+not keys of a dict.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any
+
+from camo_core.algorithm.params import CamoParams
+from camo_core.schema import ParameterError, check_fields, from_dict, param, to_dict
+
+Tile = tuple[int, int]  # first and last robot id, inclusive
+
+
+@dataclass(frozen=True)
+class ProtocolParams:
+    """How long a robot waits (docs/swarm.md, "The step protocol")."""
+
+    step_timeout: float = param(
+        30.0,
+        "seconds a robot waits for a silent neighbour before moving on",
+        low=0.0,
+        above=True,
+        unit="s",
+    )
+    discovery_timeout: float | None = param(
+        None,
+        "seconds a robot waits for its neighbours' hellos (with --remote-cells, time to start "
+        "the remote workers; a robot that never starts costs this once)",
+        low=0.0,
+        above=True,
+        unit="s",
+        none_means="60 + 0.01 per robot",
+    )
+
+    def __post_init__(self) -> None:
+        check_fields(self)
+
+    def for_swarm(self, robots: int) -> ProtocolParams:
+        """With the defaults that depend on the swarm's size filled in."""
+        if self.discovery_timeout is not None:
+            return self
+        return ProtocolParams(self.step_timeout, 60.0 + 0.01 * robots)
+
+
+class SetupError(ParameterError):
+    """A run's setup that is not one (malformed, or another run's)."""
+
+
+def _ranges(value: Any, name: str, count: int) -> tuple[Tile, ...]:
+    ok = isinstance(value, list | tuple) and all(
+        isinstance(r, list | tuple)
+        and len(r) == 2
+        and all(isinstance(x, int) and not isinstance(x, bool) for x in r)
+        and 0 <= r[0] <= r[1] < count
+        for r in value
+    )
+    if not ok:
+        raise SetupError(f"{name} must be [first, last] robot id ranges")
+    return tuple((int(a), int(b)) for a, b in value)
+
+
+def _texts(value: Any, name: str) -> tuple[str, ...]:
+    if not isinstance(value, list | tuple) or not all(isinstance(v, str) for v in value):
+        raise SetupError(f"{name} must be a list of text")
+    return tuple(value)
+
+
+@dataclass(frozen=True)
+class RunSetup:
+    """A run as its launcher publishes it: all a worker on another machine needs."""
+
+    run: str
+    params: CamoParams
+    protocol: ProtocolParams = field(default_factory=ProtocolParams)
+    backgrounds: tuple[str, ...] = ()  # every round's background: a built-in name or a file
+    remote: tuple[Tile, ...] = ()  # robots left to workers started by hand
+    tiles: tuple[Tile, ...] = ()  # the tiles the run's own processes host
+    background_digests: tuple[str, ...] = ()  # of the backgrounds its projector shows
+    bridged: tuple[int, ...] = ()  # robots that are real Droplets
+
+    def __post_init__(self) -> None:
+        count = self.params.count
+        object.__setattr__(self, "protocol", self.protocol.for_swarm(count))
+        object.__setattr__(self, "backgrounds", _texts(self.backgrounds, "backgrounds"))
+        object.__setattr__(self, "remote", _ranges(self.remote, "remote", count))
+        object.__setattr__(self, "tiles", _ranges(self.tiles, "tiles", count))
+        digests = _texts(self.background_digests, "background_digests")
+        object.__setattr__(self, "background_digests", digests)
+        bridged = self.bridged
+        if not isinstance(bridged, list | tuple) or not all(
+            isinstance(r, int) and not isinstance(r, bool) and 0 <= r < count for r in bridged
+        ):
+            raise SetupError("bridged must be a list of robot ids")
+        object.__setattr__(self, "bridged", tuple(bridged))
+
+    @property
+    def step_timeout(self) -> float:
+        return self.protocol.step_timeout
+
+    @property
+    def discovery_timeout(self) -> float:
+        return float(self.protocol.discovery_timeout)  # type: ignore[arg-type]  # for_swarm
+
+    def to_dict(self) -> dict[str, Any]:
+        """As JSON takes it: the protocol's parameters at the top level, as every camo wrote
+        them."""
+        return {
+            "run": self.run,
+            "params": to_dict(self.params),
+            "backgrounds": list(self.backgrounds),
+            **to_dict(self.protocol),
+            "remote": [list(r) for r in self.remote],
+            "tiles": [list(t) for t in self.tiles],
+            "background_digests": list(self.background_digests),
+            "bridged": list(self.bridged),
+        }
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict())
+
+    @classmethod
+    def from_dict(cls, data: Any) -> RunSetup:
+        """A setup from to_dict()'s form, checked (SetupError in one line)."""
+        if not isinstance(data, dict):
+            raise SetupError("a run's setup is a JSON object")
+        if not isinstance(data.get("run"), str):
+            raise SetupError("a run's setup names its run")
+        try:
+            params = from_dict(CamoParams, data.get("params"), "params")
+            protocol = from_dict(
+                ProtocolParams,
+                {k: data[k] for k in ("step_timeout", "discovery_timeout") if k in data},
+                "setup",
+            )
+            return cls(
+                run=data["run"],
+                params=params,
+                protocol=protocol,
+                backgrounds=data.get("backgrounds", ()),
+                remote=data.get("remote", ()),
+                tiles=data.get("tiles", ()),
+                background_digests=data.get("background_digests", ()),
+                bridged=data.get("bridged", ()),
+            )
+        except SetupError:
+            raise
+        except ParameterError as exc:
+            raise SetupError(str(exc)) from None
+
+    @classmethod
+    def from_json(cls, text: str | bytes, run: str | None = None) -> RunSetup:
+        """A setup from its JSON text; with `run`, only that run's (SetupError otherwise)."""
+        try:
+            data = json.loads(text)
+        except (ValueError, RecursionError):
+            raise SetupError("a run's setup is JSON") from None
+        setup = cls.from_dict(data)
+        if run is not None and setup.run != run:
+            raise SetupError(f"the setup of run {setup.run}, not of {run}")
+        return setup
+
+
+def contiguous(cells: list[int]) -> list[Tile]:
+    """Sorted robot ids as (first, last) runs of consecutive ids."""
+    runs: list[Tile] = []
+    for cell in sorted(cells):
+        if runs and cell == runs[-1][1] + 1:
+            runs[-1] = (runs[-1][0], cell)
+        else:
+            runs.append((cell, cell))
+    return runs

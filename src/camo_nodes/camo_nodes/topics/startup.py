@@ -1,0 +1,161 @@
+"""How a process of a run starts: rclpy with camo's DDS settings, its network and domain from
+the command line, and one-line errors for what rcl refuses.
+
+DDS reads its settings from the environment (ROS_DOMAIN_ID, ROS_AUTOMATIC_DISCOVERY_RANGE,
+ROS_DISCOVERY_SERVER, ROS_SUPER_CLIENT, FASTRTPS_DEFAULT_PROFILES_FILE): this module is the one
+place that sets them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+from pathlib import Path
+
+import rclpy
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.parameter import Parameter
+
+from camo_core.cli.options import Parser
+from camo_core.cli.params_file import check_ros_args
+from camo_core.exceptions import EXIT_USAGE, UsageError
+
+from ..shm import remove_stale
+
+FASTDDS_PROFILE = Path(__file__).parent.parent / "fastdds.xml"
+
+
+def use_camo_dds_settings(environ=os.environ) -> None:
+    """Before rclpy.init in a process of ours (and in the environment of the processes it
+    starts): camo's Fast DDS settings (fastdds.xml: quicker discovery, roomier readers), unless
+    the user has a profiles file of their own."""
+    environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(FASTDDS_PROFILE))
+
+
+def start_ros(
+    prog: str, args: list[str] | None = None, node_options: bool = False, **options
+) -> None:
+    """rclpy.init for a process of ours, with camo's DDS settings. With `node_options`, `args`
+    is a node's whole command line, whose domain and network options before --ros-args set
+    its environment first. Parameters files are checked before rcl reads them, and what rcl
+    refuses is said in one line (rcl's text without its source locations): `prog: error: ...`
+    and exit code 2, as for any bad command line."""
+    use_camo_dds_settings()
+    remove_stale()  # a port file a killed process left empty would hang this one (shm.py)
+    try:
+        if node_options:
+            args = node_command_line(prog, args)
+        check_ros_args(sys.argv if args is None else args)
+        try:
+            rclpy.init(args=args, **options)
+        except _rclpy.RCLError as exc:
+            text = re.sub(r", at /\S+:\d+", "", str(exc)).removeprefix(
+                "failed to initialize rcl: "
+            )
+            raise UsageError(f"ROS arguments refused: {' '.join(text.split())}") from None
+        except _rclpy.UnknownROSArgsError as exc:  # `--ros-args --help`, say: not an RCLError
+            unknown = " ".join(re.findall(r"'([^']*)'", str(exc))) or str(exc)  # "['--help']"
+            raise UsageError(f"unknown ROS arguments after --ros-args: {unknown}") from None
+    except UsageError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        raise SystemExit(EXIT_USAGE) from None
+
+
+# Nodes with no parameter, rosout or type-description services: no DDS entities of their own
+# (hosted robots, and short-lived helper nodes).
+LEAN_NODE = {
+    "start_parameter_services": False,
+    "enable_rosout": False,
+    "parameter_overrides": [Parameter("start_type_description_service", value=False)],
+}
+
+
+def wants_help(argv: list[str] | None) -> bool:
+    """-h or --help before any --ros-args: a ROS node's own arguments end there."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    if "--ros-args" in args:
+        args = args[: args.index("--ros-args")]
+    return "-h" in args or "--help" in args
+
+
+def node_help(prog: str, description: str, parameters: list[str]) -> str:
+    """The --help text of a node configured by ROS parameters (ros2 run's conventions);
+    `parameters`: a line each (topics.parameters.parameters_help)."""
+    lines = [
+        f"usage: {prog} [--domain-id D] [--network localhost|subnet] [--discovery-server "
+        "HOST:PORT] [--ros-args [-p NAME:=VALUE ...] [--params-file FILE] ...]",
+        "",
+    ]
+    lines.append(description)
+    if parameters:
+        lines += ["", "parameters (default):"]
+        lines += [f"  {line}" for line in parameters]
+    return "\n".join(lines)
+
+
+def node_command_line(prog: str, args: list[str] | None) -> list[str]:
+    """A ROS node's command line (argv, program first): the domain and network options before
+    --ros-args set its environment (UsageError if bad); what rclpy takes is returned."""
+    argv = list(sys.argv if args is None else args)
+    ours, ros = argv, []
+    if "--ros-args" in argv:
+        at = argv.index("--ros-args")
+        ours, ros = argv[:at], argv[at:]
+    parser = Parser(prog=prog)
+    add_network_options(parser)
+    options, unknown = parser.parse_known_args(ours[1:])
+    if unknown:
+        raise UsageError(
+            f"unrecognized arguments: {' '.join(unknown)} (parameters go after --ros-args: "
+            "-p NAME:=VALUE or --params-file FILE)"
+        )
+    os.environ.update(network_env(options, os.environ))
+    return [ours[0] if ours else prog, *ros]
+
+
+# ---- how a process finds the others: DDS discovery ----------------------------------------
+
+NETWORKS = ("localhost", "subnet")
+
+
+def add_network_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--network",
+        choices=NETWORKS,
+        default=None,
+        help="discovery range: localhost (this machine only, the default) or subnet "
+        "(multicast on the LAN: robots on several machines)",
+    )
+    parser.add_argument(
+        "--discovery-server",
+        metavar="HOST:PORT",
+        default=None,
+        help="use this Fast DDS discovery server (./camo discovery-server) instead of multicast",
+    )
+    parser.add_argument(
+        "--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited, else 0)"
+    )
+
+
+def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, str]:
+    """The environment a ROS process of ours runs in, from --network, --discovery-server and
+    --domain-id (raises UsageError)."""
+    env = dict(environ)
+    if args.domain_id is not None:
+        if not 0 <= args.domain_id <= 232:
+            raise UsageError(f"--domain-id must be in 0..232 (got {args.domain_id})")
+        env["ROS_DOMAIN_ID"] = str(args.domain_id)
+    if args.network is not None:
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = args.network.upper()
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    if args.discovery_server is not None:
+        host, _, port = args.discovery_server.rpartition(":")
+        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise UsageError(f"--discovery-server takes HOST:PORT (got {args.discovery_server!r})")
+        env["ROS_DISCOVERY_SERVER"] = args.discovery_server
+        # A server tells plain clients only of endpoints that match theirs; tools that list the
+        # graph (a recorder, a worker looking for its run) must see everything.
+        env["ROS_SUPER_CLIENT"] = "TRUE"
+    return env
