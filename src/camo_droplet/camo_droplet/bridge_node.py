@@ -224,8 +224,10 @@ def firmware_lacks(params: CamoParams) -> list[str]:
     for name, value in beyond.items():
         if value != getattr(paper, name):
             d = declared(CamoParams)[name]
+            # A switch is named alone; a value with its option's spelling.
+            named = name if isinstance(value, bool) else f"{name} {value}"
             said = f"{d.option} {value}" if d.spec.cli else f"--threshold {AUTO}"
-            lacks.append(f"{name} {value} ({said})")
+            lacks.append(f"{named} ({said})")
     return lacks
 
 

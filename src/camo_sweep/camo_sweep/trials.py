@@ -100,8 +100,10 @@ def simulate_options(
 
 def check_options(options: dict[str, Any]) -> None:
     """Raise the one-line error of options that cannot make a run (before any is run)."""
-    if params_from(namespace(options, 0)).layout:
+    # Before the parameters are checked together: a sweep's layout is refused for what it is.
+    if namespace(options, 0).layout:
         raise UsageError("sweeps run on the grid: --layout is for ./camo sim and run, for now")
+    params_from(namespace(options, 0))
 
 
 def _threads_for(params: CamoParams) -> None:

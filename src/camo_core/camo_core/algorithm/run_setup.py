@@ -130,8 +130,9 @@ class RunSetup:
         """A setup from to_dict()'s form, checked (SetupError in one line)."""
         if not isinstance(data, dict):
             raise SetupError("a run's setup is a JSON object")
-        if not isinstance(data.get("run"), str):
-            raise SetupError("a run's setup names its run")
+        # A setup without a run id is of a camo from before run ids: its run is the root one.
+        if not isinstance(data.get("run", ""), str):
+            raise SetupError("a run's setup names its run in text")
         try:
             params = from_dict(CamoParams, data.get("params"), "params")
             protocol = from_dict(
@@ -140,7 +141,7 @@ class RunSetup:
                 "setup",
             )
             return cls(
-                run=data["run"],
+                run=data.get("run", ""),
                 params=params,
                 protocol=protocol,
                 backgrounds=data.get("backgrounds", ()),
