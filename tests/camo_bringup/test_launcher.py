@@ -499,6 +499,39 @@ def test_a_robot_stopped_for_seconds_is_waited_for_not_marked_dead(tmp_path):
 
 
 @pytest.mark.slow(SWARM)
+def test_a_process_slower_than_the_step_timeout_is_waited_for_and_the_run_equals_the_simulator(
+    tmp_path,
+):
+    """One of two workers sleeps 1.5 s before every turn of its loop, with a step timeout of
+    1 s: every step its neighbours wait longer than the timeout. Its process beats all along,
+    so nobody is given up on, and the swarm computes what the simulator does."""
+    options = ["--pattern", "forest", "--seed", "4", "--consensus-steps", "6"]
+    options += ["--formation-steps", "4"]
+    env = dict(os.environ, CAMO_SLOW_CELLS="--cells=32-63", CAMO_SLOW_SECONDS="1.5")
+    env["PYTHONPATH"] = f"{ROOT / 'tests' / 'slow_process'}:{env.get('PYTHONPATH', '')}"
+    out_dir = tmp_path / "run"
+    ran = subprocess.run(
+        [sys.executable, "-m", "camo_bringup.launcher", *options, "--procs", "2"]
+        + ["--step-timeout", "1", "--domain-id", str(domain()), "--out", str(out_dir)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    assert ran.returncode == 0, ran.stderr[-2000:]
+    processes = json.loads((out_dir / "processes.json").read_text())
+    assert list(range(32, 64)) in processes.values()  # the slowed worker was there
+    assert "deadlines passed" not in ran.stderr and "dead" not in ran.stderr
+    timing = json.loads((out_dir / "timing.json").read_text())
+    assert timing["deadlines"] == 0
+    sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    summary = assert_like_sim(out_dir, tmp_path / "sim")
+    assert summary["elapsed_s"] > 5 * 1.5  # it was slow: turns of 1.5 s, each past the timeout
+
+
+@pytest.mark.slow(SWARM)
 def test_a_runs_params_yaml_repeats_it_bit_for_bit(tmp_path):
     import yaml
 

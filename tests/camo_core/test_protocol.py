@@ -143,11 +143,23 @@ def test_a_stall_of_the_robots_own_process_does_not_count_towards_a_deadline():
     # The process stalled for 10 s; a message is handled before the tick that follows.
     protocol.deliver(hello(2), 10.0)
     assert (protocol.phase, protocol.deadlines) == (DISCOVERY, 0)
-    protocol.tick(10.05)  # sees the stall and discounts it
+    protocol.stalled(9.95)  # the host saw its tick come late
+    protocol.tick(10.05)
     assert (protocol.phase, protocol.deadlines) == (DISCOVERY, 0)
     tick_until(protocol, 10.1, 12.2)  # now robot 1 really is late
     assert protocol.phase != DISCOVERY and protocol.deadlines == 1
     assert protocol.silent == {protocol.slot_of[1]}
+
+
+def test_a_robot_is_due_at_its_deadline_and_not_while_it_waits_for_a_background():
+    protocol = StepProtocol(CamoParams(rows=1, cols=2), 0, 0, FixedSensor(10.0), step_timeout=2.0)
+    assert protocol.due() == float("inf")  # not started
+    protocol.start(1.0)
+    assert protocol.due() == 1.0 + protocol.discovery_timeout
+    protocol.deliver(hello(1), 1.5)
+    assert protocol.due() == float("inf")  # sensing, with no background yet
+    protocol.background(2.0)
+    assert protocol.phase == SENSING and protocol.due() == 2.0 + 2.0  # its colour step
 
 
 def test_only_a_tick_lets_a_deadline_pass():

@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import socket
 import time
+from functools import partial
 
 import rclpy
 from rclpy.experimental import EventsExecutor
@@ -19,8 +20,10 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
+from camo_core.algorithm.liveness import HEARTBEAT_PERIOD
 from camo_core.algorithm.protocol import TICK
 from camo_core.algorithm.sensing import ImageError, Projection, image_digest
+from camo_core.algorithm.ticks import Ticks
 from camo_nodes.topics.images import ImageEncodingError, image_from_msg
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.topics.qos import LATCHED_READER
@@ -37,6 +40,10 @@ POLL_BUSY = 0.0002
 POLL_IDLE = 0.005
 IDLE = 0.05
 SPIN_EVERY = 0.02  # s between turns of the executor while messages keep coming
+# Robots started, or shown a new background, per turn of the loop; robots ticked per tick at
+# most: each costs tens of microseconds, and a turn stays short.
+BATCH = 256
+TICKS_PER_TURN = 2048
 
 
 def host_node(topics: RunTopics) -> Node:
@@ -47,8 +54,10 @@ def host_node(topics: RunTopics) -> Node:
 
 
 class Host:
-    """Robots are duck-typed: start(), tick(now), background(now), and a Node to spin when
-    `spin_robots` (robots with services of their own)."""
+    """Robots are duck-typed: start(), tick(now), background(now), their `protocol` (due(),
+    stalled()), and a Node to spin when `spin_robots` (robots with services of their own).
+    `hardware`: indices of robots with a real sensor or display (ticked every TICK while they
+    wait for it, and said offline in the heartbeat when it is)."""
 
     def __init__(
         self,
@@ -57,17 +66,29 @@ class Host:
         projection: Projection,
         robots: list,
         spin_robots: bool,
+        hardware: tuple[int, ...] = (),
     ) -> None:
         self.node = node
         self.transport = transport
         self.projection = projection
         self.robots = robots
+        self.hardware = hardware
+        self.ticks = Ticks([robot.protocol for robot in robots])
+        for index, robot in enumerate(robots):
+            robot.stepped = partial(self.ticks.add, index)
         self._stamps: set[tuple[int, int]] = set()
         self.spun = [node, *robots] if spin_robots else [node]
         self.backgrounds = BackgroundCheck(transport.setup)
-        transport.listen(Image, transport.topics.background, LATCHED_READER, self._on_background)
+        # Robots still to start, and to be told of a new background: a bounded number a turn.
+        self._to_start = 0 if robots else None
+        self._to_show: int | None = None
+        transport.listen(
+            Image, transport.topics.background, LATCHED_READER, self._on_background, 1
+        )
         node.create_timer(TICK, self._tick)
         node.create_timer(1.0, transport.announce_rejections)
+        if hardware:
+            node.create_timer(HEARTBEAT_PERIOD, self._hardware_state)
 
     def _on_background(self, data: bytes, gid: bytes) -> None:
         msg = deserialize_message(data, Image)
@@ -90,26 +111,58 @@ class Host:
         except ImageError as exc:
             self.node.get_logger().error(f"background not used: {exc}")
             return
+        self._to_show = 0  # every robot is told, a batch a turn (`_work`)
+
+    def _work(self) -> bool:
+        """A batch of robots started or shown the new background; whether any is left."""
         now = time.monotonic()
-        for robot in self.robots:
-            robot.background(now)
+        if self._to_start is not None:
+            first, self._to_start = self._to_start, self._to_start + BATCH
+            for index in range(first, min(self._to_start, len(self.robots))):
+                self.robots[index].start()
+            if self._to_start >= len(self.robots):
+                self._to_start = None
+            return True
+        if self._to_show is not None:
+            first, self._to_show = self._to_show, self._to_show + BATCH
+            for index in range(first, min(self._to_show, len(self.robots))):
+                self.robots[index].background(now)
+            if self._to_show >= len(self.robots):
+                self._to_show = None
+            return True
+        return False
 
     def _tick(self) -> None:
         now = time.monotonic()
-        for robot in self.robots:
-            robot.tick(now)
+        self.ticks.stall(now)
+        robots, ticks = self.robots, self.ticks
+        for index in (*ticks.due(now, TICKS_PER_TURN), *self.hardware):
+            robots[index].tick(now)
+            ticks.add(index, now)  # again: at its next deadline, or to ask again
+
+    def _hardware_state(self) -> None:
+        offline = frozenset(
+            self.robots[i].protocol.id for i in self.hardware if not self._hardware_ok(i)
+        )
+        if offline != self.transport.offline:
+            self.transport.set_offline(offline)
+
+    def _hardware_ok(self, index: int) -> bool:
+        protocol = self.robots[index].protocol
+        return protocol.sensor.ok() and protocol.display.ok()
 
     def _loop(self, executor, stop, until) -> None:
         transport = self.transport
         last_message = next_turn = time.monotonic()
         while not stop and rclpy.ok() and not (until and until()):
+            working = self._work()
             taken = transport.poll()
             now = time.monotonic()
             if now >= next_turn:  # the executor's turn (a turn costs more than a poll)
                 executor.spin_once(timeout_sec=0.0)
                 next_turn = now + SPIN_EVERY
             transport.flush()  # what the robots sent in this turn, an array per topic
-            if taken:
+            if taken or working or transport.busy:
                 last_message = now
             elif now - last_message < IDLE:
                 time.sleep(POLL_BUSY)  # the next message is near: a short sleep, then poll
@@ -124,9 +177,6 @@ class Host:
         try:
             for node in nodes:
                 executor.add_node(node)
-            transport.announce()
-            for robot in self.robots:
-                robot.start()
             # spin_once in a loop: EventsExecutor.spin() busy-waits and starves its timers here.
             self._loop(executor, stop, until)
         except KeyboardInterrupt:

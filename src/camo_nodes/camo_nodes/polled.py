@@ -16,28 +16,41 @@ from camo_nodes.rcl_take import Taker
 from camo_nodes.topics.startup import LEAN_NODE
 
 Handler = Callable[[bytes, bytes], None]
+# Messages taken from one topic per poll at most (unless its listen() says otherwise): a poll's
+# work is bounded, so that its caller's loop (stop flag, timers, heartbeats) turns however fast
+# messages come. What is left waits in the DDS reader for the next poll.
+TAKE_LIMIT = 64
 
 
 class PolledTopics:
     def __init__(self, name: str, namespace: str, context=None) -> None:
         self.node = Node(name, namespace=namespace, context=context, **LEAN_NODE)
-        self.takers: list[tuple[Taker, Handler]] = []
+        self.takers: list[tuple[Taker, Handler, int]] = []
         self._buffer: list[tuple[bytes, bytes]] = []
+        self.more = False  # the last poll left messages waiting
 
-    def listen(self, msg_type, topic: str, qos: QoSProfile, handle: Handler) -> None:
+    def listen(
+        self, msg_type, topic: str, qos: QoSProfile, handle: Handler, limit: int = TAKE_LIMIT
+    ) -> None:
+        """`limit`: messages taken per poll at most (an array of robot messages costs more than
+        a heartbeat)."""
         subscription = self.node.create_subscription(
             msg_type, topic, lambda m: None, qos, raw=True
         )
-        self.takers.append((Taker(subscription), handle))
+        self.takers.append((Taker(subscription), handle, limit))
 
     def poll(self) -> int:
-        """Hand every waiting message to its topic's handler; how many there were."""
+        """Hand each topic's waiting messages, up to its limit, to its handler; how many there
+        were (`more`: whether a topic may have more waiting)."""
         count = 0
         buffer = self._buffer
-        for taker, handle in self.takers:
-            if not taker.take_all(buffer):
+        self.more = False
+        for taker, handle, limit in self.takers:
+            taken = taker.take(buffer, limit)
+            if not taken:
                 continue
-            count += len(buffer)
+            self.more = self.more or taken == limit
+            count += taken
             for data, gid in buffer:
                 handle(data, gid)
             buffer.clear()
@@ -45,7 +58,7 @@ class PolledTopics:
 
     def close(self) -> None:
         """Before the context goes: taking from a destroyed subscription crashes."""
-        for taker, _ in self.takers:
+        for taker, _, _ in self.takers:
             taker.close()
         self.takers.clear()
         self.node.destroy_node()

@@ -122,14 +122,16 @@ class Taker:
         self._info_ref = ctypes.byref(self._info)
         self.closed = False
 
-    def take_all(self, out: list[tuple[bytes, bytes]]) -> int:
-        """Append (CDR bytes, publisher GID) of every waiting message to `out`; how many."""
+    def take(self, out: list[tuple[bytes, bytes]], limit: int) -> int:
+        """Append (CDR bytes, publisher GID) of at most `limit` waiting messages to `out`; how
+        many. Bounded: messages can arrive faster than they are taken, and a caller that took
+        "everything waiting" would never get back to its stop flag and timers."""
         if self.closed:
             return 0
         take, handle = _rcl.rcl_take_serialized_message, self._handle
         message, gid = self._message, self._info.publisher_gid.data
         count = 0
-        while True:
+        while count < limit:
             ret = take(handle, self._message_ref, self._info_ref, None)
             if ret != RCL_RET_OK:
                 if ret != RCL_RET_SUBSCRIPTION_TAKE_FAILED:
@@ -138,6 +140,7 @@ class Taker:
                 return count
             out.append((ctypes.string_at(message.buffer, message.buffer_length), bytes(gid)))
             count += 1
+        return count
 
     def close(self) -> None:
         """Before the subscription is destroyed: taking from a destroyed one crashes."""

@@ -67,6 +67,9 @@ class RobotNode(Node):
         self.protocol = protocol
         self.transport = transport
         self.clock = clock
+        # Its host's tick schedule, told when the robot stepped: a step can bring its deadline
+        # nearer (out of discovery, whose timeout is longer).
+        self.stepped: Callable[[float], None] = lambda now: None
         transport.add(core.id, list(protocol.listens_to()), self.deliver)
 
     def create_publisher(self, msg_type, topic, *args, **kwargs):
@@ -81,20 +84,23 @@ class RobotNode(Node):
     def start(self) -> None:
         """Say hello and begin. A process hosting many robots creates them all first, then starts
         them, so that no robot's deadline runs while its process is still creating nodes."""
-        self._emit(self.protocol.start(self.clock()))
+        now = self.clock()
+        self._emit(self.protocol.start(now), now)
 
     def deliver(self, message: Message) -> None:
-        self._emit(self.protocol.deliver(message, self.clock()))
+        now = self.clock()
+        self._emit(self.protocol.deliver(message, now), now)
 
     def tick(self, now: float) -> None:
-        self._emit(self.protocol.tick(now))
+        self._emit(self.protocol.tick(now), now)
 
     def background(self, now: float) -> None:
-        self._emit(self.protocol.background(now))
+        self._emit(self.protocol.background(now), now)
 
-    def _emit(self, out: Output) -> None:
+    def _emit(self, out: Output, now: float) -> None:
         if out is NOTHING:
             return
+        self.stepped(now)
         for warning in out.warnings:
             self.get_logger().warning(warning)
         for report in out.reports:
@@ -194,14 +200,16 @@ def host_robots(
     unless `sensors` names another (a Droplet's); `lean` robots have no services of their own.
     `setup`: the run's, as its launcher published it (which tiles and backgrounds it has)."""
     node = host_node(topics)
-    transport = Transport(node, params, topics, tiles, setup)
-    projection = Projection(params.rows, params.cols, params.profile, projected_on(params))
     protocol = protocol.for_swarm(params.count)
-    robots = []
+    transport = Transport(node, params, topics, tiles, setup, protocol.step_timeout)
+    projection = Projection(params.rows, params.cols, params.profile, projected_on(params))
+    robots, hardware = [], []
     for cell in sorted(transport.hosted):
         row, col = divmod(cell, params.cols)
         sensor = (sensors or {}).get(cell) or ProjectedSensor(projection, row, col)
         display = (displays or {}).get(cell)
+        if cell in (sensors or {}) or display is not None:
+            hardware.append(len(robots))
         steps = StepProtocol(
             params,
             row,
@@ -210,11 +218,11 @@ def host_robots(
             display,
             protocol.step_timeout,
             protocol.discovery_timeout,
-            transport.hosts,
+            transport.alive,
             max(REPORT_PERIOD, len(transport.hosted) / REPORTS_PER_PROCESS),
         )
         robots.append(RobotNode(steps, transport, **(LEAN_NODE if lean else {})))
-    return Host(node, transport, projection, robots, spin_robots=not lean)
+    return Host(node, transport, projection, robots, not lean, tuple(hardware))
 
 
 def main(args=None) -> int:

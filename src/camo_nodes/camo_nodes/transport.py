@@ -8,7 +8,7 @@ sender's id (`RunTopics.tile`). What a tile's robots send on one topic between
 two writes goes out as one DDS message, an array of them (`camo_msgs/VoteArray`,
 ...): a DDS write costs four times what packing one more robot message into it
 does (docs/swarm.md). Edge topics are written between generations of
-deliveries (`_pump`), core topics once per turn of the host's loop. A robot
+deliveries (`pump`), core topics once per turn of the host's loop. A robot
 hosted by the same process as its neighbour gets the message handed over in
 memory, as rclcpp's intra-process communication does. A process subscribes
 only to the edge topics of the tiles that hold its robots' neighbours, which it
@@ -21,12 +21,18 @@ The edge subscriptions (and the hosts', and the background's) are not spun by
 the executor: `poll()` takes their messages with their publisher's GID
 (`rcl_take.py`), so that a message is accepted only from its sender's host
 (`trust.py`), and only once it passes camo_core's checks (`validation.py`).
+Every take and every pump is bounded: a poll takes a few arrays per topic, a
+pump hands messages over for PUMP_BUDGET seconds, and the rest waits for the
+host loop's next turn, so that its timers, stop flag and heartbeats keep up
+whatever the load. The transport also judges its neighbours' processes by
+their heartbeats (`heartbeat.py`, `camo_core.algorithm.liveness`): `alive()`
+is what a robot asks before it gives up on a late neighbour.
 """
 
 from __future__ import annotations
 
 import time
-from collections import defaultdict
+from collections import defaultdict, deque
 from collections.abc import Callable, Iterable
 
 from rclpy.node import Node
@@ -34,6 +40,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 
 from camo_core.algorithm.layout import slot_ids
+from camo_core.algorithm.liveness import Liveness
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import PHASE_OF, Message, Report, kinds_of, messages_per_round
 from camo_core.algorithm.run_setup import RunSetup
@@ -43,6 +50,7 @@ from camo_msgs.msg import (
     ColorArray,
     Energy,
     EnergyArray,
+    Heartbeat,
     Hello,
     HelloArray,
     Host,
@@ -54,7 +62,9 @@ from camo_msgs.msg import (
     Vote,
     VoteArray,
 )
+from camo_nodes.heartbeat import HEARTBEAT_READER, HeartbeatThread
 from camo_nodes.polled import PolledTopics
+from camo_nodes.rcl_take import PREFIX
 from camo_nodes.topics.names import RunTopics, tile_name
 from camo_nodes.topics.qos import LATCHED, LATCHED_READER, history_qos
 from camo_nodes.trust import Hosts, Rejections
@@ -79,6 +89,11 @@ ARRAY_TYPES = {
 # Robot messages in one array at most: a process's pump can send several steps of thousands of
 # robots, and a DDS message past Fast DDS's shared-memory segment (512 KB) is slow.
 MAX_BATCH = 256
+# Arrays taken from one edge topic per poll at most (each up to MAX_BATCH robot messages).
+EDGE_TAKE = 4
+# Seconds a pump hands messages to robots per call at most: the rest is handed over on the
+# host loop's next turn, after its timers, heartbeat and stop flag have had theirs.
+PUMP_BUDGET = 0.02
 NOT_RECEIVED = Relay.NOT_RECEIVED
 Receiver = Callable[[Message], None]
 Tile = tuple[int, int]  # first and last robot id, inclusive
@@ -227,8 +242,10 @@ class Transport:
         topics: RunTopics,
         tiles: list[Tile],
         setup: RunSetup | None = None,
+        step_timeout: float = 30.0,
     ) -> None:
-        """`setup`: the run's parameters message, whose layout says which tiles may be hosted."""
+        """`setup`: the run's parameters message, whose layout says which tiles may be hosted;
+        `step_timeout`: a process silent that long is dead (`liveness.py`)."""
         self.node = node
         self.setup = setup
         self.params = params
@@ -251,12 +268,20 @@ class Transport:
         self.rejected = Rejections(node.get_logger())
         self.trusted = Hosts(params.count, self.rejected, setup)
         self._seen: dict[tuple[str, int, int, int], object] = {}  # each message taken, once
-        self._queue: list[tuple[Receiver, Message]] = []
-        self._pumping = False
+        self._queue: deque[tuple[Receiver, Message]] = deque()
+        self._generation = 0  # queued messages left of the generation being handed over
         self._announced_rejections = 0
         self.polled = PolledTopics(f"{node.get_name()}_edges", node.get_namespace())
         self.host_pub = node.create_publisher(Host, topics.hosts, LATCHED)
         self.listen(Host, topics.hosts, LATCHED_READER, self._on_host)
+        # Which processes are alive, by their heartbeats; this one's own beats from now on (its
+        # robot nodes are still to be created: a neighbour waits for them meanwhile).
+        self.liveness = Liveness(step_timeout, self.trusted.owner.get, time.monotonic)
+        self.offline: frozenset[int] = frozenset()  # hosted robots whose hardware is off
+        self.listen(Heartbeat, topics.heartbeat, HEARTBEAT_READER, self._on_heartbeat, 256)
+        self.announce()
+        self.heartbeat = HeartbeatThread(node, topics)
+        self.heartbeat.start()
 
     def _create_writers(self, first: int, last: int) -> None:
         robots = range(first, last + 1)
@@ -276,13 +301,28 @@ class Transport:
                 for robot in members:
                     self.batches[(robot, kind)] = batch
 
-    def listen(self, msg_type, topic: str, qos: QoSProfile, handle) -> None:
-        """Poll this topic: `handle(CDR bytes, publisher GID)` for each message."""
-        self.polled.listen(msg_type, topic, qos, handle)
+    def listen(self, msg_type, topic: str, qos: QoSProfile, handle, limit: int = 64) -> None:
+        """Poll this topic: `handle(CDR bytes, publisher GID)` for each message, `limit` a turn
+        at most."""
+        self.polled.listen(msg_type, topic, qos, handle, limit)
 
-    def hosts(self, robot: int) -> bool:
-        """A robot of this process: alive as long as the process is."""
-        return robot in self.hosted
+    def alive(self, robot: int) -> bool:
+        """Whether a robot is running: one of this process's, or one whose process beats (and
+        whose hardware is on). A robot is never given up on while this holds."""
+        if robot in self.hosted:
+            return robot not in self.offline
+        return self.liveness.robot_alive(robot)
+
+    def _on_heartbeat(self, data: bytes, gid: bytes) -> None:
+        msg = deserialize_message(data, Heartbeat)
+        offline = frozenset(int(r) for r in msg.offline[:1024])
+        if not self.liveness.heard(gid[:PREFIX], offline):
+            self.rejected.refuse("heartbeat of one process too many", gid, msg.name)
+
+    def set_offline(self, robots: frozenset[int]) -> None:
+        """This process's robots whose hardware is off: said in its heartbeats."""
+        self.offline = robots
+        self.heartbeat.offline = tuple(sorted(robots))
 
     def add(self, robot: int, listens_to: Iterable[tuple[int, str]], receive: Receiver) -> None:
         """A hosted robot, and what it hears from whom (`listens_to`: (sender, kind))."""
@@ -316,7 +356,8 @@ class Transport:
             name = tile_name(first, last)
             for kind in self.kinds:
                 topic = self.topics.tile(name, "edge", kind)
-                self.listen(ARRAY_TYPES[kind], topic, listener_qos(), self._robot_messages(kind))
+                handle = self._robot_messages(kind)
+                self.listen(ARRAY_TYPES[kind], topic, listener_qos(), handle, EDGE_TAKE)
 
     def _robot_messages(self, kind: str):
         cls = ARRAY_TYPES[kind]
@@ -354,8 +395,7 @@ class Transport:
             (self._unsent_edges if batch.edge else self._unsent).append(batch)
         if batch.add(message):
             batch.flush()
-        self._enqueue(message)
-        self._pump()
+        self._enqueue(message)  # handed over by the next pump: the host loop's
 
     def flush(self) -> None:
         """Publish what was sent since the last flush: one array per topic (the host's loop calls
@@ -378,34 +418,46 @@ class Transport:
     # ---- in -----------------------------------------------------------------------
 
     def poll(self) -> int:
-        """Take what came from other processes and hand it to the robots; how many messages."""
+        """Take what came from other processes (a bounded batch) and hand what is queued to the
+        robots (for PUMP_BUDGET at most); how many messages were taken."""
         taken = self.polled.poll()
-        self._pump()
+        self.pump()
         return taken
+
+    @property
+    def busy(self) -> bool:
+        """Work is left for the next turn: messages queued for robots or waiting in a reader."""
+        return bool(self._queue) or self.polled.more
 
     def _enqueue(self, message: Message) -> None:
         """For every hosted robot that listens to the message's sender, at the next pump."""
         for receive in self.receivers.get((message.sender, message.kind), ()):
             self._queue.append((receive, message))
 
-    def _pump(self) -> None:
+    def pump(self, budget: float = PUMP_BUDGET) -> None:
         """Hand queued messages to their robots, in generations: first what came in, then what
-        the robots sent on it, and so on. Not recursive: a robot that steps on a message sends
-        again. Between generations the edge topics are flushed, so that another process's robots
-        get what they wait for before this process goes on with robots they do not hear."""
-        if self._pumping:
-            return
-        self._pumping = True
-        try:
-            while self._queue:
-                generation, self._queue = self._queue, []
-                for receive, message in generation:
-                    receive(message)
+        the robots sent on it, and so on; for `budget` seconds at most (the rest stays queued,
+        in order). Between generations the edge topics are flushed, so that another process's
+        robots get what they wait for before this process goes on with robots they do not
+        hear."""
+        queue = self._queue
+        end = time.monotonic() + budget
+        handed = 0
+        while queue:
+            if not self._generation:
                 self._flush_edges()
-        finally:
-            self._pumping = False
+                self._generation = len(queue)
+            receive, message = queue.popleft()
+            self._generation -= 1
+            receive(message)
+            handed += 1
+            if not handed % 32 and time.monotonic() >= end:
+                break
+        self._flush_edges()
 
     def close(self) -> None:
-        """Before the node is destroyed: the takers use its subscriptions' handles."""
+        """Before the node is destroyed: the takers use its subscriptions' handles, the
+        heartbeat thread its publisher."""
+        self.heartbeat.close()
         self.flush()
         self.polled.close()

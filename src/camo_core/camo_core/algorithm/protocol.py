@@ -8,14 +8,19 @@ for every neighbour slot the phase needs, one of these holds:
 2. the simulated link will drop it (a deterministic draw, known in advance);
 3. the neighbour is *silent*: it let a deadline pass before and has not
    spoken since;
-4. the step's deadline passes; the neighbours still missing become silent,
-   so a dead robot costs one deadline, not one per step. A neighbour known to
-   be alive (hosted by the robot's own process, say) is never given up on: it
-   is waiting itself, for a robot further away.
+4. the step's deadline passes and the neighbour is not known to be alive
+   (`known_alive`: its process has stopped beating, see liveness.py); the
+   neighbours still missing become silent, so a dead robot costs one
+   deadline, not one per step. A neighbour known to be alive is never given
+   up on, however late: it is slow, or waiting itself for a robot further
+   away, and giving up on it would compute something else.
 
 The machine is driven from outside: `start`, `deliver`, `tick` and
 `background` are handed the current time (the clock is injected) and return an
-`Output`: the messages to send and the reports for monitors.
+`Output`: the messages to send and the reports for monitors. `due()` says when
+a tick could next change anything, so that a process with thousands of robots
+ticks only those (`Ticks`); `stalled()` discounts a stall of the robot's own
+process from its deadline.
 A transport (rclpy, or an in-memory bus in tests) moves the messages; a
 `Sensor` and a `Display` are the robot's hardware (a projected image and
 nothing, or a Droplet's colour sensor and LED).
@@ -49,8 +54,9 @@ from camo_core.algorithm.robot_io import (
     listen_slots,
 )
 
-TICK = 0.05  # s between the transport's calls to tick()
+TICK = 0.05  # s between the host's ticks
 STALL = 0.5  # s: a tick this late means the robot's own process stalled
+RECHECK = 0.25  # s between asks, past a deadline, whether the late neighbours are still alive
 
 
 class StepProtocol:
@@ -102,7 +108,6 @@ class StepProtocol:
         self.listen = listen_slots(params, self.core.near, len(self.core.neighbors))
         # --orientation any: the formation step whose states were taken and relayed, and them.
         self.relayed: tuple[int, list] | None = None
-        self.last_tick: float | None = None
         self._out = Output()
 
     @property
@@ -127,7 +132,6 @@ class StepProtocol:
         """Say hello and begin. Messages delivered before are kept for their steps."""
         self.started = True
         self.wait_started = now
-        self.last_tick = now
         self._send("hello", 0, (self.core.row, self.core.col))
         return self._advance(now)
 
@@ -158,15 +162,26 @@ class StepProtocol:
         self.background_up = True
         return self._advance(now) if self.started else self._flush()
 
+    def stalled(self, seconds: float) -> None:
+        """The robot's process could not listen for `seconds` (busy or descheduled): that time
+        is not the neighbours' fault, and their messages may still be queued. Its host calls
+        this before the tick that follows the stall."""
+        self.wait_started += seconds
+
+    def due(self) -> float:
+        """When a tick could next change anything (math.inf: only a message or a background
+        can): a deadline, or at once while the sensor or display is not ready."""
+        if not self.started or self.phase == DONE:
+            return math.inf
+        if self.hardware_wait:
+            return -math.inf
+        if self.phase == SENSING and not self.background_up:
+            return math.inf
+        timeout = self.discovery_timeout if self.phase == DISCOVERY else self.step_timeout
+        return self.wait_started + timeout
+
     def tick(self, now: float) -> Output:
-        """Called every TICK seconds: the only event that lets a deadline pass."""
-        if self.last_tick is not None:
-            stalled = now - self.last_tick - TICK
-            if stalled > STALL:
-                # This process could not listen (busy or descheduled): that time is not the
-                # neighbours' fault, and their messages may still be queued behind this tick.
-                self.wait_started += stalled
-        self.last_tick = now
+        """The only event that lets a deadline pass (its host ticks a robot when `due()`)."""
         if not self.started or not (self.hardware_wait or self._deadline_due(now)):
             return self._flush()  # nothing a tick could change: keep a big swarm's ticks cheap
         return self._advance(now, ticking=True)

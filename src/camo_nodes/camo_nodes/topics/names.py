@@ -98,6 +98,11 @@ class RunTopics:
         """camo_msgs/Host, latched: which robots each process hosts."""
         return f"/{self.run}/camo/hosts"
 
+    @property
+    def heartbeat(self) -> str:
+        """camo_msgs/Heartbeat: each process hosting robots is alive (docs/swarm.md)."""
+        return f"/{self.run}/swarm/heartbeat"
+
     def tile(self, tile: str, part: str, kind: str) -> str:
         """A tile's robot messages: part is "edge" or "core", kind hello, color, energy (with
         --threshold auto), vote or state."""
