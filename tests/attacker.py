@@ -26,15 +26,18 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
+from camo_core.algorithm.status_rows import StatusRows
 from camo_msgs.msg import (
     Color,
     ColorArray,
+    Heartbeat,
     Hello,
     HelloArray,
     Host,
     RobotStatus,
     State,
     StateArray,
+    StatusArray,
     Vote,
     VoteArray,
 )
@@ -45,7 +48,8 @@ TYPES = {
     "camo_msgs/msg/ColorArray": ColorArray,
     "camo_msgs/msg/VoteArray": VoteArray,
     "camo_msgs/msg/StateArray": StateArray,
-    "camo_msgs/msg/RobotStatus": RobotStatus,
+    "camo_msgs/msg/StatusArray": StatusArray,
+    "camo_msgs/msg/Heartbeat": Heartbeat,
     "camo_msgs/msg/Host": Host,
     "sensor_msgs/msg/Image": Image,
     "std_msgs/msg/String": String,
@@ -68,6 +72,11 @@ def forged(cls, k: int, count: int, cols: int):  # noqa: PLR0911 - one forgery a
         return Vote(sender_id=robot, phase=2, step=step, p=p, degree=(8, 99, 4)[bad])
     if cls is State:
         return State(sender_id=robot, phase=3, step=step % 10, state=(7, 1, 0)[bad])
+    if cls is StatusArray:
+        rows = [forged(RobotStatus, k * 3 + j, count, cols) for j in range(3)]
+        return StatusArray(name="impostor", **StatusRows.from_reports(rows).message_fields())
+    if cls is Heartbeat:
+        return Heartbeat(name="impostor", sequence=k, offline=list(range(count)))
     if cls is RobotStatus:
         return RobotStatus(
             sender_id=robot, row=robot // cols, col=robot % cols, phase=(2, 4, 4)[bad],
@@ -94,7 +103,8 @@ def main() -> int:
     )
     publishers: dict[str, tuple] = {}
     guessed = {f"/{run}/camo/hosts": Host, f"/{run}/camo/background": Image}
-    guessed |= {f"/{run}/swarm/status": RobotStatus, f"/{run}/swarm/params": String}
+    guessed |= {f"/{run}/swarm/status": StatusArray, f"/{run}/swarm/params": String}
+    guessed[f"/{run}/swarm/heartbeat"] = Heartbeat
     for tile in tiles:
         for part in ("edge", "core"):
             for kind, cls in zip(KINDS, ARRAYS, strict=True):

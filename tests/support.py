@@ -111,6 +111,9 @@ def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 120.0) -> 
     raise AssertionError(f"the process ended before a line with {text!r}:\n{''.join(seen[-30:])}")
 
 
+SCALAR_FIELDS = ("sender_id", "phase", "step", "round", "sensed", "pattern", "state", "alive")
+
+
 class StatusListener:
     """The robots' statuses (/swarm/status) heard in one ROS domain, in a context of the test's
     own."""
@@ -124,7 +127,7 @@ class StatusListener:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
 
-        from camo_msgs.msg import RobotStatus
+        from camo_msgs.msg import StatusArray
         from camo_nodes.topics.names import RunTopics
         from camo_nodes.topics.qos import LATCHED_READER
 
@@ -132,11 +135,26 @@ class StatusListener:
         rclpy.init(context=self.context, domain_id=self.domain_id)
         self.node = rclpy.create_node("status_listener", context=self.context)
         self.node.create_subscription(
-            RobotStatus, RunTopics(self.run).status, self.got.append, LATCHED_READER
+            StatusArray, RunTopics(self.run).status, self._take, LATCHED_READER
         )
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         return self
+
+    def _take(self, msg) -> None:
+        """Each row of a process's status array, as a report with RobotStatus's fields."""
+        from types import SimpleNamespace
+
+        from camo_core.algorithm.status_rows import StatusRows
+
+        rows = StatusRows.from_message(msg)
+        for k in range(len(rows)):
+            self.got.append(
+                SimpleNamespace(
+                    **{name: getattr(rows, name)[k].item() for name in SCALAR_FIELDS},
+                    p=rows.p[k].tolist(),
+                )
+            )
 
     def spin_until(self, done, timeout: float) -> None:
         """Take messages until done() holds or `timeout` seconds pass."""

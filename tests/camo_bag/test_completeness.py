@@ -5,6 +5,7 @@ ledger, by `bag info` and by `render`, which refuses it unless --partial and the
 import json
 import math
 
+import numpy as np
 import pytest
 from support import BAG_COLS, BAG_ROWS, BAG_RUN, SWARM, bag_tool
 
@@ -149,17 +150,24 @@ def test_a_bag_without_statuses_or_result_names_every_robot_and_writes_null_not_
     done_of = set(range(0, BAG_ROWS * BAG_COLS, 2))  # half the robots' statuses are gone
 
     def drop(topic, data):
-        if topic.endswith("/swarm/result"):
-            return True
-        if topic.endswith("/swarm/status"):
-            from rclpy.serialization import deserialize_message
+        return topic.endswith("/swarm/result")
 
-            from camo_msgs.msg import RobotStatus
+    def edit(topic, data):
+        """Status arrays without those robots' rows."""
+        if not topic.endswith("/swarm/status"):
+            return [data]
+        from rclpy.serialization import deserialize_message, serialize_message
 
-            return deserialize_message(data, RobotStatus).sender_id in done_of
-        return False
+        from camo_core.algorithm.status_rows import StatusRows
+        from camo_msgs.msg import StatusArray
 
-    copy_bag(bag, tmp_path / "cut", drop)
+        msg = deserialize_message(data, StatusArray)
+        rows = StatusRows.from_message(msg)
+        kept = rows.select(~np.isin(rows.sender_id, list(done_of)))
+        cut = StatusArray(header=msg.header, name=msg.name, **kept.message_fields())
+        return [serialize_message(cut)] if len(kept) else []
+
+    copy_bag(bag, tmp_path / "cut", drop, edit)
     gaps = examine(tmp_path / "cut").gaps()
     assert gaps[0].startswith("the run's result is not in the bag")
     count = BAG_ROWS * BAG_COLS

@@ -67,8 +67,10 @@ def test_mcap_ros2_decoder_reads_every_robot_message(recorded):
                     assert vote.sender_id in tile_range(channel.topic)  # a tile's robots only
                     assert abs(sum(vote.p) - 1.0) < 1e-9 and vote.phase == 2  # as Vote.msg says
                     votes.setdefault(vote.sender_id, []).append(vote.step)
-            elif channel.topic == f"/{BAG_RUN}/swarm/status" and msg.phase == 4:
-                final[(msg.row, msg.col)] = msg.state
+            elif channel.topic == f"/{BAG_RUN}/swarm/status":
+                for robot, phase, state in zip(msg.sender_id, msg.phase, msg.state, strict=True):
+                    if phase == 4:  # done: its final state
+                        final[divmod(robot, BAG_COLS)] = state
             publish_before_log &= message.publish_time <= message.log_time
     # Loss is drawn where a message is received, so every robot publishes every step's vote.
     assert sorted(votes) == list(range(BAG_ROWS * BAG_COLS))

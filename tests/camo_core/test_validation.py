@@ -115,3 +115,32 @@ def test_relays_and_tensors_pass_only_in_a_run_with_orientation_any():
             raw = orientation.raw_tensor(own, greys)
             p = orientation.normalised(*raw, orientation.REGULARISER)
             assert message_problem(Message("vote", 3, 0, 0, (p, 8)), oriented) is None
+
+
+def test_a_table_of_statuses_gets_each_rows_own_problem():
+    """A process's array is checked a column at a time: each row gets what it would alone, so a
+    bad row beside good ones refuses that row only."""
+    from types import SimpleNamespace
+
+    from camo_core.algorithm.status_rows import StatusRows
+    from camo_core.algorithm.validation import report_problem, rows_problems
+
+    params = CamoParams(rows=3, cols=3, consensus_steps=4, formation_steps=3, levels=4)
+    good = dict(phase=2, step=1, sensed=100.0, p=[0.2, 0.3, 0.5], state=1, pattern=0)
+    rows = [
+        dict(sender_id=0, **good),
+        dict(sender_id=9, **good),  # not of the grid
+        dict(sender_id=1, **{**good, "step": 5}),  # past the consensus steps
+        dict(sender_id=2, **{**good, "p": [0.9, 0.9, 0.9]}),
+        dict(sender_id=3, **good, p_trace=[0.2, 0.3, 0.5, 0.1, 0.1]),  # not 3 a step
+        dict(sender_id=4, **good, state_trace=[0, 9]),
+        dict(sender_id=5, **good, palette=[30, 20, 10, 0]),  # not darkest first
+        dict(sender_id=6, **good, silent=[1, 99]),
+        dict(sender_id=7, **good, p_trace=[0.2, 0.3, 0.5], palette=[0, 10, 20, 30], silent=[6]),
+    ]
+    reports = [SimpleNamespace(**r) for r in rows]
+    together = rows_problems(StatusRows.from_reports(reports), params)
+    alone = [report_problem(r, params) for r in reports]
+    assert together == alone
+    assert together[0] is None and together[-1] is None
+    assert all(problem is not None for problem in together[1:-1])

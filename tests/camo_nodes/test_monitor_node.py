@@ -84,15 +84,17 @@ def hosting_all(monitor, count: int) -> None:
 
 
 def status(**fields):
-    """A RobotStatus as polled: its CDR bytes and its writer's GID."""
+    """One robot's report in a process's StatusArray, as polled: its CDR bytes and its
+    writer's GID."""
+    from types import SimpleNamespace
+
     from rclpy.serialization import serialize_message
 
-    from camo_msgs.msg import RobotStatus
+    from camo_core.algorithm.status_rows import StatusRows
+    from camo_msgs.msg import StatusArray
 
-    robot = fields["sender_id"]
-    fields.setdefault("row", robot // 2)
-    fields.setdefault("col", robot % 2)
-    msg = RobotStatus(sensed=100.0, p=[1.0, 0.0, 0.0], **fields)
+    report = SimpleNamespace(**{"sensed": 100.0, "p": [1.0, 0.0, 0.0], **fields})
+    msg = StatusArray(name="w", **StatusRows.from_reports([report]).message_fields())
     return serialize_message(msg), HOST_GID
 
 

@@ -23,7 +23,8 @@ from camo_bag.ledger import ARRAY_KINDS, SINGLE_KINDS, Ledger
 from camo_bag.msgdefs import full_name, message_class, message_definition
 from camo_core.algorithm.protocol import DONE
 from camo_core.algorithm.run_setup import RunSetup, SetupError
-from camo_msgs.msg import RobotStatus
+from camo_core.algorithm.status_rows import rows_of_message
+from camo_msgs.msg import RobotStatus, StatusArray
 from camo_nodes.topics.names import PARAMS_SUFFIX
 from camo_nodes.topics.runs import result_from
 
@@ -72,6 +73,8 @@ def status_decoder(summary: BagSummary, topic: str):
     """Statuses decode with the installed RobotStatus when the bag's schema is its, else (a bag
     of an older camo) with the schema the bag holds; fields it lacks read as empty."""
     info = next((t for t in summary.topics if t.name == topic), None)
+    if info is not None and full_name(info.type) == "camo_msgs/msg/StatusArray":
+        return lambda data: deserialize_message(data, StatusArray)
     if info is None or info.definition == message_definition("camo_msgs/msg/RobotStatus"):
         return lambda data: deserialize_message(data, RobotStatus)
     from mcap_ros2.decoder import DecoderFactory
@@ -81,6 +84,14 @@ def status_decoder(summary: BagSummary, topic: str):
         return DecoderFactory().decoder_for("cdr", schema)
     except Exception as exc:  # noqa: BLE001 - a damaged schema: its parser raises anything
         raise damaged(summary.path, exc, f"holds an unreadable schema for {topic}") from None
+
+
+def done_reports(msg) -> list[tuple[int, int]]:
+    """(robot, round) of each report in a status message (a StatusArray, or a RobotStatus of
+    an older camo) that says its robot finished the round."""
+    rows = rows_of_message(msg)
+    done = rows.phase == DONE
+    return list(zip(rows.sender_id[done].tolist(), rows.round[done].tolist(), strict=True))
 
 
 def setup_in(data: bytes) -> RunSetup | None:
@@ -120,9 +131,8 @@ def examine(path: str | Path) -> Ledger:
                 for msg in deserialize_message(data, cls).messages:
                     ledger_message(ledger, kind, msg.sender_id, msg.round, msg.step)
             elif topic == status:
-                msg = decode_status(data)
-                if msg.phase == DONE:
-                    ledger.reported_done(msg.sender_id, msg.round)
+                for robot, index in done_reports(decode_status(data)):
+                    ledger.reported_done(robot, index)
             elif topic == background:
                 ledger.backgrounds += 1
             elif topic == params and ledger.params is None:

@@ -36,10 +36,10 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
 from camo_bag import msgdefs, qos_yaml
+from camo_bag.completeness import done_reports
 from camo_bag.container import BagWriter, TopicInfo
 from camo_bag.graph_topics import new_topics, taking_qos
 from camo_bag.ledger import ROBOT_KINDS, Ledger, robot_messages
-from camo_core.algorithm.protocol import DONE
 from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.results.folders import new_folder_problem
@@ -163,8 +163,8 @@ class RecorderNode(Node):
             else:
                 ledger.set_result(result)
         elif topic == self.run.status:
-            if msg.phase == DONE:
-                ledger.reported_done(msg.sender_id, msg.round)
+            for robot, index in done_reports(msg):
+                ledger.reported_done(robot, index)
         else:
             type_name = msgdefs.full_name(self.bag.topics[topic].type)
             kind = ROBOT_KINDS[type_name]

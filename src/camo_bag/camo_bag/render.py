@@ -20,6 +20,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
@@ -27,13 +28,13 @@ from camo_bag.completeness import examine, run_topics_of, setup_in, status_decod
 from camo_bag.container import DAMAGE, BagError, damaged, read_messages, read_summary
 from camo_bag.ledger import gaps_of_round
 from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.status_rows import rows_of_message
 from camo_core.cli.options import Parser, add_out_options, out_dir
 from camo_core.exceptions import CamoError
 from camo_core.results import figures
 from camo_core.results.animation import Snapshots, write_animation
 from camo_core.results.output import run_title, write_round
 from camo_core.results.record import Backgrounds, Rounds
-from camo_msgs.msg import RobotStatus
 from camo_nodes.topics.images import image_from_msg
 
 
@@ -56,7 +57,7 @@ def load_run(path: str | Path) -> RecordedRun:
     decode_status = status_decoder(summary, status_topic)
     setup = None
     images = Backgrounds()
-    pending: list[tuple[RobotStatus, int]] = []
+    pending: list[tuple[object, int]] = []
     try:
         for message in read_messages(path, [params_topic, status_topic, background_topic]):
             if message.topic == params_topic and setup is None:
@@ -80,9 +81,11 @@ def load_run(path: str | Path) -> RecordedRun:
     times: dict[int, list[int]] = {}
     try:
         for status, log_time in pending:
-            if status.sender_id < params.count:
-                rounds[status.round].add(status)
-                times.setdefault(status.round, []).append(log_time)
+            rows = rows_of_message(status)
+            rows = rows.select(rows.sender_id < params.count)
+            for index in np.unique(rows.round).tolist():
+                rounds[index].add_rows(rows.select(rows.round == index))
+                times.setdefault(index, []).append(log_time)
     except DAMAGE as exc:  # decoded with a damaged schema of the bag's own
         raise damaged(path, exc, "holds a status that does not read as one") from None
     if not rounds:

@@ -29,13 +29,14 @@ from rclpy.signals import SignalHandlerOptions
 from camo_core.algorithm.params import AUTO, CamoParams, ParameterError
 from camo_core.algorithm.protocol import CONSENSUS, NO_PATTERN, SENSING
 from camo_core.algorithm.sensing import Calibration
+from camo_core.algorithm.status_rows import StatusRows
 from camo_core.exceptions import CamoError
 from camo_core.schema import check_fields, declared, param
 from camo_core.shutdown import StopFlag
 from camo_droplet.firmware import FirmwareState
 from camo_droplet.link import DropletDisconnected, DropletError, DropletLink
 from camo_droplet.rig import DropletLed, DropletSensor, Reconnector, parse_rgb
-from camo_msgs.msg import Host, RobotStatus
+from camo_msgs.msg import Host, RobotStatus, StatusArray
 from camo_nodes.robot_node import (
     ROBOT_PARAMETERS,
     RobotSetup,
@@ -95,7 +96,7 @@ class DropletMonitorNode(Node):
             list(Path(transcript).read_text(errors="replace").splitlines()) if transcript else None
         )
         self.state: FirmwareState | None = None
-        self.status_pub = self.create_publisher(RobotStatus, topics.status, history_qos(10_000))
+        self.status_pub = self.create_publisher(StatusArray, topics.status, history_qos(10_000))
         # The monitor takes a cell's statuses from the process that announced hosting it.
         cell = row * params.cols + col
         self.create_publisher(Host, topics.hosts, LATCHED).publish(
@@ -155,9 +156,13 @@ class DropletMonitorNode(Node):
             alive=self.link.connected if self.link else True,
             known_slots=0,
         )
-        status.header.stamp = self.get_clock().now().to_msg()
-        status.header.frame_id = "camo"
-        self.status_pub.publish(status)
+        # A run's statuses go out as arrays, a process's reports in each: here, one report.
+        msg = StatusArray(
+            name=self.get_name(), **StatusRows.from_reports([status]).message_fields()
+        )
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = "camo"
+        self.status_pub.publish(msg)
 
 
 def run_bridge(robot: RobotSetup, topics: RunTopics, bridge: BridgeParams, stop) -> int:

@@ -35,16 +35,18 @@ from camo_core.algorithm.result import RunResult
 from camo_core.algorithm.robot_io import CONSENSUS, PHASE_NAMES
 from camo_core.algorithm.run_setup import RunSetup
 from camo_core.algorithm.sensing import image_digest
-from camo_core.algorithm.validation import report_problem
+from camo_core.algorithm.status_rows import RowsError, StatusRows
+from camo_core.algorithm.validation import rows_problems
 from camo_core.cli.options import Parser, add_out_options, out_dir
 from camo_core.exceptions import CamoError
 from camo_core.results.animation import Snapshots, write_animation
 from camo_core.results.output import run_title, write_round
 from camo_core.results.record import Backgrounds, RoundRecord, Rounds
 from camo_core.shutdown import StopFlag
-from camo_msgs.msg import Host, RobotStatus
+from camo_msgs.msg import Host, StatusArray
 from camo_nodes import scene
 from camo_nodes.polled import PolledTopics
+from camo_nodes.rcl_take import PREFIX
 from camo_nodes.topics.images import ImageEncodingError, image_from_msg, image_to_msg
 from camo_nodes.topics.names import RunTopics, check_run_id
 from camo_nodes.topics.qos import LATCHED_READER
@@ -70,13 +72,17 @@ class MonitorNode(Node):
         self.rejected = Rejections(self.get_logger())
         self.trusted = Hosts(params.count, self.rejected, setup)
         self.backgrounds = BackgroundCheck(setup)
-        self._unplaced: list[tuple[RobotStatus, bytes]] = []  # before their host's announcement
+        self._unplaced: list[tuple[StatusRows, bytes, float]] = []  # before their host's word
+        self._unplaced_rows = 0
+        # Robot -> the index of its host's GUID prefix (-1: none yet), for a table's rows at once.
+        self._owner = np.full(params.count, -1, np.int64)
+        self._prefixes: dict[bytes, int] = {}
         context = kwargs.get("context")
         self.polled = PolledTopics("monitor_listener", topics.swarm_namespace, context)
         self.polled.listen(Host, topics.hosts, LATCHED_READER, self._on_host)
-        # Every robot writes to one status topic: the monitor keeps all (LATCHED_READER keeps every
-        # sample), or bursts would push statuses out.
-        self.polled.listen(RobotStatus, topics.status, LATCHED_READER, self._on_status)
+        # Every process writes its robots' statuses to one topic: the monitor keeps all
+        # (LATCHED_READER keeps every sample), or bursts would push statuses out.
+        self.polled.listen(StatusArray, topics.status, LATCHED_READER, self._on_status, 16)
         self.polled.listen(Image, topics.background, LATCHED_READER, self._on_background)
         self.create_timer(0.02, self.polled.poll)
         self.pattern_pub = self.create_publisher(Image, topics.pattern, 10)
@@ -87,10 +93,14 @@ class MonitorNode(Node):
         self.create_timer(0.5, self.publish_views)
 
     def _on_host(self, data: bytes, gid: bytes) -> None:
-        if self.trusted.learn(deserialize_message(data, Host), gid):
-            unplaced, self._unplaced = self._unplaced, []
-            for msg, sender_gid in unplaced:
-                self._take_status(msg, sender_gid)
+        tiles = self.trusted.learn(deserialize_message(data, Host), gid)
+        if tiles:
+            index = self._prefixes.setdefault(gid[:PREFIX], len(self._prefixes))
+            for first, last in tiles:
+                self._owner[first : last + 1] = index
+            unplaced, self._unplaced, self._unplaced_rows = self._unplaced, [], 0
+            for rows, sender_gid, stamp in unplaced:
+                self._take_rows(rows, sender_gid, stamp)
 
     def _on_background(self, data: bytes, gid: bytes) -> None:
         msg = deserialize_message(data, Image)
@@ -110,28 +120,47 @@ class MonitorNode(Node):
         self.images.add(stamp, lambda: image)
 
     def _on_status(self, data: bytes, gid: bytes) -> None:
-        self.statuses_heard += 1
-        self._take_status(deserialize_message(data, RobotStatus), gid)
+        try:
+            msg = deserialize_message(data, StatusArray)
+        except Exception:  # noqa: BLE001 - rclpy's deserializer raises several kinds
+            self.rejected.refuse("a status array that does not decode", gid)
+            return
+        try:
+            rows = StatusRows.from_message(msg)
+        except RowsError:
+            self.rejected.refuse("a status array whose columns disagree", gid, msg.name)
+            return
+        self.statuses_heard += len(rows)
+        self._take_rows(rows, gid, msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
 
-    def _take_status(self, msg: RobotStatus, gid: bytes) -> None:
-        sender = msg.sender_id
-        if sender not in self.trusted.owner and 0 <= sender < self.params.count:
-            if len(self._unplaced) < 10 * self.params.count + 1000:
-                self._unplaced.append((msg, gid))  # its host has not been heard yet
+    def _take_rows(self, rows: StatusRows, gid: bytes, stamp: float) -> None:
+        """A process's reports: each row used if it is sound and its robot is the process's."""
+        ids = rows.sender_id
+        inside = (ids >= 0) & (ids < self.params.count)
+        owner = np.where(inside, self._owner[np.clip(ids, 0, self.params.count - 1)], -1)
+        waiting = inside & (owner < 0)  # robots whose host has not been heard yet
+        if waiting.any():
+            if self._unplaced_rows < 10 * self.params.count + 1000:
+                self._unplaced.append((rows.select(waiting), gid, stamp))
+                self._unplaced_rows += int(waiting.sum())
             else:
-                self.rejected.refuse(
-                    "status from a robot no process hosts", gid, f"robot {sender}"
-                )
-            return
-        problem = report_problem(msg, self.params)
-        if problem is None and not self.trusted.speaks_for(gid, sender):
-            problem = "not from the process hosting its sender"
-        if problem is not None:
-            self.rejected.refuse(problem, gid, f"robot {sender}")
-            return
-        self.offline[sender] = not msg.alive  # a bridged Droplet whose port went away
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        self.rounds[msg.round].add(msg, stamp)
+                for robot in ids[waiting]:
+                    self.rejected.refuse(
+                        "status from a robot no process hosts", gid, f"robot {robot}"
+                    )
+            rows, owner = rows.select(~waiting), owner[~waiting]
+        problems = rows_problems(rows, self.params)
+        speaker = self._prefixes.get(gid[:PREFIX], -2)
+        for row in np.flatnonzero(owner != speaker):
+            problems[row] = problems[row] or "not from the process hosting its sender"
+        good = np.array([p is None for p in problems], bool)
+        for row in np.flatnonzero(~good):
+            self.rejected.refuse(problems[row], gid, f"robot {rows.sender_id[row]}")
+        rows = rows.select(good)
+        # A bridged Droplet whose port went away.
+        self.offline[rows.sender_id] = ~rows.alive
+        for index in np.unique(rows.round).tolist():
+            self.rounds[index].add_rows(rows.select(rows.round == index), stamp)
 
     def rejected_messages(self) -> dict:
         """Messages refused in the whole run: by this monitor and by every host."""

@@ -44,6 +44,7 @@ from camo_core.algorithm.liveness import Liveness
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import PHASE_OF, Message, Report, kinds_of, messages_per_round
 from camo_core.algorithm.run_setup import RunSetup
+from camo_core.algorithm.status_rows import StatusRows
 from camo_core.algorithm.validation import message_problem, phase_problem
 from camo_msgs.msg import (
     Color,
@@ -56,9 +57,9 @@ from camo_msgs.msg import (
     Host,
     Relay,
     RelayArray,
-    RobotStatus,
     State,
     StateArray,
+    StatusArray,
     Vote,
     VoteArray,
 )
@@ -89,6 +90,9 @@ ARRAY_TYPES = {
 # Robot messages in one array at most: a process's pump can send several steps of thousands of
 # robots, and a DDS message past Fast DDS's shared-memory segment (512 KB) is slow.
 MAX_BATCH = 256
+# A process's statuses go out as one array a STATUS_PERIOD (s), of MAX_STATUS_ROWS at most.
+STATUS_PERIOD = 0.2
+MAX_STATUS_ROWS = 4096
 # Arrays taken from one edge topic per poll at most (each up to MAX_BATCH robot messages).
 EDGE_TAKE = 4
 # Seconds a pump hands messages to robots per call at most: the rest is handed over on the
@@ -173,28 +177,30 @@ def edge_of(params: CamoParams, hosted: set[int], robots: Iterable[int]) -> set[
     return edge
 
 
-def status_msg(report: Report) -> RobotStatus:
-    return RobotStatus(
-        sender_id=report.sender_id,
-        row=report.row,
-        col=report.col,
-        phase=report.phase,
-        step=report.step,
-        round=report.round,
-        sensed=report.sensed,
-        p=list(report.p),
-        pattern=report.pattern,
-        state=report.state,
-        alive=report.alive,
-        known_slots=report.known_slots,
-        deadlines=report.deadlines,
-        silent=list(report.silent),
-        p_from=report.p_from,
-        p_trace=list(report.p_trace),
-        state_from=report.state_from,
-        state_trace=list(report.state_trace),
-        palette=list(report.palette),
-    )
+class Statuses:
+    """What a process's robots reported since the last write: one StatusArray per STATUS_PERIOD
+    (or MAX_STATUS_ROWS reports), not a message per report."""
+
+    def __init__(self, writer, name: str) -> None:
+        self.writer = writer
+        self.name = name
+        self.reports: list[Report] = []
+        self.written = time.monotonic()
+
+    def add(self, report: Report) -> None:
+        self.reports.append(report)
+        if len(self.reports) >= MAX_STATUS_ROWS:
+            self.flush()
+
+    def flush(self, now: float | None = None) -> None:
+        """Write what was reported (with `now`: only once STATUS_PERIOD has passed)."""
+        if not self.reports or (now is not None and now - self.written < STATUS_PERIOD):
+            return
+        reports, self.reports = self.reports, []
+        msg = StatusArray(name=self.name, **StatusRows.from_reports(reports).message_fields())
+        stamp(msg)
+        self.writer.publish(msg)
+        self.written = time.monotonic()
 
 
 class Batch:
@@ -259,9 +265,10 @@ class Transport:
         self._unsent_edges: list[Batch] = []  # those of them other processes' robots wait for
         for first, last in tiles:
             self._create_writers(first, last)
-        self.status_pub = node.create_publisher(
-            RobotStatus, topics.status, history_qos(status_depth(params) * len(self.hosted))
+        status_pub = node.create_publisher(
+            StatusArray, topics.status, history_qos(status_depth(params) * len(self.hosted))
         )
+        self.statuses = Statuses(status_pub, node.get_name())
         self.receivers: dict[tuple[int, str], list[Receiver]] = defaultdict(list)
         self.needed: set[int] = set()  # neighbours hosted elsewhere
         self.remote: set[tuple[int, int]] = set()  # tiles subscribed to
@@ -314,7 +321,11 @@ class Transport:
         return self.liveness.robot_alive(robot)
 
     def _on_heartbeat(self, data: bytes, gid: bytes) -> None:
-        msg = deserialize_message(data, Heartbeat)
+        try:
+            msg = deserialize_message(data, Heartbeat)
+        except Exception:  # noqa: BLE001 - rclpy's deserializer raises several kinds
+            self.rejected.refuse("a heartbeat that does not decode", gid)
+            return
         offline = frozenset(int(r) for r in msg.offline[:1024])
         if not self.liveness.heard(gid[:PREFIX], offline):
             self.rejected.refuse("heartbeat of one process too many", gid, msg.name)
@@ -404,6 +415,7 @@ class Transport:
         unsent, self._unsent = self._unsent, []
         for batch in unsent:
             batch.flush()
+        self.statuses.flush(time.monotonic())
 
     def _flush_edges(self) -> None:
         unsent, self._unsent_edges = self._unsent_edges, []
@@ -411,9 +423,8 @@ class Transport:
             batch.flush()
 
     def report(self, report: Report) -> None:
-        msg = status_msg(report)
-        stamp(msg)
-        self.status_pub.publish(msg)
+        """To monitors and recorders, in the process's next status array."""
+        self.statuses.add(report)
 
     # ---- in -----------------------------------------------------------------------
 
@@ -460,4 +471,5 @@ class Transport:
         heartbeat thread its publisher."""
         self.heartbeat.close()
         self.flush()
+        self.statuses.flush()
         self.polled.close()

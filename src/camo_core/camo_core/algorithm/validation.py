@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+import numpy as np
+
 from camo_core.algorithm.layout import MAX_SLOTS
 from camo_core.algorithm.levels import BIN_WIDTH, BINS
 from camo_core.algorithm.orientation import CODES
@@ -27,6 +29,7 @@ from camo_core.algorithm.robot_io import (
     Message,
 )
 from camo_core.algorithm.rules import MOTTLED
+from camo_core.algorithm.status_rows import StatusRows
 
 TOLERANCE = 1e-9  # a consensus p sums to 1 up to rounding
 REPORT_TOLERANCE = 1e-3  # a Droplet's own firmware prints p with 4 decimals
@@ -177,41 +180,65 @@ def phase_problem(kind: str, phase: int) -> str | None:
 
 def report_problem(status, params: CamoParams) -> str | None:
     """Why the monitor must not use this status (a RobotStatus or a Report), or None."""
-    i = status.sender_id
-    if not 0 <= i < params.count:
-        return "sender is not a robot of the grid"
-    if (status.row, status.col) != divmod(i, params.cols):
-        return "status from the wrong cell"
-    phase, step = status.phase, status.step
-    limit = {CONSENSUS: params.consensus_steps, FORMATION: params.formation_steps}
-    if not SENSING <= phase <= DONE or step < 0 or step > limit.get(phase, step):
-        return "phase or step out of range"
-    return _status_values_problem(status, params)
+    return rows_problems(StatusRows.from_reports([status], params.cols), params)[0]
 
 
-def _status_values_problem(status, params: CamoParams) -> str | None:
-    """What a status says of its robot (p, state, pattern, traces, palette), out of range."""
-    phase = status.phase
-    check = tensor_vector if params.orientation_any else probability_vector
+def _p_rows_ok(p: np.ndarray, orientation_any: bool) -> np.ndarray:
+    """Each row of p (n x 3) a probability vector, or with --orientation any a tensor (the
+    row-wise probability_vector and tensor_vector, at REPORT_TOLERANCE)."""
+    tol = REPORT_TOLERANCE
+    finite = np.isfinite(p).all(axis=1)
+    with np.errstate(invalid="ignore"):
+        if orientation_any:
+            jxx, jyy, jxy = p[:, 0], p[:, 1], p[:, 2]
+            trace = jxx + jyy
+            ok = (jxx >= -tol) & (jyy >= -tol) & (trace <= 1 + tol)
+            return finite & ok & (np.abs(jxy) <= trace / 2 + tol)
+        inside = ((p >= -tol) & (p <= 1 + tol)).all(axis=1)
+        return finite & inside & (np.abs(p.sum(axis=1) - 1.0) <= tol)
+
+
+def rows_problems(rows: StatusRows, params: CamoParams) -> list[str | None]:
+    """Why the monitor must not use each row of a status table, or None: report_problem's
+    checks, a column at a time (a process's array holds thousands)."""
+    n = len(rows)
+    problems = np.full(n, None, object)
     states = states_of(params)
-
-    def good_p(p):
-        return check(p, REPORT_TOLERANCE)
-
     codes = range(MOTTLED, CODES) if params.orientation_any else range(MOTTLED + 1)
-    if phase >= CONSENSUS:
-        if not _grey(status.sensed) or not good_p(list(status.p)):
-            return "status values out of range"
-        if status.state not in states or status.pattern not in (*codes, NO_PATTERN):
-            return "status values out of range"
-    p_trace = list(getattr(status, "p_trace", ()))
-    if len(p_trace) % 3 or not all(good_p(p_trace[k : k + 3]) for k in range(0, len(p_trace), 3)):
-        return "status trace out of range"
-    if any(s not in states for s in getattr(status, "state_trace", ())):
-        return "status trace out of range"
-    palette = list(getattr(status, "palette", ()))
-    if palette and (len(palette) != params.levels or palette != sorted(palette)):
-        return "status palette out of range"
-    if any(not 0 <= n < params.count for n in getattr(status, "silent", ())):
-        return "status names a robot not of the grid"
-    return None
+    bad_state = (rows.state < states.start) | (rows.state >= states.stop)
+    bad_pattern = ~np.isin(rows.pattern, [*codes, NO_PATTERN])
+    # From the last check to the first: a row gets the first problem report_problem names.
+    silent_rows, _ = rows.spans("silent")
+    out_of_grid = (rows.silent < 0) | (rows.silent >= params.count)
+    problems[np.unique(silent_rows[out_of_grid])] = "status names a robot not of the grid"
+    palette_rows, within = rows.spans("palette")
+    unsorted = np.zeros(n, bool)
+    if len(rows.palette) > 1:
+        descending = np.r_[False, rows.palette[1:] < rows.palette[:-1]] & (within > 0)
+        unsorted[palette_rows[descending]] = True
+    wrong_count = (rows.palette_count != 0) & (rows.palette_count != params.levels)
+    problems[unsorted | wrong_count] = "status palette out of range"
+    trace_bad = rows.ragged.copy()
+    p_rows, _ = rows.spans("p_trace")
+    trace_bad[p_rows[~_p_rows_ok(rows.p_trace, params.orientation_any)]] = True
+    s_rows, _ = rows.spans("state_trace")
+    wrong = (rows.state_trace < states.start) | (rows.state_trace >= states.stop)
+    trace_bad[s_rows[wrong]] = True
+    problems[trace_bad] = "status trace out of range"
+    with np.errstate(invalid="ignore"):
+        grey = np.isfinite(rows.sensed) & (rows.sensed >= 0) & (rows.sensed <= 255)
+    good_p = _p_rows_ok(rows.p, params.orientation_any)
+    values_bad = (rows.phase >= CONSENSUS) & (~grey | ~good_p | bad_state | bad_pattern)
+    problems[values_bad] = "status values out of range"
+    limit = np.where(
+        rows.phase == CONSENSUS,
+        params.consensus_steps,
+        np.where(rows.phase == FORMATION, params.formation_steps, np.iinfo(np.int64).max),
+    )
+    phase_bad = (rows.phase < SENSING) | (rows.phase > DONE) | (rows.step < 0)
+    problems[phase_bad | (rows.step > limit)] = "phase or step out of range"
+    problems[rows.wrong_cell] = "status from the wrong cell"
+    problems[(rows.sender_id < 0) | (rows.sender_id >= params.count)] = (
+        "sender is not a robot of the grid"
+    )
+    return problems.tolist()

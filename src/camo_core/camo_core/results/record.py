@@ -17,6 +17,7 @@ from camo_core.algorithm.orientation import selector
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult, mean_p, p_stats
 from camo_core.algorithm.robot_io import CONSENSUS, DONE, FORMATION
+from camo_core.algorithm.status_rows import StatusRows
 
 
 @dataclass
@@ -50,45 +51,74 @@ class RoundRecord:
 
     def add(self, report, stamp: float | None = None) -> None:
         """One report; `stamp`: when the robot sent it (s since the epoch), if known."""
-        i = report.sender_id
+        self.add_rows(StatusRows.from_reports([report]), stamp)
+
+    def add_rows(self, rows: StatusRows, stamp: float | None = None) -> None:
+        """Reports as a table (checked: `validation.rows_problems`), in their order; `stamp`:
+        when they were sent (s since the epoch), if known."""
+        rank = rows.occurrences()
+        if len(rank) and rank.max() > 0:  # a robot twice: its reports one after the other
+            for k in range(int(rank.max()) + 1):
+                self._add_distinct(rows.select(rank == k), stamp)
+        else:
+            self._add_distinct(rows, stamp)
+
+    def _add_distinct(self, rows: StatusRows, stamp: float | None) -> None:
+        """Reports of distinct robots."""
+        i, phase, step = rows.sender_id, rows.phase, rows.step
         if stamp is not None:
-            if report.phase >= CONSENSUS and np.isnan(self.voted_at[i]):
-                self.voted_at[i] = stamp
-            if report.phase == DONE:
-                self.done_at[i] = stamp
-        self.phase[i] = report.phase
-        self.step[i] = report.step
-        self.sensed[i] = report.sensed
-        self.state[i] = report.state
-        self.deadlines[i] = report.deadlines
-        silent = getattr(report, "silent", ())  # a status of an older camo has none
-        if silent or i in self.given_up:
-            self.given_up[i] = frozenset(silent)
-        if report.phase >= CONSENSUS:
-            self.p_latest[i] = report.p
-        if report.phase == CONSENSUS:
-            self.p_trace[report.step, i] = report.p
-            self.initial[i] = report.state
-        elif report.phase == FORMATION:
-            self.state_trace[report.step, i] = report.state
-        if self.params.levels and len(getattr(report, "palette", ())) == self.params.levels:
-            self.palette[i] = report.palette
-        # The steps since the robot's last report (statuses of an older camo have none: they came
-        # one a step).
-        p_trace = getattr(report, "p_trace", ())
-        if len(p_trace):
-            first = report.p_from
-            steps = max(0, min(len(p_trace) // 3, len(self.p_trace) - first))
-            self.p_trace[first : first + steps, i] = np.reshape(p_trace[: 3 * steps], (steps, 3))
-        state_trace = getattr(report, "state_trace", ())
-        if len(state_trace):
-            first = report.state_from
-            steps = max(0, min(len(state_trace), len(self.state_trace) - first))
-            self.state_trace[first : first + steps, i] = state_trace[:steps]
-        if report.phase == DONE:
-            self.state_trace[report.step, i] = report.state
-            self.selected[i] = report.pattern
-            self.finished[i] = True
+            voted = i[(phase >= CONSENSUS) & np.isnan(self.voted_at[i])]
+            self.voted_at[voted] = stamp
+            self.done_at[i[phase == DONE]] = stamp
+        self.phase[i], self.step[i] = phase, step
+        self.sensed[i], self.state[i], self.deadlines[i] = rows.sensed, rows.state, rows.deadlines
+        self._given_up(rows)
+        consensus = phase >= CONSENSUS
+        self.p_latest[i[consensus]] = rows.p[consensus]
+        now = phase == CONSENSUS
+        self.p_trace[step[now], i[now]] = rows.p[now]
+        self.initial[i[now]] = rows.state[now]
+        forming = phase == FORMATION
+        self.state_trace[step[forming], i[forming]] = rows.state[forming]
+        if self.params.levels:
+            full = rows.palette_count == self.params.levels
+            if full.any():
+                mine = np.repeat(full, rows.palette_count)
+                self.palette[i[full]] = rows.palette[mine].reshape(-1, self.params.levels)
+        # The steps since each robot's last report (statuses of an older camo have none: they
+        # came one a step).
+        self._traces(rows)
+        done = phase == DONE
+        self.state_trace[step[done], i[done]] = rows.state[done]
+        self.selected[i[done]] = rows.pattern[done]
+        self.finished[i[done]] = True
+
+    def _given_up(self, rows: StatusRows) -> None:
+        """Who each reporter has given up on, at its latest report (a few rows have any)."""
+        ids = rows.sender_id
+        have = rows.silent_count > 0
+        known = np.fromiter(self.given_up, np.int64, len(self.given_up))
+        if known.size:
+            have |= np.isin(ids, known)
+        if not have.any():
+            return
+        ends = np.cumsum(rows.silent_count)
+        for row in np.flatnonzero(have):
+            silent = rows.silent[ends[row] - rows.silent_count[row] : ends[row]]
+            self.given_up[int(ids[row])] = frozenset(silent.tolist())
+
+    def _traces(self, rows: StatusRows) -> None:
+        ids = rows.sender_id
+        if len(rows.p_trace):
+            row, j = rows.spans("p_trace")
+            at = rows.p_from[row] + j
+            keep = at < len(self.p_trace)
+            self.p_trace[at[keep], ids[row[keep]]] = rows.p_trace[keep]
+        if len(rows.state_trace):
+            row, j = rows.spans("state_trace")
+            at = rows.state_from[row] + j
+            keep = at < len(self.state_trace)
+            self.state_trace[at[keep], ids[row[keep]]] = rows.state_trace[keep]
 
     def timing(self) -> tuple[float, float] | None:
         """(when the last robot voted, when the last robot finished), by the robots' clocks."""
