@@ -747,3 +747,69 @@ def test_a_file_layout_reaches_robot_nodes_of_their_own_as_a_csv(tmp_path):
     given = dict(x.split(":=", 1) for x in robot_parameters(config, 2) if ":=" in x)
     written = Path(given["layout"])
     assert written.parent == config.folder and written.read_text().splitlines()[2] == "0.5,0.87"
+
+
+def test_a_large_swarm_on_this_machine_defers_discovery_to_a_server_of_its_own(tmp_path):
+    from camo_bringup.run_config import DEFER_FROM, build_parser, config_from
+
+    side = 65  # 4225 robots
+    assert side * side >= DEFER_FROM
+    large = ["--rows", str(side), "--cols", str(side), "--out", str(tmp_path / "a")]
+    config = config_from(build_parser().parse_args(large), environ={})
+    host, _, port = config.deferred.rpartition(":")
+    assert host == "127.0.0.1" and 0 < int(port) < 65536
+    assert config.env["ROS_DISCOVERY_SERVER"] == config.deferred
+    assert config.env["ROS_SUPER_CLIENT"] == "TRUE"
+    small = ["--rows", "64", "--cols", "64", "--out", str(tmp_path / "b")]
+    assert config_from(build_parser().parse_args(small), environ={}).deferred is None
+    # Not when the user chose how processes find each other, nor with workers elsewhere.
+    for extra in (["--network", "subnet"], ["--discovery-server", "10.0.0.1:11811"]):
+        args = build_parser().parse_args([*large[:-1], str(tmp_path / "c"), *extra])
+        assert config_from(args, environ={}).deferred is None
+    remote = [*large[:-1], str(tmp_path / "d"), "--remote-cells", "0-9"]
+    assert config_from(build_parser().parse_args(remote), environ={}).deferred is None
+
+
+@pytest.mark.slow(SWARM)
+def test_a_swarm_whose_discovery_was_deferred_equals_the_simulator(tmp_path):
+    """65 x 65 robots: the workers create their robot nodes hearing nobody, then find each other
+    through the run's own discovery server; the result is the simulator's."""
+    options = ["--rows", "65", "--cols", "65", "--consensus-steps", "6", "--formation-steps", "3"]
+    out = camo_run(*options, "--procs", "2", "--out", str(tmp_path / "run"), timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "robot nodes created" in out.stderr and "discovery server at 127.0.0.1:" in out.stderr
+    assert "did not stop" not in out.stderr  # the workers exit at once
+    sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    assert_like_sim(tmp_path / "run", tmp_path / "sim")
+
+
+@pytest.mark.slow(SWARM)
+def test_ctrl_c_stops_thousands_of_robots_within_seconds_and_keeps_what_they_reported(tmp_path):
+    out_dir = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_bringup.launcher", "--rows", "64", "--cols", "64"]
+        + ["--procs", "2", "--consensus-steps", "5000", "--domain-id", str(domain())]
+        + ["--out", str(out_dir)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    wait_for_line(proc, "consensus 4096")
+    time.sleep(1.0)
+    interrupted = time.monotonic()
+    proc.send_signal(2)
+    _, err = proc.communicate(timeout=60)
+    stopped = time.monotonic() - interrupted
+    assert proc.returncode == 130, err[-2000:]
+    assert stopped < 10, f"{stopped:.1f} s from Ctrl-C to exit"
+    assert "did not stop" not in err and "Traceback" not in err
+    for pid in json.loads((out_dir / "processes.json").read_text()):
+        assert (
+            not os.path.exists(f"/proc/{pid}")
+            or "zombie" in open(f"/proc/{pid}/status").read().lower()
+        )
+    summary = json.loads((out_dir / "summary.json").read_text())
+    assert "incomplete" in summary and "dead" not in summary
+    assert len(summary["consensus_trace"]) >= 2

@@ -14,7 +14,9 @@ per tile topic, as the swarm's do at best.
 
 Figures: set-up (launch until every robot has voted; bare: until the
 processes are matched), steps per second (every robot voting to every robot
-done; bare: its steps), and launch to exit.
+done; bare: its steps), and launch to exit. Large swarms (128x128 and 256x256
+by default) run once each, with the launcher's default processes, and add the
+largest resident set of a worker and of the whole run.
 """
 
 from __future__ import annotations
@@ -28,11 +30,13 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from camo_bringup.run_config import split_cells
+from camo_bringup.run_config import default_procs, split_cells
+from camo_core.algorithm.backgrounds import SIZE, forest
 from camo_core.algorithm.grid import neighbor_ids
 from camo_core.algorithm.params import CamoParams
 from camo_msgs.msg import Vote, VoteArray
@@ -158,16 +162,17 @@ def bare_exchange(side: int, steps: int, procs: int, domain: int, packed: bool =
 
 
 def swarm_run(
-    side: int, procs: int, domain: int, out: Path, steps: int | None = None, extra=()
+    side: int, procs: int | None, domain: int, out: Path, steps: int | None = None, extra=()
 ) -> dict:
     """`./camo run` once (paper profile; `steps` consensus + formation steps if given; `extra`
-    options): its timing.json, and launch to exit."""
+    options; `procs` None: the launcher's default): its timing.json, and launch to exit."""
     length = [] if steps is None else ["--consensus-steps", str(steps - 10)]
     length += list(extra)
+    length += [] if procs is None else ["--procs", str(procs)]
     launched = time.monotonic()
     proc = subprocess.run(
         [sys.executable, "-m", "camo_bringup.launcher", "--rows", str(side), "--cols", str(side)]
-        + ["--procs", str(procs), "--domain-id", str(domain), "--out", str(out), *length],
+        + ["--domain-id", str(domain), "--out", str(out), *length],
         capture_output=True,
         text=True,
         timeout=1800,
@@ -176,7 +181,45 @@ def swarm_run(
     if proc.returncode != 0:
         raise RuntimeError(f"camo run {side}x{side} failed: {proc.stderr.strip()[-300:]}")
     timing = json.loads((out / "timing.json").read_text())
-    return {"setup_s": timing["startup_s"], "steps_per_s": timing["steps_per_s"], "wall_s": wall}
+    return {
+        "setup_s": timing["startup_s"],
+        "steps_per_s": timing["steps_per_s"],
+        "wall_s": wall,
+        "peak_mib": timing.get("peak_mib", {}),
+        "deadlines": timing["deadlines"],
+    }
+
+
+def large_run(side: int, domain: int, out: Path) -> dict:
+    """One whole run of a large swarm with the launcher's defaults (processes of at most 4096
+    robots), on the forest scaled to the grid when the grid outgrows it."""
+    out.mkdir(parents=True, exist_ok=True)
+    image = out / f"forest_{side}.png"
+    size = max(SIZE, side)
+    cv2.imwrite(str(image), cv2.resize(forest(), (size, size), interpolation=cv2.INTER_NEAREST))
+    procs = default_procs(side * side)
+    row = swarm_run(side, None, domain, out / "run", extra=["--image", str(image)])
+    print(
+        f"{side}x{side}: set-up {row['setup_s']:.1f} s, {row['steps_per_s']:.2f} steps/s, "
+        f"launch to exit {row['wall_s']:.1f} s, {procs} workers",
+        file=sys.stderr,
+    )
+    return {"robots": f"{side}x{side}", "procs": procs, **row}
+
+
+def format_large(rows: list[dict]) -> str:
+    lines = [
+        f"{'robots':>8} {'workers':>7} {'set-up s':>9} {'steps/s':>8} {'launch to exit s':>17} "
+        f"{'peak MiB: a worker / all':>25} {'deadlines':>9}"
+    ]
+    for r in rows:
+        peak = r["peak_mib"]
+        memory = f"{peak.get('worker_max', 0):>8.0f} / {peak.get('all', 0):<6.0f}"
+        lines.append(
+            f"{r['robots']:>8} {r['procs']:>7} {r['setup_s']:>9.1f} {r['steps_per_s']:>8.2f} "
+            f"{r['wall_s']:>17.1f} {memory:>25} {r['deadlines']:>9}"
+        )
+    return "\n".join(lines)
 
 
 def default_steps(side: int) -> int:
@@ -283,6 +326,12 @@ def main(argv: list[str] | None = None) -> int:
         help="grid sides of the whole-run comparison (default 16,32,64; 0: none)",
     )
     parser.add_argument(
+        "--large-sides",
+        type=grid_sides,
+        default="128,256",
+        help="grid sides of single large runs: set-up, rate, memory (default 128,256; 0: none)",
+    )
+    parser.add_argument(
         "--record-side", type=int, default=16, help="side of the recording comparison (0: none)"
     )
     parser.add_argument(
@@ -325,6 +374,7 @@ def main(argv: list[str] | None = None) -> int:
         compare(side, args.procs, domain, args.out / "whole", None, args.repeat)
         for side in args.sides
     ]
+    large = [large_run(side, domain, args.out / "large" / str(side)) for side in args.large_sides]
     # What recording, and a live view with no client connected, add to a run.
     extras = {
         "recording": (args.record_side, "record", lambda out: ["--record", str(out / "bag")]),
@@ -336,7 +386,7 @@ def main(argv: list[str] | None = None) -> int:
         if side
     }
     if args.json:
-        print(json.dumps({"rates": rates, "whole": whole, **added}))
+        print(json.dumps({"rates": rates, "whole": whole, "large": large, **added}))
     else:
         print(f"medians of {args.repeat} alternating runs, {args.procs} processes")
         print("long runs (step rate):")
@@ -348,6 +398,9 @@ def main(argv: list[str] | None = None) -> int:
             )
         print("whole runs (35 + 10 steps):")
         print(format_table(whole))
+        if large:
+            print("large swarms (one run each, the launcher's default processes):")
+            print(format_large(large))
         targets = {"recording": 1.5, "live view": 1.1}
         for what, r in added.items():
             print(

@@ -17,6 +17,7 @@ import json
 import os
 import socket
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -33,6 +34,7 @@ from camo_core.cli.params_file import write_params_file
 from camo_core.exceptions import EXIT_USAGE, CamoError
 from camo_core.shutdown import StopFlag
 from camo_nodes.monitor_node import MonitorNode
+from camo_nodes.shm import remove_stale
 
 
 def run_round(session: Session, index: int, group: ProcessGroup) -> float:
@@ -49,6 +51,7 @@ def run_round(session: Session, index: int, group: ProcessGroup) -> float:
         if time.monotonic() - last_print > 1.0:
             print(f"camo run: {monitor.progress_line(index)}", file=sys.stderr)
             last_print = time.monotonic()
+            group.sample_memory()
         problem = group.failed()
         if problem:
             raise RunFailed(problem)
@@ -83,9 +86,46 @@ def start_processes(config: RunConfig, group: ProcessGroup, session: Session) ->
     if config.foxglove is not None:
         group.start_view(config.topics.run, config.foxglove)  # it says where it serves
     print(f"camo run: {config.topics.run}: topics under /{config.topics.run}/", file=sys.stderr)
-    group.start_swarm(config)
-    (config.folder / "processes.json").write_text(
-        json.dumps({str(pid): cells for pid, cells in group.cells.items()})
+    with tempfile.TemporaryDirectory(prefix="camo-ready-") as ready:
+        group.start_swarm(config, Path(ready) if config.deferred else None)
+        (config.folder / "processes.json").write_text(
+            json.dumps({str(pid): cells for pid, cells in group.cells.items()})
+        )
+        if config.deferred:
+            discover_once_created(config, group, session, Path(ready))
+
+
+def _count(path: Path) -> int:
+    """A worker's count of robot nodes created so far (0 while it is being written)."""
+    try:
+        return int(path.read_text())
+    except (OSError, ValueError):
+        return 0
+
+
+def discover_once_created(config: RunConfig, group: ProcessGroup, session: Session, ready: Path):
+    """Wait until every worker has created its robot nodes, then start the run's discovery
+    server (run_config.deferred_discovery says why)."""
+    workers, last_print = len(group.workers), 0.0
+    while (done := sum(1 for f in ready.iterdir() if not f.suffix)) < workers:
+        problem = group.failed() or (group.lost_cells() and "a worker died creating its robots")
+        if problem:
+            raise RunFailed(problem)
+        if time.monotonic() - last_print > 2.0:
+            created = sum(_count(f) for f in ready.glob("*.count"))
+            print(
+                f"camo run: creating robot nodes: {created}/{config.params.count} "
+                f"({done}/{workers} workers done)",
+                file=sys.stderr,
+            )
+            last_print = time.monotonic()
+        session.spin(0.2)  # Ctrl-C is heard here too
+    group.start_discovery_server(config.deferred)
+    print(
+        f"camo run: {config.params.count} robot nodes created; the run's processes find each "
+        f"other through its discovery server at {config.deferred} (ros2 CLI: "
+        f"ROS_DISCOVERY_SERVER={config.deferred} ROS_SUPER_CLIENT=TRUE)",
+        file=sys.stderr,
     )
 
 
@@ -102,11 +142,13 @@ def run_rounds(
         voted = run_round(session, index, group)
         times = {"launched": launched[0], "voted": voted, "done": time.monotonic()}
         times["launched_wall"] = launched[1]
+        group.sample_memory()
+        times["peak_mib"] = group.peak_mib()
         if index == config.rounds - 1:
             if session.recorders.present():
                 session.recorders.hold(index, group)
             # The robots tear down while this process writes the results.
-            group.interrupt(keep=lambda proc: proc is group.recorder)
+            group.interrupt(keep=lambda proc: proc in (group.recorder, group.server))
         summary = report_round(config, session.monitor, index, times)
         ran.append(round_ran(config, session.monitor, index, summary))
 
@@ -139,13 +181,14 @@ def run(config: RunConfig) -> int:
         code = exc.code
     finally:
         stuck = watchdog(config.folder)
-        group.stop(keep=lambda proc: proc is group.recorder)
+        group.stop(keep=lambda proc: proc in (group.recorder, group.server))
         if len(ran) < config.rounds and group.cells:
             summary = write_partial(config, session.monitor, len(ran))
             if summary is not None:
                 ran.append(round_ran(config, session.monitor, len(ran), summary))
         session.recorders.publish_result({"run": config.topics.run, "ended": ended, "rounds": ran})
         group.stop()  # the recorder last: it closes the bag on SIGINT
+        remove_stale()  # the shared-memory files of workers that exited without tearing down
         for module in group.killed:
             print(f"camo run: warning: {module} did not stop within 5 s; killed", file=sys.stderr)
         session.close()

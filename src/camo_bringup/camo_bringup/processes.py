@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import ctypes
 import os
+import resource
 import signal
 import subprocess
 import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 from camo_bringup.run_config import RunConfig, worker_groups
 from camo_core.algorithm.run_setup import contiguous
@@ -70,14 +72,21 @@ class ProcessGroup:
         self.procs: list[subprocess.Popen] = []
         self.cells: dict[int, list[int]] = {}  # pid -> robot ids
         self.recorder: subprocess.Popen | None = None
+        self.server: subprocess.Popen | None = None  # the run's own discovery server
+        self.workers: list[subprocess.Popen] = []
+        self.peak_kib: dict[int, int] = {}  # pid -> its largest resident set so far
         self._interrupted: list[subprocess.Popen] = []
         self.killed: list[str] = []  # modules that did not stop in time (their shm is left)
 
-    def _start(self, module: str, *args: str, on_orphan: int = signal.SIGKILL) -> subprocess.Popen:
+    def _start(
+        self, module: str, *args: str, on_orphan: int = signal.SIGKILL, quiet: bool = False
+    ) -> subprocess.Popen:
+        """`quiet`: its standard output to /dev/null (a tool's banner)."""
         command = [sys.executable, "-m", module, *args]
         proc = subprocess.Popen(
             command,
             env=self.env,
+            stdout=subprocess.DEVNULL if quiet else None,
             start_new_session=True,
             preexec_fn=_dying_with(os.getpid(), on_orphan),
         )
@@ -104,7 +113,15 @@ class ProcessGroup:
             "warn",
         )
 
-    def start_swarm(self, config: RunConfig) -> None:
+    def start_discovery_server(self, address: str) -> subprocess.Popen:
+        host, _, port = address.rpartition(":")
+        server = ("camo_nodes.discovery_server", "--address", host, "--port", port)
+        self.server = self._start(*server, quiet=True)
+        return self.server
+
+    def start_swarm(self, config: RunConfig, ready: Path | None = None) -> None:
+        """Projector, bridges and workers; with `ready`, each worker touches a file in that
+        folder once its robot nodes exist."""
         quiet = ("--ros-args", "--log-level", "warn")
         run = ("-p", f"run_id:={config.topics.run}")
         if config.projector is not None:
@@ -129,9 +146,34 @@ class ProcessGroup:
                 "--run-id",
                 config.topics.run,
                 *ranges,
+                *([f"--ready={ready / str(len(self.workers))}"] if ready else []),
                 *quiet,
             )
             self.cells[worker.pid] = cells
+            self.workers.append(worker)
+
+    def sample_memory(self) -> None:
+        """Each running process's largest resident set so far (the kernel's VmHWM)."""
+        for proc in self.procs:
+            try:
+                status = Path(f"/proc/{proc.pid}/status").read_text()
+            except OSError:
+                continue  # gone: its last sample stands
+            for line in status.splitlines():
+                if line.startswith("VmHWM:"):
+                    kib = int(line.split()[1])
+                    self.peak_kib[proc.pid] = max(kib, self.peak_kib.get(proc.pid, 0))
+
+    def peak_mib(self) -> dict[str, float]:
+        """The largest resident sets (MiB): of a worker, of this process, and all together."""
+        mine = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB on Linux
+        workers = [self.peak_kib.get(p.pid, 0) for p in self.workers]
+        total = mine + sum(self.peak_kib.values())
+        return {
+            "worker_max": round(max(workers, default=0) / 1024, 1),
+            "launcher": round(mine / 1024, 1),
+            "all": round(total / 1024, 1),
+        }
 
     def failed(self) -> str | None:
         """A process exited with an error (a robot killed by a signal is a fault, not this)."""

@@ -54,6 +54,7 @@ def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dic
         "steps_per_s": steps / max(done - voted, 1e-9),
         "launch_to_done_s": done - launched,
         "deadlines": missed,
+        "peak_mib": times.get("peak_mib", {}),  # largest resident sets: a worker, all together
     }
     (folder / "timing.json").write_text(json.dumps(timing) + "\n")
     notes = ""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import socket
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,6 +35,10 @@ from camo_nodes.topics.parameters import ros_arguments
 from camo_nodes.topics.startup import add_network_options, network_env, use_camo_dds_settings
 from camo_projector.projector_node import ProjectorParams
 
+# Robots a worker hosts at most by default: creating a process's nodes grows with their square
+# (docs/swarm.md, "Set-up"), so a large swarm is spread over more processes than cores.
+ROBOTS_PER_PROCESS = 4096
+
 
 def build_parser() -> Parser:
     parser = Parser(prog="camo run", description="run the camouflage as a swarm of ROS 2 nodes")
@@ -43,8 +48,9 @@ def build_parser() -> Parser:
     add(
         "--procs",
         type=int,
-        default=os.cpu_count() or 1,
-        help="worker processes hosting the robot nodes (default: number of cores)",
+        default=None,
+        help="worker processes hosting the robot nodes (default: the number of cores, or more "
+        f"so that none hosts more than {ROBOTS_PER_PROCESS} robots)",
     )
     add_network_options(parser)
     add(
@@ -133,6 +139,9 @@ class RunConfig:
     record: Path | None = None
     foxglove: int | None = None  # the live view's port
     digests: list[str] = field(default_factory=list)  # of the backgrounds our projector shows
+    # A large swarm on this machine: its processes find each other through a discovery server
+    # of the run's own, started once every worker has created its robot nodes (HOST:PORT).
+    deferred: str | None = None
 
     @property
     def rounds(self) -> int:
@@ -186,7 +195,8 @@ def parse_bridges(texts: list[str], params: CamoParams) -> dict[int, str]:
 
 def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None) -> RunConfig:
     params = params_from(args)
-    if not 1 <= args.procs <= 256:
+    procs = default_procs(params.count) if args.procs is None else args.procs
+    if not 1 <= procs <= 256:
         raise UsageError(f"--procs must be an integer in 1..256 (got {args.procs})")
     protocol = ProtocolParams(**options_of(args, ProtocolParams)).for_swarm(params.count)
     alone = parse_cells(args.own_process, params)
@@ -214,6 +224,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         sense_image(images[-1], params.rows, params.cols, params.profile)
     env = network_env(args, os.environ if environ is None else environ)
     use_camo_dds_settings(env)
+    deferred = deferred_discovery(env, params.count, bool(remote))
     topics = RunTopics(check_run_id(args.run_id) if args.run_id else new_run_id())
     if args.no_projector:
         projector = None
@@ -225,7 +236,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         projector = ros_arguments(ProjectorParams(pattern=args.pattern or args.default_pattern))
     return RunConfig(
         params=params,
-        procs=args.procs,
+        procs=procs,
         protocol=protocol,
         image=image,
         labels=[label, *args.then],
@@ -241,7 +252,36 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         remote=remote,
         named=args.run_id is not None,
         digests=[] if projector is None else [image_digest(i) for i in images],
+        deferred=deferred,
     )
+
+
+def default_procs(robots: int) -> int:
+    return max(os.cpu_count() or 1, -(-robots // ROBOTS_PER_PROCESS))
+
+
+# From this many robots on, a run on this machine defers discovery (docs/swarm.md, "Set-up").
+DEFER_FROM = 4097
+
+
+def deferred_discovery(env: dict[str, str], robots: int, remote: bool) -> str | None:
+    """For a large swarm on this machine alone: a private discovery server's address, set in
+    `env` for every process of the run, or None (simple discovery).
+
+    Creating a node says the process's whole node list anew to every participant that listens:
+    thousands of robot nodes created while the others listen cost each listener as much as
+    their creator, and the cost grows with the square of the nodes. Clients of a server that
+    does not run yet hear nobody; once the server starts, each hears the others' final lists
+    once."""
+    local = env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").upper() == "LOCALHOST"
+    if robots < DEFER_FROM or remote or "ROS_DISCOVERY_SERVER" in env or not local:
+        return None
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    env["ROS_DISCOVERY_SERVER"] = f"127.0.0.1:{port}"
+    env["ROS_SUPER_CLIENT"] = "TRUE"  # a recorder, a view and the launcher list the graph
+    return env["ROS_DISCOVERY_SERVER"]
 
 
 def split_cells(cells: list[int], procs: int) -> list[list[int]]:

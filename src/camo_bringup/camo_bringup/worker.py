@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 import rclpy
 from rclpy.node import Node
@@ -46,6 +47,8 @@ def build_parser() -> Parser:
     # The launcher's own workers: the run's setup from it, not from the network, and cells it
     # keeps for itself.
     parser.add_argument("--setup", default=None, help=argparse.SUPPRESS)
+    # ... and a file to create once its robot nodes exist (the launcher defers discovery).
+    parser.add_argument("--ready", default=None, help=argparse.SUPPRESS)
     return parser
 
 
@@ -103,14 +106,29 @@ def main(argv: list[str] | None = None) -> int:
             finally:
                 finder.destroy_node()
         tiles = tiles_for(setup, args.cells, launched)
-        host = host_robots(setup.params, setup.protocol, topics, tiles, setup=setup)
+        progress = Path(f"{args.ready}.count") if args.ready else None
+        host = host_robots(
+            setup.params,
+            setup.protocol,
+            topics,
+            tiles,
+            setup=setup,
+            created=progress and (lambda count: progress.write_text(str(count))),
+        )
+        if args.ready:
+            Path(args.ready).touch()
         if not launched:
             cells = ", ".join(f"{a}-{b}" for a, b in tiles)
             print(f"camo worker: hosting robots {cells} of {topics.run}", file=sys.stderr)
-        code = host.run(stop, until=run_ended(host.node, topics))
+        code = host.run(stop, until=run_ended(host.node, topics), destroy=False)
         if not launched and not stop:
             print(f"camo worker: {topics.run} has ended", file=sys.stderr)
-        return code
+        # At once: tearing thousands of robot nodes down one by one takes longer than the run's
+        # end allows, and the process's exit frees them all (its shared-memory files, left
+        # behind, are removed as stale by the next camo process: shm.py).
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
     except CamoError as exc:
         print(f"camo worker: error: {exc}", file=sys.stderr)
         return 2

@@ -169,8 +169,14 @@ class Host:
             else:
                 executor.spin_once(timeout_sec=POLL_IDLE)  # idle: let the executor wait
 
-    def run(self, stop=None, until=None, extra_nodes: tuple[Node, ...] = ()) -> int:
-        """Start every robot and spin until Ctrl-C, SIGTERM, shutdown or `until()`."""
+    def run(
+        self, stop=None, until=None, extra_nodes: tuple[Node, ...] = (), destroy: bool = True
+    ) -> int:
+        """Start every robot and spin until Ctrl-C, SIGTERM, shutdown or `until()`. What the
+        robots reported is written, and acknowledged by its readers, before this returns.
+        `destroy=False` leaves the nodes for the process's exit to take: destroying thousands
+        of nodes one by one costs longer than creating them (each says the graph anew), and a
+        worker that exits (os._exit) needs none of it."""
         executor = EventsExecutor()
         nodes = [*self.spun, *extra_nodes]
         transport = self.transport
@@ -183,11 +189,12 @@ class Host:
             pass
         finally:
             transport.close()
-            # Executor first, then nodes: the EventsExecutor must let go of the nodes' handles
-            # before they are destroyed, or interpreter exit can crash.
-            executor.shutdown()
-            for node in nodes:
-                executor.remove_node(node)
-            for node in [*nodes, *(r for r in self.robots if r not in nodes)]:
-                node.destroy_node()
+            if destroy:
+                # Executor first, then nodes: the EventsExecutor must let go of the nodes'
+                # handles before they are destroyed, or interpreter exit can crash.
+                executor.shutdown()
+                for node in nodes:
+                    executor.remove_node(node)
+                for node in [*nodes, *(r for r in self.robots if r not in nodes)]:
+                    node.destroy_node()
         return 0

@@ -87,9 +87,11 @@ class RobotNode(Node):
         now = self.clock()
         self._emit(self.protocol.start(now), now)
 
-    def deliver(self, message: Message) -> None:
-        now = self.clock()
-        self._emit(self.protocol.deliver(message, now), now)
+    def deliver(self, message: Message, now: float) -> None:
+        """A neighbour's message, handed over by the transport at `now` (its pump's clock)."""
+        out = self.protocol.deliver(message, now)
+        if out is not NOTHING:  # most messages only wait in the inbox for their step
+            self._emit(out, now)
 
     def tick(self, now: float) -> None:
         self._emit(self.protocol.tick(now), now)
@@ -195,10 +197,12 @@ def host_robots(
     sensors: dict[int, Sensor] | None = None,
     displays: dict[int, Display] | None = None,
     setup: RunSetup | None = None,
+    created: Callable[[int], None] | None = None,
 ) -> Host:
     """This process's robots (tiles of robot ids), ready to run: a projected-image sensor
     unless `sensors` names another (a Droplet's); `lean` robots have no services of their own.
-    `setup`: the run's, as its launcher published it (which tiles and backgrounds it has)."""
+    `setup`: the run's, as its launcher published it (which tiles and backgrounds it has);
+    `created(count)`: told every 1024 robot nodes created (thousands take a while)."""
     node = host_node(topics)
     protocol = protocol.for_swarm(params.count)
     transport = Transport(node, params, topics, tiles, setup, protocol.step_timeout)
@@ -222,6 +226,8 @@ def host_robots(
             max(REPORT_PERIOD, len(transport.hosted) / REPORTS_PER_PROCESS),
         )
         robots.append(RobotNode(steps, transport, **(LEAN_NODE if lean else {})))
+        if created is not None and len(robots) % 1024 == 0:
+            created(len(robots))
     return Host(node, transport, projection, robots, not lean, tuple(hardware))
 
 

@@ -35,6 +35,7 @@ import time
 from collections import defaultdict, deque
 from collections.abc import Callable, Iterable
 
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
@@ -93,13 +94,14 @@ MAX_BATCH = 256
 # A process's statuses go out as one array a STATUS_PERIOD (s), of MAX_STATUS_ROWS at most.
 STATUS_PERIOD = 0.2
 MAX_STATUS_ROWS = 4096
+CLOSE_ACK_WAIT = 1.0  # s a closing process waits for its last statuses to be acknowledged
 # Arrays taken from one edge topic per poll at most (each up to MAX_BATCH robot messages).
 EDGE_TAKE = 4
 # Seconds a pump hands messages to robots per call at most: the rest is handed over on the
 # host loop's next turn, after its timers, heartbeat and stop flag have had theirs.
 PUMP_BUDGET = 0.02
 NOT_RECEIVED = Relay.NOT_RECEIVED
-Receiver = Callable[[Message], None]
+Receiver = Callable[[Message, float], None]  # a robot's: (message, now)
 Tile = tuple[int, int]  # first and last robot id, inclusive
 
 
@@ -269,13 +271,15 @@ class Transport:
             StatusArray, topics.status, history_qos(status_depth(params) * len(self.hosted))
         )
         self.statuses = Statuses(status_pub, node.get_name())
+        self.status_pub = status_pub
         self.receivers: dict[tuple[int, str], list[Receiver]] = defaultdict(list)
         self.needed: set[int] = set()  # neighbours hosted elsewhere
         self.remote: set[tuple[int, int]] = set()  # tiles subscribed to
         self.rejected = Rejections(node.get_logger())
         self.trusted = Hosts(params.count, self.rejected, setup)
         self._seen: dict[tuple[str, int, int, int], object] = {}  # each message taken, once
-        self._queue: deque[tuple[Receiver, Message]] = deque()
+        # Messages to hand over, each with the robots that hear it.
+        self._queue: deque[tuple[list[Receiver], Message]] = deque()
         self._generation = 0  # queued messages left of the generation being handed over
         self._announced_rejections = 0
         self.polled = PolledTopics(f"{node.get_name()}_edges", node.get_namespace())
@@ -442,8 +446,9 @@ class Transport:
 
     def _enqueue(self, message: Message) -> None:
         """For every hosted robot that listens to the message's sender, at the next pump."""
-        for receive in self.receivers.get((message.sender, message.kind), ()):
-            self._queue.append((receive, message))
+        receivers = self.receivers.get((message.sender, message.kind))
+        if receivers:
+            self._queue.append((receivers, message))
 
     def pump(self, budget: float = PUMP_BUDGET) -> None:
         """Hand queued messages to their robots, in generations: first what came in, then what
@@ -452,18 +457,22 @@ class Transport:
         robots get what they wait for before this process goes on with robots they do not
         hear."""
         queue = self._queue
-        end = time.monotonic() + budget
+        now = time.monotonic()
+        end = now + budget
         handed = 0
         while queue:
             if not self._generation:
                 self._flush_edges()
                 self._generation = len(queue)
-            receive, message = queue.popleft()
+            receivers, message = queue.popleft()
             self._generation -= 1
-            receive(message)
+            for receive in receivers:
+                receive(message, now)
             handed += 1
-            if not handed % 32 and time.monotonic() >= end:
-                break
+            if not handed % 16:  # the clock a few times per batch of messages, not per robot
+                now = time.monotonic()
+                if now >= end:
+                    break
         self._flush_edges()
 
     def close(self) -> None:
@@ -472,4 +481,6 @@ class Transport:
         self.heartbeat.close()
         self.flush()
         self.statuses.flush()
+        # The last statuses reach the monitor and the recorder before the process goes.
+        self.status_pub.wait_for_all_acked(Duration(seconds=CLOSE_ACK_WAIT))
         self.polled.close()
