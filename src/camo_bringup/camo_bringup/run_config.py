@@ -37,7 +37,7 @@ from camo_projector.projector_node import ProjectorParams
 
 # Robots a worker hosts at most by default: creating a process's nodes grows with their square
 # (docs/swarm.md, "Set-up"), so a large swarm is spread over more processes than cores.
-ROBOTS_PER_PROCESS = 4096
+ROBOTS_PER_PROCESS = 8192
 
 
 def build_parser() -> Parser:

@@ -3,8 +3,12 @@
 Every process with robots runs one Host: a worker started by the launcher or by
 hand on another machine, a robot alone (`robot_node`), a Droplet bridge. It
 owns one node of its own, which holds the transport's DDS endpoints
-(`transport.py`), the background subscription and the one timer that ticks
-every robot's protocol; its loop spins the executor and polls the transport.
+(`transport.py`, with the process's heartbeat), the background subscription and
+the one timer that ticks the robots whose deadline is due; its loop spins the
+executor and polls the transport. Each turn of the loop does a bounded amount of
+work (a batch of robots started or shown a new background, a bounded take, 20
+ms of handing messages over), so that its timers and stop flag keep up whatever
+the number of robots.
 """
 
 from __future__ import annotations

@@ -73,9 +73,9 @@ class StepProtocol:
         report_period: float = 0.0,
     ) -> None:
         self.params = params
-        # A neighbour the transport knows to be alive (e.g. hosted by the same process) is waited
-        # for past the deadline: it is itself waiting, and giving up on it would wrongly spread
-        # one dead robot's silence through its living neighbours.
+        # A neighbour the transport knows to be alive (hosted by this process, or by one whose
+        # heartbeats say it lives: liveness.py) is waited for past the deadline: it is slow, or
+        # itself waiting, and giving up on it would compute something else than the simulator.
         self.known_alive = known_alive or (lambda robot: False)
         # Between phase changes a robot reports at most this often (0: every step): a large,
         # fast swarm's statuses would otherwise outnumber its messages.
