@@ -282,7 +282,7 @@ class Transport:
         self._queue: deque[tuple[list[Receiver], Message]] = deque()
         self._generation = 0  # queued messages left of the generation being handed over
         self._announced_rejections = 0
-        self.polled = PolledTopics(f"{node.get_name()}_edges", node.get_namespace())
+        self.polled = PolledTopics(f"{node.get_name()}_edges", node.get_namespace(), node.context)
         self.host_pub = node.create_publisher(Host, topics.hosts, LATCHED)
         self.listen(Host, topics.hosts, LATCHED_READER, self._on_host)
         # Which processes are alive, by their heartbeats; this one's own beats from now on (its

@@ -1,0 +1,65 @@
+"""A process's transport: its statuses go out as a few arrays, not a message per robot, and its
+pump hands messages over for a bounded time per turn, in order, the rest on later turns."""
+
+import time
+from types import SimpleNamespace
+
+import rclpy
+from support import ros_context
+
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.robot_io import Message
+from camo_nodes.topics.names import RunTopics
+from camo_nodes.transport import MAX_STATUS_ROWS, STATUS_PERIOD, Statuses, Transport
+
+
+class Writer:
+    def __init__(self) -> None:
+        self.sent: list = []
+
+    def publish(self, msg) -> None:
+        self.sent.append(msg)
+
+
+def report(robot: int) -> SimpleNamespace:
+    return SimpleNamespace(sender_id=robot, phase=2, step=1, sensed=9.0, p=(1.0, 0.0, 0.0))
+
+
+def test_thousands_of_reports_go_out_as_a_few_arrays_and_no_more_often_than_the_period():
+    writer = Writer()
+    statuses = Statuses(writer, "w")
+    now = time.monotonic()
+    for robot in range(2 * MAX_STATUS_ROWS + 5):
+        statuses.add(report(robot))
+    assert [len(m.sender_id) for m in writer.sent] == [MAX_STATUS_ROWS, MAX_STATUS_ROWS]
+    statuses.flush(now)  # within the period since the last array: not yet
+    assert len(writer.sent) == 2
+    statuses.flush(now + STATUS_PERIOD + 1.0)
+    assert len(writer.sent[-1].sender_id) == 5 and writer.sent[-1].sender_id[-1] == 2 * 4096 + 4
+    statuses.flush()  # nothing left: nothing written
+    assert len(writer.sent) == 3
+
+
+def test_a_pump_stops_at_its_budget_and_the_next_ones_go_on_in_order():
+    with ros_context() as context:
+        node = rclpy.create_node("pump_test", context=context)
+        params = CamoParams(rows=4, cols=4)
+        transport = Transport(node, params, RunTopics("pump_test"), [(0, 15)])
+        heard: list[int] = []
+
+        def slow_robot(message: Message, now: float) -> None:
+            time.sleep(0.0005)
+            heard.append(message.step)
+
+        transport.add(1, [(0, "vote")], slow_robot)
+        for step in range(400):  # 0.2 s of work
+            transport._enqueue(Message("vote", 0, 0, step, ((1.0, 0.0, 0.0), 1)))
+        started = time.monotonic()
+        transport.pump(budget=0.02)
+        assert time.monotonic() - started < 0.1 and 0 < len(heard) < 400
+        assert transport.busy  # it says that work is left for the next turn
+        while transport.busy:
+            transport.pump(budget=0.02)
+        assert heard == list(range(400))
+        transport.close()
+        node.destroy_node()
