@@ -54,7 +54,8 @@ class Ticks:
 
     def due(self, now: float, limit: int) -> list[int]:
         """Up to `limit` robots whose due has come (taken out of the heap: `add` them back)."""
-        heap, queued, out = self._heap, self._queued, []
+        heap, queued = self._heap, self._queued
+        out: list[int] = []
         while heap and heap[0][0] <= now and len(out) < limit:
             due, index = heapq.heappop(heap)
             if queued.get(index) == due:
