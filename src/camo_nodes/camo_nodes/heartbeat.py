@@ -16,26 +16,11 @@ import threading
 import time
 
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from camo_core.algorithm.liveness import HEARTBEAT_PERIOD
 from camo_msgs.msg import Heartbeat
 from camo_nodes.topics.names import RunTopics
-
-HEARTBEAT_WRITER = QoSProfile(
-    depth=4,
-    history=HistoryPolicy.KEEP_LAST,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
-# Every sample until taken (a reader polls them each turn of its loop, a bounded batch): a
-# stranger's flood cannot push a process's heartbeats out.
-HEARTBEAT_READER = QoSProfile(
-    depth=1,
-    history=HistoryPolicy.KEEP_ALL,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+from camo_nodes.topics.qos import HEARTBEAT_WRITER
 
 
 class HeartbeatThread:

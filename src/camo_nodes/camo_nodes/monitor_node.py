@@ -120,10 +120,8 @@ class MonitorNode(Node):
         self.images.add(stamp, lambda: image)
 
     def _on_status(self, data: bytes, gid: bytes) -> None:
-        try:
-            msg = deserialize_message(data, StatusArray)
-        except Exception:  # noqa: BLE001 - rclpy's deserializer raises several kinds
-            self.rejected.refuse("a status array that does not decode", gid)
+        msg = self.rejected.decoded(data, StatusArray, gid, "a status array")
+        if msg is None:
             return
         try:
             rows = StatusRows.from_message(msg)

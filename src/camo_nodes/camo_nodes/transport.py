@@ -64,11 +64,11 @@ from camo_msgs.msg import (
     Vote,
     VoteArray,
 )
-from camo_nodes.heartbeat import HEARTBEAT_READER, HeartbeatThread
+from camo_nodes.heartbeat import HeartbeatThread
 from camo_nodes.polled import PolledTopics
 from camo_nodes.rcl_take import PREFIX
 from camo_nodes.topics.names import RunTopics, tile_name
-from camo_nodes.topics.qos import LATCHED, LATCHED_READER, history_qos
+from camo_nodes.topics.qos import HEARTBEAT_READER, LATCHED, LATCHED_READER, history_qos
 from camo_nodes.trust import Hosts, Rejections
 
 MESSAGE_TYPES = {
@@ -325,10 +325,8 @@ class Transport:
         return self.liveness.robot_alive(robot)
 
     def _on_heartbeat(self, data: bytes, gid: bytes) -> None:
-        try:
-            msg = deserialize_message(data, Heartbeat)
-        except Exception:  # noqa: BLE001 - rclpy's deserializer raises several kinds
-            self.rejected.refuse("a heartbeat that does not decode", gid)
+        msg = self.rejected.decoded(data, Heartbeat, gid, "a heartbeat")
+        if msg is None:
             return
         offline = frozenset(int(r) for r in msg.offline[:1024])
         if not self.liveness.heard(gid[:PREFIX], offline):

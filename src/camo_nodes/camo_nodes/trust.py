@@ -20,6 +20,8 @@ from __future__ import annotations
 
 from collections import Counter
 
+from rclpy.serialization import deserialize_message
+
 from camo_core.algorithm.run_setup import RunSetup
 from camo_msgs.msg import Host
 from camo_nodes.rcl_take import PREFIX
@@ -44,6 +46,15 @@ class Rejections:
                 f"refused a message{claimed} from the process with GUID prefix {process.hex()}: "
                 f"{reason}; further ones from it are only counted"
             )
+
+    def decoded(self, data: bytes, msg_type, gid: bytes, what: str):
+        """The message `data` holds, or None, refused as `what` that does not decode (bytes a
+        stranger wrote on the topic)."""
+        try:
+            return deserialize_message(data, msg_type)
+        except Exception:  # noqa: BLE001 - rclpy's deserializer raises several kinds
+            self.refuse(f"{what} that does not decode", gid)
+            return None
 
     @property
     def total(self) -> int:

@@ -22,6 +22,22 @@ LATCHED_READER = QoSProfile(
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 
+# Heartbeats (`heartbeat.py`): the latest few; nobody needs old ones.
+HEARTBEAT_WRITER = QoSProfile(
+    depth=4,
+    history=HistoryPolicy.KEEP_LAST,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+# Every sample until taken (a reader polls them each turn of its loop, a bounded batch): a
+# stranger's flood cannot push a process's heartbeats out.
+HEARTBEAT_READER = QoSProfile(
+    depth=1,
+    history=HistoryPolicy.KEEP_ALL,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
 
 def history_qos(depth: int) -> QoSProfile:
     """Reliable and transient-local: a neighbour that starts late still gets every step's
