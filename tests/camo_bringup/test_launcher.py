@@ -2,8 +2,10 @@
 killed robots and Ctrl-C, leave nothing behind a killed launcher, switch backgrounds, and refuse
 bad options in one line."""
 
+import contextlib
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -813,3 +815,48 @@ def test_ctrl_c_stops_thousands_of_robots_within_seconds_and_keeps_what_they_rep
     summary = json.loads((out_dir / "summary.json").read_text())
     assert "incomplete" in summary and "dead" not in summary
     assert len(summary["consensus_trace"]) >= 2
+
+
+@contextlib.contextmanager
+def full_filesystem(tmp_path, size: str = "200k"):
+    """A tmpfs of `size` mounted in tmp_path (root only; the test is skipped elsewhere)."""
+    mount = tmp_path / "small"
+    mount.mkdir()
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        pytest.skip("mounting a small tmpfs needs root")
+    made = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mount)],
+        capture_output=True,
+        text=True,
+    )
+    if made.returncode:
+        pytest.skip(f"cannot mount a tmpfs here: {made.stderr.strip()[-120:]}")
+    try:
+        yield mount
+    finally:
+        subprocess.run(["umount", "-l", str(mount)], capture_output=True)
+
+
+@pytest.mark.slow(SWARM)
+def test_a_recording_onto_a_full_disk_costs_the_bag_and_never_the_run(tmp_path):
+    options = ["--pattern", "leopard", "--rows", "16", "--cols", "16", "--seed", "4"]
+    options += ["--rho-comm", "0.1"]
+    with full_filesystem(tmp_path) as small:
+        bag = small / "bag"
+        run = camo_run(*options, "--record", str(bag), "--out", str(tmp_path / "run"))
+        assert run.returncode == 3, run.stderr[-3000:]
+        assert "Traceback" not in run.stderr, run.stderr[-3000:]
+        said = [line for line in run.stderr.splitlines() if "error" in line]
+        assert len(said) == 1, said
+        assert f"cannot write the bag {bag}" in said[0] and "No space left" in said[0]
+        assert "messages" in said[0] and "incomplete" in said[0]
+        info = bag_tool("cli", "info", str(bag))
+        assert info.returncode != 0 and "truncated or was not closed" in info.stderr
+        assert len(info.stderr.strip().splitlines()) == 1 and "Traceback" not in info.stderr
+        repaired = bag_tool("cli", "repair", str(bag), "--out", str(tmp_path / "repaired"))
+        assert repaired.returncode == 0, repaired.stderr
+    again = bag_tool("cli", "info", str(tmp_path / "repaired"))
+    assert again.returncode == 0 and "Messages:" in again.stdout, again.stderr
+    sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    assert_like_sim(tmp_path / "run", tmp_path / "sim")

@@ -123,10 +123,30 @@ class BagWriter:
         self.start_ns: int | None = None
         self.end_ns = 0
         self.closed = False
+        # Why writing stopped (a full disk, a lost device): the bag ends there, the run goes on.
+        self.failed: str | None = None
+        self.saved = 0  # messages surely in the file: up to the last flush that succeeded
+        self.saved_ns = 0  # the log time of the last of them
+
+    def _stopped(self, exc: OSError) -> None:
+        """A write failed: keep what the file holds and write nothing more (the file's index
+        and metadata.yaml are left out; `bag repair` rebuilds them)."""
+        self.failed = exc.strerror or str(exc)
+        self.closed = True
+        try:
+            self._stream.close()
+        except OSError:
+            pass  # the unwritten rest of its buffer is what the failure cost
 
     def add_topic(self, topic: TopicInfo, definition: str) -> None:
-        if topic.name in self._channels:
+        if topic.name in self._channels or self.closed:
             return
+        try:
+            self._register(topic, definition)
+        except OSError as exc:
+            self._stopped(exc)
+
+    def _register(self, topic: TopicInfo, definition: str) -> None:
         if topic.type not in self._schemas:
             self._schemas[topic.type] = self._writer.register_schema(
                 name=topic.type, encoding="ros2msg", data=definition.encode()
@@ -141,22 +161,36 @@ class BagWriter:
         self._sequence[topic.name] = 0
 
     def write(self, topic: str, data: bytes, log_time: int, publish_time: int) -> None:
+        """One message (nothing once the bag is closed or writing has failed)."""
+        if self.closed:
+            return
         self._sequence[topic] += 1
-        self._writer.add_message(
-            channel_id=self._channels[topic],
-            log_time=log_time,
-            data=data,
-            publish_time=publish_time,
-            sequence=self._sequence[topic],
-        )
+        try:
+            self._writer.add_message(
+                channel_id=self._channels[topic],
+                log_time=log_time,
+                data=data,
+                publish_time=publish_time,
+                sequence=self._sequence[topic],
+            )
+        except OSError as exc:  # a chunk was full and could not be written
+            self._stopped(exc)
+            return
         self.topics[topic].count += 1
         self.start_ns = log_time if self.start_ns is None else min(self.start_ns, log_time)
         self.end_ns = max(self.end_ns, log_time)
 
     def flush(self) -> None:
         """Write the chunk in progress, so that a killed process loses nothing written before."""
-        if not self.closed:
+        if self.closed:
+            return
+        try:
             self._writer.flush()
+            self._stream.flush()
+        except OSError as exc:
+            self._stopped(exc)
+            return
+        self.saved, self.saved_ns = self.message_count, self.end_ns
 
     @property
     def message_count(self) -> int:
@@ -165,20 +199,30 @@ class BagWriter:
     def close(self) -> None:
         if self.closed:
             return
+        self.flush()  # what is written before the index, should the index not fit
+        if self.closed:
+            return
         self.closed = True
         metadata = metadata_yaml(
             self.file.name, list(self.topics.values()), self.start_ns or 0, self.end_ns
         )
-        self._writer.add_metadata(
-            "rosbag2", {"serialized_metadata": metadata, "ROS_DISTRO": "jazzy"}
-        )
-        self._writer.finish()
-        self._stream.close()
-        (self.folder / "metadata.yaml").write_text(
-            yaml.safe_dump(
-                {"rosbag2_bagfile_information": yaml.safe_load(metadata)}, sort_keys=False
+        try:
+            self._writer.add_metadata(
+                "rosbag2", {"serialized_metadata": metadata, "ROS_DISTRO": "jazzy"}
             )
+            self._writer.finish()
+            self._stream.close()
+        except OSError as exc:
+            self._stopped(exc)
+            return
+        info = yaml.safe_dump(
+            {"rosbag2_bagfile_information": yaml.safe_load(metadata)}, sort_keys=False
         )
+        try:
+            (self.folder / "metadata.yaml").write_text(info)
+        except OSError as exc:
+            (self.folder / "metadata.yaml").unlink(missing_ok=True)  # no half a description
+            self.failed = exc.strerror or str(exc)
 
 
 def metadata_yaml(file_name: str, topics: list[TopicInfo], start_ns: int, end_ns: int) -> str:

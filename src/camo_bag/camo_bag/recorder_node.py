@@ -50,6 +50,9 @@ from camo_nodes.topics.runs import result_from, run_ended, setup_from, wait_for_
 from camo_nodes.topics.startup import LEAN_NODE, add_network_options, network_env, start_ros
 
 RESULT_GRACE = 10.0  # s a recorder waits, after the run's result, for what the result names
+# A recorder that could not write its bag (a full disk) exits with this code: the bag ends
+# where writing failed, and the run it recorded goes on without it.
+EXIT_WRITE_FAILED = 3
 
 
 def header_stamp_ns(data: bytes) -> int | None:
@@ -201,6 +204,18 @@ class RecorderNode(Node):
     def close(self) -> None:
         self.bag.close()
 
+    def failure(self) -> str:
+        """One line: which bag stopped, why, and how far it got."""
+        bag = self.bag
+        start = bag.start_ns or bag.saved_ns
+        got = f"{bag.saved} messages, {max(0, bag.saved_ns - start) / 1e9:.1f} s"
+        if self.run is not None:
+            got += f" of run {self.run.run}"
+        return (
+            f"cannot write the bag {bag.folder} ({bag.failed}); it holds its first {got} and "
+            f"is incomplete (./camo bag repair {bag.folder} makes a readable copy)"
+        )
+
 
 def join(executor, run_id: str | None, wait: float, stop) -> RunTopics:
     """The run to record: as soon as its topics appear, to miss nothing."""
@@ -257,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         ended = run_ended(node, run) if run else (lambda: False)
         result_at = None
-        while not stop and rclpy.ok() and not ended():
+        while not stop and rclpy.ok() and not ended() and node.bag.failed is None:
             executor.spin_once(timeout_sec=0.2)
             if run is not None and node.ledger.result is not None:
                 # The result came: what it names should follow at once; RESULT_GRACE at most.
@@ -272,23 +287,32 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         executor.shutdown()
-        if node is not None:
-            executor.remove_node(node)
-            node.close()
-            print(
-                f"recorder_node: wrote {node.bag.message_count} messages on "
-                f"{len(node.bag.topics)} topics to {node.bag.folder}",
-                file=sys.stderr,
-            )
-            if node.run is not None:
-                gaps = node.ledger.gaps()
-                verdict = "incomplete: " + "; ".join(gaps) if gaps else "complete"
-                print(
-                    f"recorder_node: the bag of run {node.run.run} is {verdict}", file=sys.stderr
-                )
-            node.destroy_node()
+        code = 0 if node is None else finish(executor, node)
         rclpy.try_shutdown()
-    return 0
+    return code
+
+
+def finish(executor, node: RecorderNode) -> int:
+    """Close the bag and say what it holds (one line if writing failed); the exit code."""
+    executor.remove_node(node)
+    node.close()
+    bag = node.bag
+    try:
+        if bag.failed is not None:
+            print(f"recorder_node: error: {node.failure()}", file=sys.stderr)
+            return EXIT_WRITE_FAILED
+        print(
+            f"recorder_node: wrote {bag.message_count} messages on {len(bag.topics)} topics "
+            f"to {bag.folder}",
+            file=sys.stderr,
+        )
+        if node.run is not None:
+            gaps = node.ledger.gaps()
+            verdict = "incomplete: " + "; ".join(gaps) if gaps else "complete"
+            print(f"recorder_node: the bag of run {node.run.run} is {verdict}", file=sys.stderr)
+        return 0
+    finally:
+        node.destroy_node()
 
 
 if __name__ == "__main__":

@@ -82,6 +82,7 @@ def start_processes(config: RunConfig, group: ProcessGroup, session: Session) ->
     if config.record:
         recorder = group.start_recorder(str(config.record), config.topics.run)
         session.recorders.own = f"{socket.gethostname()}:{recorder.pid}"  # as it names itself
+        session.recorders.own_running = group.recording
         print(f"camo run: recording every topic to {config.record}/", file=sys.stderr)
     if config.foxglove is not None:
         group.start_view(config.topics.run, config.foxglove)  # it says where it serves
@@ -196,10 +197,18 @@ def run(config: RunConfig) -> int:
         faulthandler.cancel_dump_traceback_later()
         stuck.close()
         Path(stuck.name).unlink()  # it ended in time: nothing to say
+    if code == 0 and group.recording_failed():
+        print(
+            f"camo run: the run finished and wrote its results to {config.folder}/; its "
+            "recording did not (the recorder said why above)",
+            file=sys.stderr,
+        )
+        code = EXIT_RECORDING
     return code
 
 
 TEARDOWN_LIMIT = 60.0  # s; stopping, writing and the result take 25 s at most
+EXIT_RECORDING = 3  # the run finished, its recording failed (a full disk): the bag is cut short
 
 
 def watchdog(folder: Path):

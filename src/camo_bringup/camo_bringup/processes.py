@@ -176,11 +176,23 @@ class ProcessGroup:
         }
 
     def failed(self) -> str | None:
-        """A process exited with an error (a robot killed by a signal is a fault, not this)."""
+        """A process exited with an error (a robot killed by a signal is a fault, not this; a
+        recorder that could not write costs its bag, not the run: `recording_failed`)."""
         for proc in self.procs:
+            if proc is self.recorder:
+                continue
             if proc.poll() is not None and proc.returncode > 0:
                 return f"a swarm process exited with code {proc.returncode}: {proc.args[2]}"
         return None
+
+    def recording_failed(self) -> bool:
+        """Our recorder exited before the run's end with an error (it said why)."""
+        recorder = self.recorder
+        return recorder is not None and recorder.poll() is not None and recorder.returncode != 0
+
+    def recording(self) -> bool:
+        """Our recorder runs."""
+        return self.recorder is not None and self.recorder.poll() is None
 
     def lost_cells(self) -> list[int]:
         """Robots whose process has exited (killed, say): they cannot finish."""

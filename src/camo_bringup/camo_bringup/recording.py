@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from rclpy.duration import Duration
@@ -50,6 +51,9 @@ class Recorders:
         node, topics = session.node, session.topics
         self.reports: dict[str, dict] = {}
         self.own: str | None = None  # our recorder's report's "recorder", once started
+        # Whether our recorder still runs: one that could not write its bag (a full disk) has
+        # said so and exited, and the run goes on without waiting for it.
+        self.own_running: Callable[[], bool] = lambda: True
         node.create_subscription(String, topics.recorded, self._on_recorded, LATCHED_READER)
         # Created now, written at the end: recorders subscribe to it while the run goes on.
         self.result_pub = node.create_publisher(String, topics.result, LATCHED)
@@ -61,20 +65,29 @@ class Recorders:
 
     def own_heard(self) -> bool:
         """Whether our own recorder has reported (one started by hand may be seen first)."""
-        return self.own is None or self.own in self.reports
+        return self.own is None or self.own in self.reports or not self.own_running()
+
+    def live_reports(self) -> list[dict]:
+        """The reports of the recorders that still record (not our own once it has failed)."""
+        gone = None if self.own_running() else self.own
+        return [r for name, r in self.reports.items() if name != gone]
 
     def count(self) -> int:
         """The recorders the graph shows, and at least our own: on a loaded machine discovery
         can show it later than a short round ends, and the robots must not stop before it has
         their messages."""
-        own = 1 if self.session.config.record else 0
-        return max(own, self.session.node.count_publishers(self.session.topics.recorded))
+        publishers = self.session.node.count_publishers(self.session.topics.recorded)
+        if not self.session.config.record:
+            return publishers
+        if not self.own_running():  # the graph may list it a while after it exited
+            return max(len(self.live_reports()), publishers - 1)
+        return max(1, publishers)
 
     def present(self) -> bool:
         """Whether a recorder records the run. A recorder waiting for a run finds it within
         about a discovery announcement period (fastdds.xml) of its parameters' appearing: a
         run shorter than that gives it the time."""
-        if self.session.config.record:
+        if self.session.config.record and self.own_running():
             return True
         settle = RECORDER_SETTLE - (time.monotonic() - self.session.started)
         if settle > 0:
@@ -91,7 +104,7 @@ class Recorders:
 
         def short() -> list[dict]:
             """The reports of recorders that do not hold the round yet."""
-            reports = list(self.reports.values())
+            reports = self.live_reports()
             if len(reports) < self.count() or not self.own_heard():
                 return [{}]  # a recorder not heard from yet
             return [r for r in reports if not holds(r, round_index, finished)]
@@ -134,7 +147,7 @@ class Recorders:
         self.result_pub.publish(String(data=json.dumps(result)))
         deadline = time.monotonic() + limit
         while time.monotonic() < deadline:
-            reports = list(self.reports.values())
+            reports = self.live_reports()
             present = self.count()
             heard = len(reports) >= present and self.own_heard()
             if not present or (heard and all(r["result"] for r in reports)):
