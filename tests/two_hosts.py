@@ -40,6 +40,28 @@ def netns_available() -> tuple[bool, str]:
         ip("netns", "del", ns, check=False)
 
 
+def lossy_available() -> tuple[bool, str]:
+    """(True, "") where packets can be dropped at random between the hosts, else why not."""
+    ok, why = netns_available()
+    if not ok:
+        return ok, why
+    if shutil.which("iptables") is None:
+        return False, "needs iptables to drop packets (this kernel has no tc netem)"
+    ns = f"camo_chk_{uuid.uuid4().hex[:8]}"
+    try:
+        ip("netns", "add", ns)
+        rule = ["-A", "INPUT", "-m", "statistic", "--mode", "random", "--probability", "0.1"]
+        tried = subprocess.run(
+            ["ip", "netns", "exec", ns, "iptables", *rule, "-j", "DROP"],
+            capture_output=True, text=True,
+        )  # fmt: skip
+        if tried.returncode:
+            return False, "iptables cannot drop at random here: " + tried.stderr.strip()[-120:]
+        return True, ""
+    finally:
+        ip("netns", "del", ns, check=False)
+
+
 class TwoHosts:
     """Namespaces a and b; veth addresses <subnet>.1 (a) and <subnet>.2 (b)."""
 
@@ -83,6 +105,35 @@ class TwoHosts:
         )
         self.procs.append(proc)
         return proc
+
+    def cut(self) -> None:
+        """Partition the hosts: the veth goes down (the kernel drops its routes)."""
+        ip("-n", self.ns["a"], "link", "set", self.dev["a"], "down")
+
+    def mend(self) -> None:
+        """Join them again, with the multicast routes the cut took away."""
+        ip("-n", self.ns["a"], "link", "set", self.dev["a"], "up")
+        for host in "ab":
+            ip("-n", self.ns[host], "route", "replace", "224.0.0.0/4", "dev", self.dev[host])
+
+    def drop(self, host: str, probability: float) -> None:
+        """Drop that share of the packets arriving at a host, at random (iptables' statistic
+        match: this kernel has no netem; `lossy_available` says whether it works here)."""
+        subprocess.run(
+            ["ip", "netns", "exec", self.ns[host], "iptables", "-A", "INPUT", "-i",
+             self.dev[host], "-m", "statistic", "--mode", "random", "--probability",
+             str(probability), "-j", "DROP"],
+            capture_output=True, text=True, check=True,
+        )  # fmt: skip
+
+    def dropped(self, host: str) -> int:
+        """Packets dropped at a host so far by `drop`."""
+        out = subprocess.run(
+            ["ip", "netns", "exec", self.ns[host], "iptables", "-L", "INPUT", "-v", "-n", "-x"],
+            capture_output=True, text=True, check=True,
+        )  # fmt: skip
+        rows = [line.split() for line in out.stdout.splitlines() if "DROP" in line]
+        return sum(int(row[0]) for row in rows)
 
     def traffic(self, host: str = "a") -> int:
         """Bytes sent and received on a host's veth so far: proof that data crossed the net."""

@@ -2,13 +2,14 @@
 the launcher and half the robots on one, a worker with the other half on the other, found by
 multicast or through a discovery server; the result equals the simulator."""
 
+import json
 import os
 import sys
 import time
 
 import pytest
 from support import SWARM, assert_like_sim, domain, run_camo
-from two_hosts import TwoHosts, netns_available
+from two_hosts import TwoHosts, lossy_available, netns_available
 
 OK, WHY = netns_available()
 pytestmark = pytest.mark.skipif(not OK, reason=WHY)
@@ -104,3 +105,70 @@ def test_the_discovery_server_stops_on_ctrl_c_even_with_sigint_ignored_by_its_st
             server.kill()
             server.wait()
             pytest.fail("the discovery server ran on after SIGINT")
+
+
+def split_run(net: TwoHosts, tmp_path, env: dict[str, str]) -> tuple:
+    """The launcher with half the robots on host a, a worker with the rest on host b."""
+    half = ROWS * COLS // 2
+    network = ["--network", "subnet"]
+    launcher = net.popen(
+        "a",
+        [sys.executable, "-m", "camo_bringup.launcher", *OPTIONS, "--procs", "1"]
+        + ["--remote-cells", f"{half}-{ROWS * COLS - 1}", "--run-id", "faults"]
+        + ["--out", str(tmp_path / "run"), *network],
+        env,
+    )
+    worker = net.popen(
+        "b",
+        [sys.executable, "-m", "camo_bringup.worker", "--cells", f"{half}-{ROWS * COLS - 1}"]
+        + ["--run-id", "faults", *network],
+        env,
+    )
+    return launcher, worker
+
+
+def equals_the_simulator(tmp_path, launcher, worker) -> None:
+    _, said = launcher.communicate(timeout=300)
+    assert launcher.returncode == 0, said[-3000:]
+    assert worker.wait(timeout=60) == 0, worker.stderr.read()[-2000:]
+    assert "Traceback" not in said
+    sim = run_camo("sim", *OPTIONS, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    assert_like_sim(tmp_path / "run", tmp_path / "sim")
+    timing = json.loads((tmp_path / "run" / "timing.json").read_text())
+    assert timing["deadlines"] == 0
+
+
+@pytest.mark.slow(SWARM)
+def test_a_partition_of_five_seconds_mid_consensus_leaves_the_result_equal_to_the_simulator(
+    tmp_path,
+):
+    with TwoHosts() as net:
+        launcher, worker = split_run(net, tmp_path, environment())
+        deadline = time.monotonic() + 180
+        while "consensus" not in launcher.stderr.readline():  # its progress line
+            assert launcher.poll() is None and time.monotonic() < deadline
+        net.cut()
+        time.sleep(0.5)
+        before = net.traffic("a")
+        time.sleep(4.5)
+        assert net.traffic("a") == before  # nothing crossed
+        net.mend()
+        assert launcher.poll() is None  # the cut fell within the run
+        equals_the_simulator(tmp_path, launcher, worker)
+
+
+LOSSY, WHY_NOT = lossy_available()
+
+
+@pytest.mark.slow(SWARM)
+@pytest.mark.skipif(not LOSSY, reason=WHY_NOT)
+def test_a_tenth_of_the_packets_lost_between_hosts_leaves_the_result_equal_to_the_simulator(
+    tmp_path,
+):
+    with TwoHosts() as net:
+        for host in "ab":
+            net.drop(host, 0.1)
+        launcher, worker = split_run(net, tmp_path, environment())
+        equals_the_simulator(tmp_path, launcher, worker)
+        assert net.dropped("a") + net.dropped("b") > 100
