@@ -7,6 +7,7 @@ import json
 import os
 import random
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -14,6 +15,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+import psutil
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.protocol import StepProtocol
@@ -30,26 +32,55 @@ COMPUTE = "computes for seconds: large grids, many trials, serial timeouts or a 
 FOXGLOVE_CLIENT = ROOT / "tests" / "foxglove_client"  # Foxglove's libraries, pinned (npm ci)
 
 
+def finished(proc: subprocess.Popen, timeout: float) -> tuple[str, str]:
+    """The whole output (stdout, stderr) of a process the test started, once it has ended, also
+    printed: pytest shows it when the test fails. A process that has not ended in `timeout` s
+    first writes every thread's stack, and so do the processes it started (SIGUSR1, see
+    camo_core.shutdown), then all are killed and the test fails with the lot."""
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        family = [proc.pid, *(child.pid for child in psutil.Process(proc.pid).children(True))]
+        for how in (signal.SIGUSR1, signal.SIGKILL):
+            for pid in family:
+                try:
+                    os.kill(pid, how)
+                except ProcessLookupError:
+                    pass
+            time.sleep(1.0)  # the stacks are written
+        out, err = proc.communicate()
+        show(proc, out, err)
+        raise AssertionError(
+            f"{' '.join(map(str, proc.args))[:200]} did not end in {timeout:g} s: the stacks of "
+            "its processes are in its output (captured stdout)"
+        ) from None
+    show(proc, out, err)
+    return out or "", err or ""
+
+
+def show(proc: subprocess.Popen, out: str | None, err: str | None) -> None:
+    """A process's whole output, into the test's captured stdout."""
+    print(f"==== {' '.join(map(str, proc.args))} (exit code {proc.returncode})")
+    print(f"---- stdout\n{out or ''}---- stderr\n{err or ''}", flush=True)
+
+
+def run_whole(argv: list[str], timeout: float, **kwargs) -> subprocess.CompletedProcess:
+    """subprocess.run(argv, capture_output=True, text=True), its output kept whole (`finished`)."""
+    proc = subprocess.Popen(
+        argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, **kwargs
+    )
+    out, err = finished(proc, timeout)
+    return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+
+
 def run_camo(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run the camo command line (already set up: we are inside ./camo test)."""
-    return subprocess.run(
-        [sys.executable, "-m", "camo_core.cli", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
+    return run_whole([sys.executable, "-m", "camo_core.cli", *args], timeout)
 
 
 def sweep(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run `./camo sweep` (as the camo script does, inside ./camo test)."""
-    return subprocess.run(
-        [sys.executable, "-m", "camo_sweep.cli", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
+    return run_whole([sys.executable, "-m", "camo_sweep.cli", *args], timeout)
 
 
 def sweep_table(folder) -> list[dict]:
@@ -88,13 +119,8 @@ def ros_context(domain_id: int | None = None):
 
 def camo_run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
     """`./camo run` with a domain of its own."""
-    return subprocess.run(
-        [sys.executable, "-m", "camo_bringup.launcher", *args, "--domain-id", str(domain())],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
+    argv = [sys.executable, "-m", "camo_bringup.launcher", *args, "--domain-id", str(domain())]
+    return run_whole(argv, timeout)
 
 
 def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 120.0) -> list[str]:
@@ -103,6 +129,7 @@ def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 120.0) -> 
     deadline = time.monotonic() + timeout
     for line in proc.stderr:
         seen.append(line)
+        print(line, end="")  # the test's captured stdout, shown if it fails
         if text in line:
             return seen
         assert time.monotonic() < deadline, (
@@ -176,13 +203,7 @@ class StatusListener:
 
 def bag_tool(module: str, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
     """Run a camo_bag command line (`cli`, `render`, `replay`, `recorder_node`)."""
-    return subprocess.run(
-        [sys.executable, "-m", f"camo_bag.{module}", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
+    return run_whole([sys.executable, "-m", f"camo_bag.{module}", *args], timeout)
 
 
 def robot_messages_in(bag, suffix: str) -> list:

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
-from support import ROOT, SWARM, domain
+from support import ROOT, SWARM, domain, finished
 
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 FRESH_SHELL = {"HOME": os.environ.get("HOME", "/root"), "PATH": "/usr/local/bin:/usr/bin:/bin"}
@@ -144,7 +144,7 @@ def test_every_command_of_the_doc_works(doc, tmp_path):
             parse_run_options(command)
         elif how == "refused":
             proc = shell(command, tmp_path, env)
-            _, err = proc.communicate(timeout=120)
+            _, err = finished(proc, 120)
             assert proc.returncode == 2 and len(err.strip().splitlines()) == 1, err[-1500:]
         elif how == SERVES:
             serve_until_up(command, tmp_path, env)
@@ -153,17 +153,17 @@ def test_every_command_of_the_doc_works(doc, tmp_path):
             time.sleep(2.0)
             swarm = shell("./camo run --rows 3 --cols 3 --out run_for_recorder", tmp_path, env)
             assert swarm.wait(timeout=240) == 0, swarm.communicate()[1][-1500:]
-            _, err = recorder.communicate(timeout=120)
+            _, err = finished(recorder, 120)
             assert recorder.returncode == 0, f"{command}: {err[-1500:]}"
         elif command.endswith("&"):
             background.append(shell(command[:-1], tmp_path, env))
         else:
             proc = shell(command, tmp_path, env)
-            _, err = proc.communicate(timeout=600)
+            _, err = finished(proc, 600)
             assert proc.returncode == 0, f"{command}: {err[-1500:]}"
         ran += 1
     for proc in background:
-        _, err = proc.communicate(timeout=300)
+        _, err = finished(proc, 300)
         assert proc.returncode == 0, err[-1500:]
     if doc.name in ("README.md", "bags.md", "swarm.md", "hardware.md"):
         assert ran, f"no command found in {doc.name}"

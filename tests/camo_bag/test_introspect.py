@@ -10,7 +10,7 @@ import sys
 import time
 
 import pytest
-from support import COMPUTE, ROOT, SWARM, bag_tool, domain
+from support import COMPUTE, ROOT, SWARM, bag_tool, domain, finished
 
 TALKER = """
 import sys, rclpy
@@ -73,7 +73,7 @@ def test_topic_hz_measures_the_rate(talker):
     )
     time.sleep(5.0)
     proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=30)
+    out, err = finished(proc, 30)
     rates = [float(r) for r in re.findall(r"average rate: ([0-9.]+)", out)]
     assert rates, out + err
     assert 7.0 < rates[-1] < 13.0  # the talker publishes at 10 Hz

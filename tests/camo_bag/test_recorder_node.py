@@ -8,7 +8,16 @@ import sys
 import time
 
 import pytest
-from support import ROOT, SWARM, bag_tool, camo_run, domain, robot_messages_in, wait_for_line
+from support import (
+    ROOT,
+    SWARM,
+    bag_tool,
+    camo_run,
+    domain,
+    finished,
+    robot_messages_in,
+    wait_for_line,
+)
 
 
 def deserialize(data: bytes) -> str:
@@ -101,7 +110,7 @@ def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers
         swarm.send_signal(signal.SIGINT)
         # It ends even if Fast DDS blocks its last publication on the dead recorder's
         # shared-memory port: its watchdog then exits it (code 1) and names where in stuck.txt.
-        swarm.communicate(timeout=120)
+        finished(swarm, 120)
     stuck = tmp_path / "run" / "stuck.txt"
     assert swarm.returncode == 130 or (swarm.returncode == 1 and stuck.read_text())
     assert bag_tool("cli", "info", str(tmp_path / "killed")).returncode == 2
@@ -151,7 +160,7 @@ def test_a_recorder_started_before_a_run_records_all_of_it_and_stops_at_its_end(
             timeout=240,
         )
         assert run.returncode == 0, run.stderr[-2000:]
-        _, said = recorder.communicate(timeout=60)  # it ends by itself
+        _, said = finished(recorder, 60)  # it ends by itself
     finally:
         if recorder.poll() is None:
             recorder.kill()
@@ -201,7 +210,7 @@ def test_ctrl_c_during_a_recorded_run_leaves_a_complete_indexed_bag(tmp_path):
     wait_for_line(proc, "consensus 16")
     seen = recorded_so_far(tmp_path / "bag", "/vote", 2, proc)
     proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
+    _, err = finished(proc, 60)
     assert proc.returncode == 130 and "Traceback" not in err, err
     summary = read_summary(tmp_path / "bag")
     counts = {t.name: t.count for t in summary.topics}

@@ -15,6 +15,7 @@ from support import (
     StatusListener,
     bag_tool,
     domain,
+    finished,
 )
 
 
@@ -55,7 +56,7 @@ def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded
     )
     assert replay.returncode == 0, replay.stderr
     assert "published 1 messages on 1 topics" in replay.stderr
-    _, err = swarm.communicate(timeout=120)
+    _, err = finished(swarm, 120)
     assert swarm.returncode == 0, err[-2000:]
     again = json.loads((tmp_path / "again" / "summary.json").read_text())
     for key in ("final", "initial", "sensed", "mean_p", "consensus_trace", "votes"):

@@ -11,7 +11,7 @@ import sys
 
 import pytest
 from support import FOXGLOVE_CLIENT as CLIENT
-from support import ROOT, SWARM, assert_like_sim, domain, run_camo, wait_for_line
+from support import ROOT, SWARM, assert_like_sim, domain, finished, run_camo, wait_for_line
 
 OPTIONS = ["--pattern", "forest", "--rows", "6", "--cols", "6", "--consensus-steps", "3000"]
 
@@ -43,7 +43,7 @@ def test_foxglove_client_lists_subscribes_and_decodes_a_live_run(tmp_path, foxgl
             text=True,
             timeout=120,
         )
-        _, err = run.communicate(timeout=240)
+        _, err = finished(run, 240)
     finally:
         run.kill()
     assert client.returncode == 0, client.stdout[-3000:] + client.stderr[-2000:]
@@ -94,7 +94,7 @@ def test_a_port_in_use_is_one_line(tmp_path):
             stderr=subprocess.PIPE,
             text=True,
         )
-        _, err = run.communicate(timeout=240)
+        _, err = finished(run, 240)
     assert run.returncode != 0
     assert "Traceback" not in err
     assert f"camo view: error: cannot serve Foxglove on 127.0.0.1:{port}" in err

@@ -21,6 +21,7 @@ from support import (
     bag_tool,
     camo_run,
     domain,
+    finished,
     ros_context,
     run_camo,
     wait_for_line,
@@ -180,7 +181,7 @@ def test_two_runs_on_different_domains_do_not_disturb_each_other(tmp_path):
             )
         )
     for proc in runs:
-        _, err = proc.communicate(timeout=240)
+        _, err = finished(proc, 240)
         assert proc.returncode == 0, err[-2000:]
     for pattern, expected in (("forest", "vertical"), ("desert", "horizontal")):
         summary = json.loads((tmp_path / pattern / "summary.json").read_text())
@@ -226,7 +227,7 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     for pid in victims:
         os.kill(pid, 9)
     assert len(victims) == 2, "".join(seen[-30:])
-    rest, _ = proc.communicate(timeout=240)
+    rest, _ = finished(proc, 240)
     assert proc.returncode == 0, rest
     summary = json.loads((out_dir / "summary.json").read_text())
     assert sorted(summary["dead"]) == [[2, 3], [5, 6]]
@@ -265,7 +266,7 @@ def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
     wait_for_line(proc, "consensus 64")
     time.sleep(1.0)
     proc.send_signal(2)
-    _, err = proc.communicate(timeout=60)
+    _, err = finished(proc, 60)
     assert proc.returncode == 130, err
     assert "interrupted" in err and "Traceback" not in err
     pids = [int(pid) for pid in json.loads((out_dir / "processes.json").read_text())]
@@ -342,7 +343,7 @@ def test_two_runs_in_one_domain_each_equal_the_simulator(tmp_path):
             text=True,
         )
     for proc in runs.values():
-        _, err = proc.communicate(timeout=240)
+        _, err = finished(proc, 240)
         assert proc.returncode == 0, err[-2000:]
     for pattern in runs:
         sim = run_camo(
@@ -386,7 +387,7 @@ def test_a_run_id_in_use_is_refused_in_one_line(tmp_path):
         )
     finally:
         first.send_signal(2)
-        first.communicate(timeout=60)
+        finished(first, 60)
     assert second.returncode == 2, second.stderr
     assert "a run named taken is already running" in second.stderr
     assert len(second.stderr.strip().splitlines()) == 1
@@ -459,7 +460,7 @@ def test_nothing_the_launcher_started_outlives_its_sigkill(tmp_path):
     # two workers, the robot of its own, the projector and the recorder
     assert len(started) == 5, started
     proc.kill()
-    proc.communicate(timeout=30)
+    finished(proc, 30)
     deadline = time.monotonic() + 10.0
     while any(running(pid) for pid in started) and time.monotonic() < deadline:
         time.sleep(0.2)
@@ -490,7 +491,7 @@ def test_a_robot_stopped_for_seconds_is_waited_for_not_marked_dead(tmp_path):
     os.kill(slow, signal.SIGSTOP)
     time.sleep(5.0)
     os.kill(slow, signal.SIGCONT)
-    _, err = proc.communicate(timeout=240)
+    _, err = finished(proc, 240)
     assert proc.returncode == 0, err[-2000:]
     assert "dead" not in err and "deadlines passed" not in err
     sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
@@ -802,7 +803,7 @@ def test_ctrl_c_stops_thousands_of_robots_within_seconds_and_keeps_what_they_rep
     time.sleep(1.0)
     interrupted = time.monotonic()
     proc.send_signal(2)
-    _, err = proc.communicate(timeout=60)
+    _, err = finished(proc, 60)
     stopped = time.monotonic() - interrupted
     assert proc.returncode == 130, err[-2000:]
     assert stopped < 10, f"{stopped:.1f} s from Ctrl-C to exit"

@@ -16,6 +16,7 @@ from support import (
     assert_like_sim,
     camo_run,
     domain,
+    finished,
     run_camo,
 )
 
@@ -119,7 +120,7 @@ def test_monitor_mode_turns_a_transcript_into_status_messages():
             listener.spin_until(lambda: len(listener.got) >= 5, timeout=30)
     finally:
         bridge.send_signal(2)
-        bridge.communicate(timeout=30)
+        finished(bridge, 30)
     got = listener.got
     assert len(got) == 5
     assert {m.sender_id for m in got} == {6}  # the cell (1, 2) of a 3-column grid

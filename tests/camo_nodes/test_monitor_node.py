@@ -5,7 +5,7 @@ import sys
 import time
 
 import pytest
-from support import ROOT, SWARM, domain, ros_context
+from support import ROOT, SWARM, domain, finished, ros_context
 
 
 @pytest.mark.slow(SWARM)
@@ -58,7 +58,7 @@ def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
             node.destroy_node()
     finally:
         proc.send_signal(2)
-        _, err = proc.communicate(timeout=120)
+        _, err = finished(proc, 120)
     assert images, f"no /swarm/pattern image; launcher said: {err[-1500:]}"
     complete = [m for m in images if set(bytes(m.data)) <= {0, 255}]
     assert complete, (

@@ -8,7 +8,7 @@ import sys
 import time
 
 import pytest
-from support import SWARM, assert_like_sim, domain, run_camo
+from support import SWARM, assert_like_sim, domain, finished, run_camo
 from two_hosts import TwoHosts, lossy_available, netns_available
 
 OK, WHY = netns_available()
@@ -64,7 +64,7 @@ def test_a_swarm_split_across_two_hosts_equals_the_simulator(tmp_path, mode):
             + ["--run-id", "split", *network],
             env,
         )
-        _, said = launcher.communicate(timeout=240)
+        _, said = finished(launcher, 240)
         assert launcher.returncode == 0, said[-3000:]
         assert worker.wait(timeout=60) == 0, worker.stderr.read()[-2000:]
         crossed = net.traffic("a") - before
@@ -128,7 +128,7 @@ def split_run(net: TwoHosts, tmp_path, env: dict[str, str]) -> tuple:
 
 
 def equals_the_simulator(tmp_path, launcher, worker) -> None:
-    _, said = launcher.communicate(timeout=300)
+    _, said = finished(launcher, 300)
     assert launcher.returncode == 0, said[-3000:]
     assert worker.wait(timeout=60) == 0, worker.stderr.read()[-2000:]
     assert "Traceback" not in said

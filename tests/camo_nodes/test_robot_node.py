@@ -6,7 +6,7 @@ import subprocess
 import sys
 
 import pytest
-from support import ROOT, SWARM, assert_like_sim, domain, run_camo
+from support import ROOT, SWARM, assert_like_sim, domain, finished, run_camo
 
 
 def test_robot_with_cell_outside_grid_exits_with_one_line():
@@ -83,7 +83,7 @@ def test_robots_started_alone_and_a_remote_worker_join_a_run_and_equal_the_simul
         text=True,
     )
     try:
-        _, err = launcher.communicate(timeout=180)
+        _, err = finished(launcher, 180)
         assert launcher.returncode == 0, err[-2000:]
         # Every one of them notices that the run has ended, and exits 0.
         assert worker.wait(timeout=60) == 0

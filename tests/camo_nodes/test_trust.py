@@ -8,7 +8,7 @@ import subprocess
 import sys
 
 import pytest
-from support import ROOT, SWARM, assert_like_sim, domain, run_camo, wait_for_line
+from support import ROOT, SWARM, assert_like_sim, domain, finished, run_camo, wait_for_line
 
 from camo_core.algorithm.run_setup import RunSetup
 from camo_msgs.msg import Host
@@ -49,10 +49,10 @@ def test_a_run_under_attack_equals_the_simulator_and_reports_what_it_refused(tmp
     )
     try:
         wait_for_line(attacker, "ready")
-        out, err = run.communicate(timeout=240)
+        out, err = finished(run, 240)
     finally:
         attacker.terminate()
-        stranger, _ = attacker.communicate(timeout=30)
+        stranger, _ = finished(attacker, 30)
     assert run.returncode == 0, err[-3000:]
     attack = json.loads(stranger)
     assert attack["topics"] >= 20 and attack["sent"] > 1000, attack

@@ -9,7 +9,7 @@ import sys
 import time
 
 import pytest
-from support import CLUSTER, ROOT, SWARM, sweep
+from support import CLUSTER, ROOT, SWARM, finished, sweep
 from support import sweep_table as table
 
 from camo_sweep.table import parts
@@ -82,7 +82,7 @@ def test_a_worker_killed_mid_sweep_costs_only_its_tasks(cluster, tmp_path):
     while len(parts(out)) < 3 and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.02)
     os.killpg(workers[0].pid, signal.SIGKILL)  # the worker, its nanny and all
-    stdout, stderr = proc.communicate(timeout=300)
+    stdout, stderr = finished(proc, 300)
     assert proc.returncode == 0, stderr
     assert "the Dask scheduler at tcp://127.0.0.1" in stdout
     assert len(parts(out)) > 3  # it went on after the kill

@@ -12,7 +12,7 @@ import sys
 import cv2
 import pyarrow.dataset as ds
 import pytest
-from support import CLUSTER, PROCESS, ROOT, SWARM, run_camo, sweep
+from support import CLUSTER, PROCESS, ROOT, SWARM, finished, run_camo, sweep
 from support import sweep_table as table
 
 from camo_core.algorithm.backgrounds import background
@@ -133,7 +133,7 @@ def test_ctrl_c_mid_sweep_then_the_same_command_gives_the_same_table(tmp_path):
         if shown and 10 <= int(shown.group(1)) < 100:
             break
     proc.send_signal(signal.SIGINT)
-    _, rest = proc.communicate(timeout=60)
+    _, rest = finished(proc, 60)
     stderr = "".join(said) + rest
     assert proc.returncode == 130, stderr
     assert "the same command goes on from there" in stderr and "Traceback" not in stderr

@@ -12,11 +12,22 @@ Ctrl-C (or a launcher's SIGINT) would not stop it.
 
 from __future__ import annotations
 
+import faulthandler
 import signal
+
+
+def stacks_on_faults() -> None:
+    """A crash (SIGSEGV, SIGABRT, ...) writes every thread's Python stack to stderr before the
+    process dies, and SIGUSR1 writes them and goes on: what a process hung or crashed in is
+    in its output (the tests send SIGUSR1 to a process that does not end in time)."""
+    if not faulthandler.is_enabled():
+        faulthandler.enable(all_threads=True)
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
 
 
 class StopFlag:
     def __init__(self) -> None:
+        stacks_on_faults()
         self.raised = False
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, self._set)
@@ -31,5 +42,6 @@ class StopFlag:
 def interrupt_on_signals() -> None:
     """Ctrl-C and SIGTERM raise KeyboardInterrupt in the main thread, even in a process that
     inherited SIGINT ignored."""
+    stacks_on_faults()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.default_int_handler)

@@ -21,6 +21,7 @@ from rclpy.parameter import Parameter
 from camo_core.cli.options import Parser
 from camo_core.cli.params_file import check_ros_args
 from camo_core.exceptions import EXIT_USAGE, UsageError
+from camo_core.shutdown import stacks_on_faults
 
 from ..shm import remove_stale
 
@@ -43,6 +44,7 @@ def start_ros(
     refuses is said in one line (rcl's text without its source locations): `prog: error: ...`
     and exit code 2, as for any bad command line."""
     use_camo_dds_settings()
+    stacks_on_faults()
     remove_stale()  # a port file a killed process left empty would hang this one (shm.py)
     try:
         if node_options:

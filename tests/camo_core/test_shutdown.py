@@ -1,0 +1,52 @@
+"""What a camo process does on signals: Ctrl-C as a flag, and on a crash or SIGUSR1 every
+thread's stack on stderr (what a hung or crashed process was doing is in its output)."""
+
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from support import PROCESS
+
+SLEEPER = """
+import sys, time
+from camo_core.shutdown import StopFlag
+stop = StopFlag()
+print("ready", flush=True)
+def waiting_for_the_test():
+    while not stop:
+        time.sleep(0.05)
+waiting_for_the_test()
+print("stopped", flush=True)
+"""
+
+
+def sleeper() -> subprocess.Popen:
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SLEEPER], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    assert proc.stdout.readline() == "ready\n"
+    return proc
+
+
+@pytest.mark.slow(PROCESS)
+def test_sigusr1_writes_every_threads_stack_and_the_process_goes_on():
+    proc = sleeper()
+    time.sleep(0.3)  # in its loop
+    proc.send_signal(signal.SIGUSR1)
+    time.sleep(0.3)
+    assert proc.poll() is None
+    proc.send_signal(signal.SIGINT)  # the stop flag: it ends by itself
+    out, err = proc.communicate(timeout=10)
+    assert proc.returncode == 0 and out == "stopped\n"
+    assert "waiting_for_the_test" in err and "most recent call first" in err
+
+
+@pytest.mark.slow(PROCESS)
+def test_a_crash_writes_the_stack_it_crashed_in():
+    crash = SLEEPER.replace("time.sleep(0.05)", "import ctypes; ctypes.string_at(0)")
+    argv = [sys.executable, "-c", crash]
+    proc = subprocess.run(argv, capture_output=True, text=True, timeout=10)
+    assert proc.returncode == -signal.SIGSEGV
+    assert "Segmentation fault" in proc.stderr and "waiting_for_the_test" in proc.stderr
