@@ -169,3 +169,22 @@ def test_a_misspelt_option_of_a_node_command_is_an_error_not_a_ros_argument(
     assert out.returncode == 2, out.stderr
     assert "unrecognized arguments" in out.stderr and len(out.stderr.strip().splitlines()) == 1
     assert list(tmp_path.iterdir()) == []  # no results folder, no bag
+
+
+@pytest.mark.slow(PROCESS)
+def test_output_into_a_pipe_nobody_reads_ends_quietly(tmp_path):
+    import signal
+    import subprocess
+    import sys
+
+    argv = [sys.executable, "-m", "camo_core.cli", "sim", "--rows", "4", "--cols", "4"]
+    proc = subprocess.Popen(
+        [*argv, "--out", str(tmp_path / "sim")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    proc.stdout.close()  # as `| head` does once it has what it wants
+    err = proc.stderr.read()
+    assert proc.wait(timeout=60) == -signal.SIGPIPE
+    assert "Traceback" not in err and "BrokenPipeError" not in err

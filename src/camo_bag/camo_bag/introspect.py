@@ -24,7 +24,7 @@ from camo_bag import msgdefs
 from camo_bag.graph_topics import taking_qos
 from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.shutdown import StopFlag
+from camo_core.shutdown import StopFlag, quiet_on_a_closed_pipe
 from camo_nodes.topics.startup import add_network_options, network_env, start_ros
 
 # Before listing: at least DISCOVERY s for the graph to fill (ros2cli's daemon keeps it filled),
@@ -188,6 +188,7 @@ def build_parser() -> Parser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    quiet_on_a_closed_pipe()  # `./camo topic echo T | head`
     try:
         args = build_parser().parse_args(argv)
         if getattr(args, "window", 1) < 1:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 
-from camo_core.shutdown import interrupt_on_signals
+from camo_core.shutdown import interrupt_on_signals, quiet_on_a_closed_pipe
 
 
 class CamoError(Exception):
@@ -27,6 +27,7 @@ def reported(prog: str, work: Callable[[], int]) -> int:
     """An entry point's exit code: work()'s, or a CamoError as `prog: error: ...` and exit 2,
     Ctrl-C (or SIGTERM) as `prog: interrupted` and 130."""
     interrupt_on_signals()
+    quiet_on_a_closed_pipe()
     try:
         return work()
     except CamoError as exc:

@@ -25,6 +25,12 @@ def stacks_on_faults() -> None:
     faulthandler.register(signal.SIGUSR1, all_threads=True)
 
 
+def quiet_on_a_closed_pipe() -> None:
+    """A tool whose output is piped into one that stops reading (`| head`) ends quietly, as
+    Unix tools do, instead of a BrokenPipeError traceback."""
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)
+
+
 class StopFlag:
     def __init__(self) -> None:
         stacks_on_faults()
