@@ -1,6 +1,14 @@
-"""QoS profiles to and from rosbag2's `offered_qos_profiles` YAML (metadata version 9)."""
+"""QoS profiles to and from rosbag2's `offered_qos_profiles` YAML (metadata version 9).
+
+`check_profiles` validates the YAML (a string holding YAML, in metadata.yaml and in an MCAP
+channel's metadata) before anything uses it: every field of a profile known, enums named
+(or, as older rosbag2 versions wrote them, numbered) within their value sets, the depth an
+int in range, and durations of non-negative int sec and nsec.
+"""
 
 from __future__ import annotations
+
+from typing import Any
 
 import yaml
 from rclpy.duration import Duration
@@ -12,7 +20,66 @@ from rclpy.qos import (
     ReliabilityPolicy,
 )
 
+from camo_bag.checks import bad, boolean, integer, listed, mapping
+from camo_bag.container import BagError
+
 INFINITE_NS = 9223372036854775807  # RMW_DURATION_INFINITE, as rosbag2 writes it
+DEPTH_MAX = 2**31 - 1  # DDS history depths are int32
+# nsec up to 2**32 - 1: rosbag2 before version 9 wrote an infinite duration as
+# {sec: 2147483647, nsec: 4294967295}.
+DURATION = mapping(
+    {"sec": integer(0, INFINITE_NS // 10**9), "nsec": integer(0, 2**32 - 1)},
+    required=("sec", "nsec"),
+)
+
+
+def _enum(enum):
+    names = [m.name.lower() for m in enum]
+    values = [m.value for m in enum]
+
+    def check(value: Any, where: str) -> str:
+        """The policy's name (lower case), from its name or its number."""
+        if type(value) is int and value in values:
+            return enum(value).name.lower()
+        if isinstance(value, str) and value.lower() in names:
+            return value.lower()
+        raise bad(where, f"one of {', '.join(names)} (or {values})", value)
+
+    return check
+
+
+PROFILE = mapping(
+    {
+        "history": _enum(HistoryPolicy),
+        "depth": integer(0, DEPTH_MAX),
+        "reliability": _enum(ReliabilityPolicy),
+        "durability": _enum(DurabilityPolicy),
+        "deadline": DURATION,
+        "lifespan": DURATION,
+        "liveliness": _enum(LivelinessPolicy),
+        "liveliness_lease_duration": DURATION,
+        "avoid_ros_namespace_conventions": boolean,
+    }
+)
+PROFILES = listed(PROFILE)
+
+
+def check_profiles(value: Any, where: str) -> list[dict]:
+    """The offered profiles of one topic, checked: `value` is their YAML text (as rosbag2
+    writes it), or the list itself (as camo's metadata.yaml holds it); empty means none."""
+    if isinstance(value, str):
+        try:
+            value = yaml.safe_load(value) if value.strip() else []
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            at = f" at line {mark.line + 1}" if mark else ""
+            problem = getattr(exc, "problem", None) or type(exc).__name__
+            raise BagError(f"{where} is not YAML{at}: {problem}") from None
+        except (ValueError, RecursionError) as exc:  # e.g. a NUL byte in the text
+            raise BagError(f"{where} is not YAML ({type(exc).__name__})") from None
+    if value is None:
+        return []
+    return PROFILES(value, where)
 
 
 def _time(duration: Duration) -> dict:
@@ -39,29 +106,23 @@ def dump(profiles: list[QoSProfile]) -> str:
 
 
 def _policy(enum, value, default):
-    if isinstance(value, int):
-        return enum(value)
-    try:
-        return enum[str(value).upper()]
-    except KeyError:
-        return default
+    """A checked policy name as the enum; `default` for none or "unknown" (a publisher cannot
+    offer an unknown policy)."""
+    return default if value in (None, "unknown") else enum[value.upper()]
 
 
-def load_first(text: str) -> QoSProfile:
+def load_first(text: str, where: str = "offered_qos_profiles") -> QoSProfile:
     """The first recorded profile, for a replay publisher (default: reliable, volatile, keep
-    all)."""
-    try:
-        profiles = yaml.safe_load(text) if text else []
-    except yaml.YAMLError:
-        profiles = []
-    if not profiles or not isinstance(profiles, list) or not isinstance(profiles[0], dict):
+    all); BagError if the text is not a list of valid profiles."""
+    profiles = check_profiles(text, where)
+    if not profiles:
         return QoSProfile(depth=10)
     first = profiles[0]
     # Offered profiles from graph discovery carry no history (rosbag2 writes "unknown", depth 0):
     # keep
     # all then, or a reliable burst would overwrite samples a subscriber has not acknowledged yet.
     history = _policy(HistoryPolicy, first.get("history"), HistoryPolicy.KEEP_ALL)
-    depth = int(first.get("depth", 0) or 0)
+    depth = first.get("depth", 0)
     if history != HistoryPolicy.KEEP_LAST or depth < 1:
         history, depth = HistoryPolicy.KEEP_ALL, 1
     return QoSProfile(
