@@ -211,7 +211,7 @@ def robot_messages_in(bag, suffix: str) -> list:
     their arrays."""
     from rclpy.serialization import deserialize_message
 
-    from camo_bag.container import read_messages, read_summary
+    from camo_bag.loader import read_messages, read_summary
     from camo_bag.msgdefs import message_class
 
     types = {t.name: message_class(t.type) for t in read_summary(bag).topics}

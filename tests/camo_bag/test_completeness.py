@@ -10,7 +10,8 @@ import pytest
 from support import BAG_COLS, BAG_ROWS, BAG_RUN, SWARM, bag_tool
 
 from camo_bag.completeness import examine, message_fields
-from camo_bag.container import BagWriter, TopicInfo, read_messages, read_summary
+from camo_bag.container import BagWriter, TopicInfo
+from camo_bag.loader import read_messages, read_summary
 
 
 def copy_bag(source, target, drop=lambda topic, data: False, edit=None) -> None:

@@ -139,7 +139,8 @@ def test_repair_keeps_every_complete_chunk_of_a_cut_file(tmp_path):
     from rclpy.serialization import serialize_message
     from std_msgs.msg import String
 
-    from camo_bag.container import BagWriter, TopicInfo, read_messages
+    from camo_bag.container import BagWriter, TopicInfo
+    from camo_bag.loader import read_messages
     from camo_bag.msgdefs import message_definition
 
     writer = BagWriter(tmp_path / "whole")
@@ -207,7 +208,7 @@ def test_a_damaged_bag_gives_a_one_line_error_or_what_it_holds(
     """Every reader of bags (info, the completeness check, render, repair) either works or
     raises the project's own error; never anything else."""
     from camo_bag.completeness import examine
-    from camo_bag.container import read_messages, read_summary, repair
+    from camo_bag.loader import read_messages, read_summary, repair
     from camo_bag.render import load_run
     from camo_core.exceptions import CamoError
 

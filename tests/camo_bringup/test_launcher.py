@@ -680,7 +680,7 @@ def test_the_swarm_with_orientation_any_threshold_auto_and_levels_equals_the_sim
     from rclpy.serialization import deserialize_message
     from support import bag_tool
 
-    from camo_bag.container import read_messages
+    from camo_bag.loader import read_messages
     from camo_core.algorithm.backgrounds import stripes
     from camo_msgs.msg import RelayArray
 

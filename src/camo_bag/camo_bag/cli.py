@@ -6,7 +6,8 @@ import sys
 from pathlib import Path
 
 from camo_bag.completeness import examine
-from camo_bag.container import BagError, format_info, mcap_file, read_summary, repair
+from camo_bag.container import BagError, format_info
+from camo_bag.loader import Bag, open_bag, repair
 from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError
 
@@ -28,7 +29,7 @@ def build_parser() -> Parser:
     return parser
 
 
-def run_verdict(bag: str) -> str:
+def run_verdict(bag: Bag) -> str:
     """What `bag info` says of the run a bag holds: complete, or what it lacks."""
     try:
         ledger = examine(bag)
@@ -47,16 +48,20 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         if args.command == "info":
-            print(format_info(read_summary(args.bag)))
-            print(run_verdict(args.bag))
+            bag = open_bag(args.bag)
+            print(format_info(bag.summary))
+            print(run_verdict(bag))
+            if bag.note():
+                print(f"camo bag: warning: {bag.note()}", file=sys.stderr)
             return 0
-        source = mcap_file(args.bag)
         out = args.out or Path(str(Path(args.bag)).rstrip("/") + "_repaired")
-        count, ending = repair(source, out)
+        bag, count = repair(args.bag, out)
     except CamoError as exc:
         print(f"camo bag: error: {exc}", file=sys.stderr)
         return 2
-    print(f"camo bag: read {source} ({ending}); wrote {count} messages to {out}/")
+    if bag.note():
+        print(f"camo bag: warning: {bag.note()}", file=sys.stderr)
+    print(f"camo bag: read {bag.file} ({bag.ending}); wrote {count} messages to {out}/")
     return 0
 
 

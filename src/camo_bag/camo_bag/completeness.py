@@ -12,18 +12,21 @@ run holds millions of messages, and a full decode of each costs ten times more).
 from __future__ import annotations
 
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 
 from mcap.records import Schema
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
-from camo_bag.container import BagError, BagSummary, damaged, read_messages, read_summary
+from camo_bag.container import BagError, BagMessage, BagSummary, damaged
 from camo_bag.ledger import ARRAY_KINDS, SINGLE_KINDS, Ledger
+from camo_bag.loader import Bag, open_bag
 from camo_bag.msgdefs import full_name, message_class, message_definition
 from camo_core.algorithm.protocol import DONE
 from camo_core.algorithm.run_setup import RunSetup, SetupError
 from camo_core.algorithm.status_rows import rows_of_message
+from camo_core.exceptions import CamoError
 from camo_msgs.msg import RobotStatus, StatusArray
 from camo_nodes.topics.names import PARAMS_SUFFIX
 from camo_nodes.topics.runs import result_from
@@ -102,9 +105,51 @@ def setup_in(data: bytes) -> RunSetup | None:
         return None
 
 
-def examine(path: str | Path) -> Ledger:
-    """What the bag holds of its run (BagError if it holds no run, or cannot be read)."""
-    summary = read_summary(path)
+@dataclass
+class Topics:
+    """The topics of a bag's run, and how to read each."""
+
+    params: str
+    status: str
+    background: str
+    result: str
+    run: str
+    kinds: dict[str, str]  # robot message topics of the older layout: their kind
+    arrays: dict[str, tuple[str, type]]  # robot message array topics: kind, class
+    decode_status: object
+
+
+def ledger_one(ledger: Ledger, topics: Topics, message: BagMessage) -> None:
+    """One bag message into the ledger (any exception: it does not decode as its type)."""
+    topic, data = message.topic, message.data
+    kind = topics.kinds.get(topic)
+    if kind is not None:
+        ledger_message(ledger, kind, *message_fields(kind, data))
+    elif topic in topics.arrays:
+        kind, cls = topics.arrays[topic]
+        for msg in deserialize_message(data, cls).messages:
+            ledger_message(ledger, kind, msg.sender_id, msg.round, msg.step)
+    elif topic == topics.status:
+        for robot, index in done_reports(topics.decode_status(data)):
+            ledger.reported_done(robot, index)
+    elif topic == topics.background:
+        ledger.backgrounds += 1
+    elif topic == topics.params and ledger.params is None:
+        setup = setup_in(data)
+        if setup is not None:
+            ledger.set_run(setup.params, len(setup.backgrounds) or 1)
+    elif topic == topics.result:
+        found = result_from(deserialize_message(data, String).data, topics.run)
+        if found is not None:
+            ledger.set_result(found)
+
+
+def examine(path: str | Path | Bag) -> Ledger:
+    """What the bag holds of its run (BagError if it holds no run, or cannot be read). A
+    message that does not decode as its type is left out, and counted in the bag's
+    `rejected`."""
+    bag = path if isinstance(path, Bag) else open_bag(path)
+    summary = bag.summary
     params, status, background, result = run_topics_of(summary)
     run = params[1 : -len(PARAMS_SUFFIX)]
     kinds = {
@@ -119,33 +164,13 @@ def examine(path: str | Path) -> Ledger:
     }
     decode_status = status_decoder(summary, status)
     ledger = Ledger()
-    try:
-        wanted = [params, status, background, result, *kinds, *arrays]
-        for message in read_messages(path, wanted):
-            topic, data = message.topic, message.data
-            kind = kinds.get(topic)
-            if kind is not None:
-                ledger_message(ledger, kind, *message_fields(kind, data))
-            elif topic in arrays:
-                kind, cls = arrays[topic]
-                for msg in deserialize_message(data, cls).messages:
-                    ledger_message(ledger, kind, msg.sender_id, msg.round, msg.step)
-            elif topic == status:
-                for robot, index in done_reports(decode_status(data)):
-                    ledger.reported_done(robot, index)
-            elif topic == background:
-                ledger.backgrounds += 1
-            elif topic == params and ledger.params is None:
-                setup = setup_in(data)
-                if setup is not None:
-                    ledger.set_run(setup.params, len(setup.backgrounds) or 1)
-            elif topic == result:
-                found = result_from(deserialize_message(data, String).data, run)
-                if found is not None:
-                    ledger.set_result(found)
-    except BagError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - bytes that do not decode as their recorded type
-        raise damaged(path, exc, "holds a message that does not decode as its type") from None
+    topics = Topics(params, status, background, result, run, kinds, arrays, decode_status)
+    for message in bag.messages([params, status, background, result, *kinds, *arrays]):
+        try:
+            ledger_one(ledger, topics, message)
+        except CamoError:
+            raise
+        except Exception:  # noqa: BLE001 - bytes that do not decode as their recorded type
+            bag.reject(message)
     ledger.results_expected = bool(run)  # a bag of the older layout (no run id) never had one
     return ledger

@@ -4,7 +4,8 @@ A bag is a folder NAME/ holding NAME_0.mcap and metadata.yaml. The MCAP file
 has the `ros2` profile, one `ros2msg` schema per type, `cdr` channels with
 their `offered_qos_profiles` metadata, zstd chunks, message indexes and a
 summary; the file's own `rosbag2` metadata record repeats metadata.yaml. The
-container is the `mcap` library's; this module only decides what goes in.
+container is the `mcap` library's; this module only decides what goes in. Every
+reader opens bags through `loader.py`, which checks them first.
 """
 
 from __future__ import annotations
@@ -12,16 +13,12 @@ from __future__ import annotations
 import os
 import struct
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
 import zstandard
 from mcap.exceptions import McapError
-from mcap.reader import make_reader
-from mcap.records import Channel, Message, Schema
-from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from camo_core.exceptions import CamoError
@@ -265,139 +262,7 @@ def metadata_yaml(file_name: str, topics: list[TopicInfo], start_ns: int, end_ns
     return yaml.safe_dump(info, sort_keys=False)
 
 
-# ---- reading ----------------------------------------------------------------------
-
-
-def mcap_file(path: str | Path) -> Path:
-    """The .mcap file of a bag folder (or the file itself), checked to be MCAP."""
-    path = Path(path)
-    if path.is_dir():
-        files = sorted(path.glob("*.mcap"))
-        if not files:
-            raise BagError(f"{path} holds no .mcap file")
-        path = files[0]
-    elif not path.exists():
-        raise BagError(f"{path}: no such bag")
-    try:
-        with open(path, "rb") as stream:
-            head = stream.read(len(MAGIC))
-    except OSError as exc:
-        raise BagError(f"cannot read {path}: {exc.strerror}") from None
-    if head != MAGIC:
-        raise BagError(f"{path} is not an MCAP file")
-    return path
-
-
-def _truncated(path: Path) -> BagError:
-    return BagError(
-        f"{path} is truncated or was not closed (no index); `./camo bag repair {path}` "
-        f"writes a readable copy of its complete chunks"
-    )
-
-
-def _qos_of(channel: Channel) -> str:
-    """The channel's offered QoS profiles as YAML text; "" when damaged beyond parsing."""
-    text = channel.metadata.get("offered_qos_profiles", "")
-    try:
-        yaml.safe_load(text)
-    except (yaml.YAMLError, *DAMAGE):
-        return ""
-    return text
-
-
-def read_summary(path: str | Path) -> BagSummary:
-    file = mcap_file(path)
-    with open(file, "rb") as stream:
-        try:
-            summary = make_reader(stream).get_summary()
-        except (*DAMAGE, OSError):
-            raise _truncated(file) from None
-    if summary is None or summary.statistics is None:
-        raise _truncated(file)
-    counts = summary.statistics.channel_message_counts
-    topics = []
-    for channel_id, channel in sorted(summary.channels.items()):
-        schema = summary.schemas.get(channel.schema_id)
-        topics.append(
-            TopicInfo(
-                channel.topic,
-                schema.name if schema else "",
-                _qos_of(channel),
-                count=counts.get(channel_id, 0),
-                definition=schema.data.decode(errors="replace") if schema else "",
-            )
-        )
-    return BagSummary(
-        file, summary.statistics.message_start_time, summary.statistics.message_end_time, topics
-    )
-
-
-def read_messages(path: str | Path, topics: list[str] | None = None) -> Iterator[BagMessage]:
-    """Messages of a closed bag in log-time order (BagError if it is truncated or corrupt)."""
-    file = read_summary(path).path
-    with open(file, "rb") as stream:
-        try:
-            for schema, channel, message in make_reader(stream).iter_messages(
-                topics=topics, log_time_order=True
-            ):
-                yield BagMessage(
-                    channel.topic,
-                    schema.name if schema else "",
-                    message.log_time,
-                    message.publish_time,
-                    message.data,
-                )
-        except DAMAGE as exc:
-            raise damaged(file, exc) from None
-
-
-def salvage(path: str | Path) -> tuple[list[Schema], list[Channel], list[Message], str]:
-    """Everything readable from the start of a damaged file: schemas, channels, messages, and why
-    it ends."""
-    file = mcap_file(path)
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    messages: list[Message] = []
-    ending = "complete"
-    with open(file, "rb") as stream:
-        try:
-            for record in StreamReader(
-                stream, skip_magic=False, emit_chunks=False, validate_crcs=True
-            ).records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message):
-                    messages.append(record)
-        except Exception as exc:  # noqa: BLE001 - a damaged tail makes the parser fail in many ways
-            ending = f"cut short ({type(exc).__name__})"
-    messages = [m for m in messages if m.channel_id in channels]
-    return list(schemas.values()), list(channels.values()), messages, ending
-
-
-def repair(src: str | Path, dst: str | Path) -> tuple[int, str]:
-    """Write a complete, indexed bag of every message that can be read from `src`."""
-    schemas, channels, messages, ending = salvage(src)
-    by_schema = {s.id: s for s in schemas}
-    writer = BagWriter(dst, library="camo bag repair")
-    try:
-        for channel in channels:
-            schema = by_schema.get(channel.schema_id)
-            if schema is None:
-                continue
-            writer.add_topic(
-                TopicInfo(channel.topic, schema.name, _qos_of(channel)),
-                schema.data.decode(errors="replace"),
-            )
-        topic_of = {c.id: c.topic for c in channels}
-        for message in sorted(messages, key=lambda m: m.log_time):
-            topic = topic_of[message.channel_id]
-            if topic in writer.topics:
-                writer.write(topic, message.data, message.log_time, message.publish_time)
-    finally:
-        writer.close()
-    return writer.message_count, ending
+# ---- reading: loader.py, which checks every level first ------------------------------
 
 
 def format_info(summary: BagSummary) -> str:

@@ -25,8 +25,9 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
 from camo_bag.completeness import examine, run_topics_of, setup_in, status_decoder
-from camo_bag.container import DAMAGE, BagError, damaged, read_messages, read_summary
+from camo_bag.container import DAMAGE, BagError, BagMessage
 from camo_bag.ledger import gaps_of_round
+from camo_bag.loader import Bag, open_bag
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.status_rows import rows_of_message
 from camo_core.cli.options import Parser, add_out_options, out_dir
@@ -50,16 +51,18 @@ class RecordedRun:
     bridged: frozenset[int] = frozenset()  # robots that were real Droplets
 
 
-def load_run(path: str | Path) -> RecordedRun:
-    """The run's parameters, statuses and backgrounds, from a bag."""
-    summary = read_summary(path)
-    params_topic, status_topic, background_topic, _ = run_topics_of(summary)
-    decode_status = status_decoder(summary, status_topic)
+def load_run(path: str | Path | Bag) -> RecordedRun:
+    """The run's parameters, statuses and backgrounds, from a bag. A message that does not
+    decode as its type is left out, and counted in the bag's `rejected`."""
+    bag = path if isinstance(path, Bag) else open_bag(path)
+    path = bag.path
+    params_topic, status_topic, background_topic, _ = run_topics_of(bag.summary)
+    decode_status = status_decoder(bag.summary, status_topic)
     setup = None
     images = Backgrounds()
-    pending: list[tuple[object, int]] = []
-    try:
-        for message in read_messages(path, [params_topic, status_topic, background_topic]):
+    pending: list[tuple[object, BagMessage]] = []
+    for message in bag.messages([params_topic, status_topic, background_topic]):
+        try:
             if message.topic == params_topic and setup is None:
                 setup = setup_in(message.data) or False
             elif message.topic == background_topic:
@@ -67,11 +70,11 @@ def load_run(path: str | Path) -> RecordedRun:
                 stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
                 images.add(stamp, lambda msg=msg: image_from_msg(msg))
             elif message.topic == status_topic:
-                pending.append((decode_status(message.data), message.log_time))
-    except CamoError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - bytes that do not decode as their recorded type
-        raise damaged(path, exc, "holds a message that does not decode as its type") from None
+                pending.append((decode_status(message.data), message))
+        except CamoError:
+            raise
+        except Exception:  # noqa: BLE001 - bytes that do not decode as their recorded type
+            bag.reject(message)
     if setup is None:
         raise BagError(f"{path} has no message on {params_topic}")
     if not setup:
@@ -79,15 +82,16 @@ def load_run(path: str | Path) -> RecordedRun:
     params = setup.params
     rounds = Rounds(params)
     times: dict[int, list[int]] = {}
-    try:
-        for status, log_time in pending:
+    for status, message in pending:
+        try:
             rows = rows_of_message(status)
-            rows = rows.select(rows.sender_id < params.count)
-            for index in np.unique(rows.round).tolist():
-                rounds[index].add_rows(rows.select(rows.round == index))
-                times.setdefault(index, []).append(log_time)
-    except DAMAGE as exc:  # decoded with a damaged schema of the bag's own
-        raise damaged(path, exc, "holds a status that does not read as one") from None
+        except DAMAGE:  # decoded with a damaged schema of the bag's own
+            bag.reject(message)
+            continue
+        rows = rows.select(rows.sender_id < params.count)
+        for index in np.unique(rows.round).tolist():
+            rounds[index].add_rows(rows.select(rows.round == index))
+            times.setdefault(index, []).append(message.log_time)
     if not rounds:
         raise BagError(f"{path} holds no robot status: nothing to render")
     elapsed = {index: (max(t) - min(t)) / 1e9 for index, t in times.items()}
@@ -99,14 +103,20 @@ class IncompleteBag(CamoError):
     """The bag lacks part of its run."""
 
 
-def render(path: str | Path, out: Path, partial: bool = False) -> list[dict]:
-    held = examine(path)
+def render(path: str | Path | Bag, out: Path, partial: bool = False) -> list[dict]:
+    """Each round's summary, written with its figures to `out`. Without `partial`, a bag that
+    lacks part of its run, or holds messages that do not decode, is refused."""
+    bag = path if isinstance(path, Bag) else open_bag(path, partial)
+    path = bag.path
+    held = examine(bag)
+    if bag.rejected and not partial:
+        raise BagError(f"{bag.note()} (--partial renders the rest)")
     gaps = held.gaps()
     if gaps and not partial:
         raise IncompleteBag(
             f"{path} is incomplete: {'; '.join(gaps)} (--partial renders what it holds)"
         )
-    run = load_run(path)
+    run = load_run(bag)
     params, summaries = run.params, []
     results = (held.result or {}).get("rounds", [])
     for index in sorted(run.rounds):
@@ -150,16 +160,19 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="render an incomplete bag: what it holds, its gaps named in summary.json",
     )
+    bag = None
     try:
         args = parser.parse_args(argv)
         out = out_dir(args)
-        summaries = render(args.bag, out, args.partial)
-    except IncompleteBag as exc:
-        print(f"camo render: error: {exc}", file=sys.stderr)
-        return 1
+        bag = open_bag(args.bag, args.partial)
+        summaries = render(bag, out, args.partial)
     except CamoError as exc:
-        print(f"camo render: error: {exc}", file=sys.stderr)
-        return 2
+        note = bag.note() if bag is not None else ""
+        more = f" ({note})" if note and note not in str(exc) else ""
+        print(f"camo render: error: {exc}{more}", file=sys.stderr)
+        return 1 if isinstance(exc, IncompleteBag) else 2
+    if bag.note():
+        print(f"camo render: warning: {bag.note()}", file=sys.stderr)
     for k, summary in enumerate(summaries):
         print(
             f"round {k}: pattern {summary['pattern']} "

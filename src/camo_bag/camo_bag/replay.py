@@ -15,10 +15,11 @@ import time
 
 import rclpy
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 
 from camo_bag import msgdefs, qos_yaml
-from camo_bag.container import BagSummary, read_messages, read_summary
+from camo_bag.loader import Bag, open_bag
 from camo_core.cli.options import Parser
 from camo_core.cli.progress import ProgressBar
 from camo_core.exceptions import CamoError, UsageError
@@ -75,7 +76,8 @@ def sleep_until(due: float, stop: StopFlag) -> None:
         time.sleep(min(left, 0.1))
 
 
-def replay(args, summary: BagSummary, stop: StopFlag) -> int:
+def replay(args, bag: Bag, stop: StopFlag) -> int:
+    summary = bag.summary
     topics = [t for t in summary.topics if args.topics is None or t.name in args.topics]
     if args.topics:
         unknown = sorted(set(args.topics) - {t.name for t in summary.topics})
@@ -87,26 +89,34 @@ def replay(args, summary: BagSummary, stop: StopFlag) -> int:
             t.name: node.create_publisher(
                 msgdefs.message_class(t.type),
                 renamed(t.name, args.run_id),
-                qos_yaml.load_first(t.qos),
+                qos_yaml.load_first(t.qos, f"{bag.file}: {t.name} offered_qos_profiles"),
             )
             for t in topics
         }
+        classes = {t.name: msgdefs.message_class(t.type) for t in topics}
         total = sum(t.count for t in topics)
         passes = 0
         sleep_until(time.monotonic() + args.delay, stop)
         while not stop:
             bar = ProgressBar(total, f"replay x{args.rate:g}")
             start = time.monotonic()
-            for message in read_messages(args.bag, list(publishers)):
+            for message in bag.messages(list(publishers)):
                 sleep_until(start + (message.log_time - summary.start_ns) / 1e9 / args.rate, stop)
                 if stop:
                     break
+                try:  # subscribers would fail on it: left out, and counted
+                    deserialize_message(message.data, classes[message.topic])
+                except Exception:  # noqa: BLE001 - bytes that do not decode as their type
+                    bag.reject(message)
+                    continue
                 publishers[message.topic].publish(message.data)
                 bar.update(note=message.topic)
             passes += 1
             if not args.loop:
                 break
         sleep_until(time.monotonic() + args.linger, stop)
+        if bag.note():
+            print(f"camo replay: warning: {bag.note()}", file=sys.stderr)
         print(
             f"camo replay: published {total} messages on {len(publishers)} topics"
             f"{f' ({passes} passes)' if passes > 1 else ''}",
@@ -130,7 +140,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.run_id is not None:
             check_run_id(args.run_id)
         env = network_env(args, os.environ)
-        summary = read_summary(args.bag)  # a bad bag fails before ROS starts
+        bag = open_bag(args.bag)  # a bad bag fails before ROS starts
+        for topic in bag.summary.topics:  # so does a QoS profile a publisher cannot take
+            qos_yaml.load_first(topic.qos, f"{bag.file}: {topic.name} offered_qos_profiles")
     except CamoError as exc:
         print(f"camo replay: error: {exc}", file=sys.stderr)
         return 2
@@ -138,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = StopFlag()
     start_ros("camo replay", None, signal_handler_options=SignalHandlerOptions.NO)
     try:
-        return replay(args, summary, stop)
+        return replay(args, bag, stop)
     except CamoError as exc:
         print(f"camo replay: error: {exc}", file=sys.stderr)
         return 2
