@@ -69,7 +69,8 @@ def metadata_of(bag: Path) -> dict:
 
 
 def write_metadata(bag: Path, data) -> None:
-    (bag / "metadata.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+    (bag / "metadata.yaml").write_text(yaml.dump(data, Dumper=dumper, sort_keys=False))
 
 
 def qos_text(**changes) -> str:

@@ -6,10 +6,26 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import Any
 
+import yaml
+
 from camo_bag.container import BagError
 
 INT64_MAX = 2**63 - 1
 Check = Callable[[Any, str], Any]
+LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's: the same, faster
+
+
+def load_yaml(text: str, where: str) -> Any:
+    """YAML text as data; BagError naming the line where it is not YAML."""
+    try:
+        return yaml.load(text, Loader=LOADER)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or type(exc).__name__
+        raise BagError(f"{where} is not YAML{at}: {problem}") from None
+    except (ValueError, RecursionError) as exc:  # e.g. a NUL byte in the text
+        raise BagError(f"{where} is not YAML ({type(exc).__name__})") from None
 
 
 def shown(value: Any) -> str:

@@ -30,7 +30,11 @@ CHUNK_SIZE = 256 * 1024  # small chunks: a killed recorder loses at most one
 
 
 class BagError(CamoError):
-    """A bag that cannot be used: missing, not MCAP, truncated, or unwritable."""
+    """A bag that cannot be used: missing, not MCAP, truncated, or unwritable. Always one line:
+    line breaks that a path or a name from the bag brings are shown escaped."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(str(message).replace("\r", "\\r").replace("\n", "\\n"))
 
 
 # What the mcap, zstd and ros2msg parsers raise on damaged bytes. They check little, so a

@@ -26,13 +26,21 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-import yaml
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
 from mcap.stream_reader import StreamReader
 
 from camo_bag import msgdefs
-from camo_bag.checks import INT64_MAX, integer, listed, mapping, optional, text
+from camo_bag.checks import (
+    INT64_MAX,
+    integer,
+    listed,
+    load_yaml,
+    mapping,
+    optional,
+    shown,
+    text,
+)
 from camo_bag.container import (
     DAMAGE,
     MAGIC,
@@ -60,8 +68,8 @@ def bag_path(path: str | Path) -> Path:
     raw = os.fspath(path)
     if not raw.strip():
         raise BagError("no bag given (the path is empty)")
-    if "\0" in raw:
-        raise BagError(f"{raw!r} is not a path (it holds a NUL byte)")
+    if not raw.isprintable():
+        raise BagError(f"{shown(raw)} is not a usable path: it holds a control character")
     if len(raw.encode(errors="surrogateescape")) > PATH_MAX or any(
         len(part.encode(errors="surrogateescape")) > NAME_MAX for part in Path(raw).parts
     ):
@@ -91,10 +99,17 @@ SINCE_EPOCH = mapping(
 COUNT = integer(0, INT64_MAX)
 
 
+def topic_problem(name: str) -> str:
+    """Why a topic name from a bag cannot be one ("" when it can)."""
+    if not name.startswith("/") or not name.isprintable() or any(c.isspace() for c in name):
+        return f"not a topic name starting with / ({shown(name)})"
+    return ""
+
+
 def _topic_name(value: Any, where: str) -> str:
     name = text(nonempty=True)(value, where)
-    if not name.startswith("/") or any(c.isspace() for c in name):
-        raise BagError(f"{where} must be a topic name starting with / (got {name!r:.40})")
+    if topic_problem(name):
+        raise BagError(f"{where} must be a topic name starting with / (got {shown(name)})")
     return name
 
 
@@ -108,8 +123,14 @@ def _type_name(value: Any, where: str) -> str:
 
 def _relative_file(value: Any, where: str) -> str:
     name = text(nonempty=True)(value, where)
-    if Path(name).is_absolute() or ".." in Path(name).parts or Path(name).suffix != ".mcap":
-        raise BagError(f"{where} must be an .mcap file inside the bag folder (got {name!r:.40})")
+    path = Path(name)
+    if (
+        not name.isprintable()
+        or path.is_absolute()
+        or ".." in path.parts
+        or path.suffix != ".mcap"
+    ):
+        raise BagError(f"{where} must be an .mcap file inside the bag folder (got {shown(name)})")
     return name
 
 
@@ -179,16 +200,10 @@ def load_metadata(file: Path) -> dict:
     except OSError as exc:
         raise BagError(f"cannot read {file}: {exc.strerror}") from None
     try:
-        data = yaml.safe_load(raw.decode())
+        decoded = raw.decode()
     except UnicodeDecodeError:
         raise BagError(f"{file} is not UTF-8 text") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or type(exc).__name__
-        raise BagError(f"{file} is not YAML{at}: {problem}") from None
-    except (ValueError, RecursionError) as exc:
-        raise BagError(f"{file} is not YAML ({type(exc).__name__})") from None
+    data = load_yaml(decoded, str(file))
     info = METADATA_FILE(data, str(file))["rosbag2_bagfile_information"]
     names = [t["topic_metadata"]["name"] for t in info["topics_with_message_count"]]
     twice = sorted({n for n in names if names.count(n) > 1})
@@ -407,6 +422,9 @@ def _channels_into(bag: Bag, schemas: dict, channels: dict, counts: dict, partia
     """The usable channels into the bag's summary; the others into `left_out`."""
     for channel_id, channel in sorted(channels.items()):
         schema = schemas.get(channel.schema_id)
+        if topic_problem(channel.topic):
+            bag.left_out[shown(channel.topic)] = topic_problem(channel.topic)
+            continue
         problem = "no schema" if schema is None else ""
         problem = problem or schema_problem(schema.encoding, schema.name, bytes(schema.data))
         if not problem and channel.message_encoding != "cdr":

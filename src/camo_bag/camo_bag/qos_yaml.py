@@ -20,8 +20,7 @@ from rclpy.qos import (
     ReliabilityPolicy,
 )
 
-from camo_bag.checks import bad, boolean, integer, listed, mapping
-from camo_bag.container import BagError
+from camo_bag.checks import bad, boolean, integer, listed, load_yaml, mapping
 
 INFINITE_NS = 9223372036854775807  # RMW_DURATION_INFINITE, as rosbag2 writes it
 DEPTH_MAX = 2**31 - 1  # DDS history depths are int32
@@ -68,15 +67,7 @@ def check_profiles(value: Any, where: str) -> list[dict]:
     """The offered profiles of one topic, checked: `value` is their YAML text (as rosbag2
     writes it), or the list itself (as camo's metadata.yaml holds it); empty means none."""
     if isinstance(value, str):
-        try:
-            value = yaml.safe_load(value) if value.strip() else []
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            at = f" at line {mark.line + 1}" if mark else ""
-            problem = getattr(exc, "problem", None) or type(exc).__name__
-            raise BagError(f"{where} is not YAML{at}: {problem}") from None
-        except (ValueError, RecursionError) as exc:  # e.g. a NUL byte in the text
-            raise BagError(f"{where} is not YAML ({type(exc).__name__})") from None
+        value = load_yaml(value, where) if value.strip() else []
     if value is None:
         return []
     return PROFILES(value, where)
