@@ -338,7 +338,7 @@ def test_channels_whose_schema_is_unusable_are_left_out_and_noted(tmp_path):
     assert "does not parse" in loaded.left_out["/garbled"]
     assert [m.topic for m in loaded.messages()] == [CHATTER, CHATTER]
     note = loaded.note()
-    assert note.startswith("left out of") and "5 topics" in note and "\n" not in note
+    assert note.startswith("left out of") and "5 unusable topics" in note and "\n" not in note
 
 
 # ---- level 5: messages --------------------------------------------------------------------

@@ -146,3 +146,21 @@ def test_render_reads_a_bag_of_the_older_layout_with_its_older_status_type(tmp_p
     expected = simulate(params, grid).summary()
     for key in ("final", "initial", "sensed", "votes", "mean_p", "consensus_trace", "pattern"):
         assert rendered[key] == expected[key], key
+
+
+@pytest.mark.slow(SWARM)
+def test_render_partial_reads_a_truncated_bag_up_to_where_it_breaks(recorded, tmp_path):
+    """A file cut short (a recorder killed) is refused in one line; with --partial its
+    messages before the cut are rendered, the gaps named."""
+    bag, _ = recorded
+    data = (bag / "bag_0.mcap").read_bytes()
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    (cut / "cut_0.mcap").write_bytes(data[: len(data) // 2])
+    out = bag_tool("render", str(cut), "--out", str(tmp_path / "r"))
+    assert out.returncode == 2 and "truncated" in out.stderr, out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1
+    out = bag_tool("render", str(cut), "--out", str(tmp_path / "r"), "--partial")
+    assert out.returncode == 0, out.stderr
+    summary = json.loads((tmp_path / "r" / "summary.json").read_text())
+    assert summary["incomplete"] and "pattern" in summary

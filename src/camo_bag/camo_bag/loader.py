@@ -266,7 +266,7 @@ class Bag:
     ending: str = "complete"  # how reading the file ended
     left_out: dict[str, str] = field(default_factory=dict)  # topic -> why it was left out
     notes: list[str] = field(default_factory=list)  # what a partial read passed over
-    rejected: dict[str, set[tuple[int, int]]] = field(default_factory=dict)  # undecodable
+    rejected: dict[str, set[tuple[int, int, int]]] = field(default_factory=dict)  # undecodable
     _channels: dict[int, Channel] = field(default_factory=dict)  # usable, by id
     _schemas: dict[int, Schema] = field(default_factory=dict)
     _salvaged: list[Message] | None = None
@@ -313,7 +313,7 @@ class Bag:
     def reject(self, message: BagMessage) -> None:
         """A message whose bytes do not decode as its type: left out, and counted."""
         self.rejected.setdefault(message.topic, set()).add(
-            (message.log_time, message.publish_time)
+            (message.log_time, message.publish_time, hash(message.data))
         )
 
     @property
@@ -326,11 +326,14 @@ class Bag:
         if self.left_out:
             why = "; ".join(f"{t}: {w}" for t, w in sorted(self.left_out.items())[:3])
             more = ", ..." if len(self.left_out) > 3 else ""
-            parts.append(f"{len(self.left_out)} topics whose schema is unusable ({why}{more})")
+            count = len(self.left_out)
+            parts.append(f"{count} unusable topic{'s' * (count != 1)} ({why}{more})")
         if self.rejected:
             per = ", ".join(f"{t}: {len(s)}" for t, s in sorted(self.rejected.items())[:3])
             more = ", ..." if len(self.rejected) > 3 else ""
-            parts.append(f"{self.rejected_count} messages that do not decode ({per}{more})")
+            count = self.rejected_count
+            kind = "messages that do not decode" if count != 1 else "message that does not decode"
+            parts.append(f"{count} {kind} ({per}{more})")
         return f"left out of {self.file}: " + "; ".join(parts) if parts else ""
 
 
