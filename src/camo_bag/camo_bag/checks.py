@@ -102,7 +102,8 @@ def mapping(fields: dict[str, Check], required: Iterable[str] = (), open_: bool 
         out = {}
         for key, item in value.items():
             if key in fields:
-                out[key] = fields[key](item, f"{where}.{key}")
+                # "FILE: a.b": a file's fields after a colon, nested ones after a dot
+                out[key] = fields[key](item, f"{where}{' ' if where.endswith(':') else '.'}{key}")
             elif open_:
                 out[key] = item
             else:

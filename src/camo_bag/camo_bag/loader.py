@@ -204,7 +204,7 @@ def load_metadata(file: Path) -> dict:
     except UnicodeDecodeError:
         raise BagError(f"{file} is not UTF-8 text") from None
     data = load_yaml(decoded, str(file))
-    info = METADATA_FILE(data, str(file))["rosbag2_bagfile_information"]
+    info = METADATA_FILE(data, f"{file}:")["rosbag2_bagfile_information"]
     names = [t["topic_metadata"]["name"] for t in info["topics_with_message_count"]]
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
