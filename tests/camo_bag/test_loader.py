@@ -387,6 +387,24 @@ def test_replay_refuses_a_channel_qos_that_is_malformed_in_one_line(tmp_path, ca
         assert f"offered_qos_profiles[0].{next(iter(change))} must be" in err
 
 
+def test_replay_refuses_a_topic_it_cannot_replay_before_ros_starts(tmp_path, capsys):
+    from camo_bag.replay import main
+
+    file = write_mcap(
+        tmp_path / "t.mcap",
+        [
+            (CHATTER, STRING, "ros2msg", string_definition(), "cdr", {}),
+            ("/alien", "alien_msgs/msg/Thing", "ros2msg", b"int32 x\n", "cdr", {}),
+        ],
+        [(0, string_cdr("a"))],
+    )
+    assert main([str(file), "--topics", "/alien"]) == 2
+    err = capsys.readouterr().err
+    assert "topic /alien cannot be replayed: unknown type" in err and err.count("\n") == 1
+    assert main([str(file), "--topics", "/nothing"]) == 2
+    assert "the bag has no topic /nothing" in capsys.readouterr().err
+
+
 def test_bag_info_warns_in_one_line_of_what_it_left_out(tmp_path, capsys):
     from camo_bag.cli import main
 

@@ -19,6 +19,7 @@ from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 
 from camo_bag import msgdefs, qos_yaml
+from camo_bag.container import TopicInfo
 from camo_bag.loader import Bag, open_bag
 from camo_core.cli.options import Parser
 from camo_core.cli.progress import ProgressBar
@@ -76,13 +77,20 @@ def sleep_until(due: float, stop: StopFlag) -> None:
         time.sleep(min(left, 0.1))
 
 
+def chosen_topics(args, bag: Bag) -> list[TopicInfo]:
+    """The topics to replay: all the bag's usable ones, or those of --topics (UsageError for
+    one the bag does not hold, or holds with a schema that cannot be used)."""
+    topics = [t for t in bag.summary.topics if args.topics is None or t.name in args.topics]
+    for name in sorted(set(args.topics or ()) - {t.name for t in topics}):
+        if name in bag.left_out:
+            raise UsageError(f"the bag's topic {name} cannot be replayed: {bag.left_out[name]}")
+        raise UsageError(f"the bag has no topic {name} (see ./camo bag info {args.bag})")
+    return topics
+
+
 def replay(args, bag: Bag, stop: StopFlag) -> int:
     summary = bag.summary
-    topics = [t for t in summary.topics if args.topics is None or t.name in args.topics]
-    if args.topics:
-        unknown = sorted(set(args.topics) - {t.name for t in summary.topics})
-        if unknown:
-            raise UsageError(f"the bag has no topic {unknown[0]} (see ./camo bag info {args.bag})")
+    topics = chosen_topics(args, bag)
     node = Node("replay", **LEAN_NODE)
     try:
         publishers = {
@@ -141,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
             check_run_id(args.run_id)
         env = network_env(args, os.environ)
         bag = open_bag(args.bag)  # a bad bag fails before ROS starts
-        for topic in bag.summary.topics:  # so does a QoS profile a publisher cannot take
+        for topic in chosen_topics(args, bag):  # so do a topic it lacks and a bad QoS
             qos_yaml.load_first(topic.qos, f"{bag.file}: {topic.name} offered_qos_profiles")
     except CamoError as exc:
         print(f"camo replay: error: {exc}", file=sys.stderr)
