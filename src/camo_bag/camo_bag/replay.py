@@ -126,7 +126,8 @@ def replay(args, bag: Bag, stop: StopFlag) -> int:
         if bag.note():
             print(f"camo replay: warning: {bag.note()}", file=sys.stderr)
         print(
-            f"camo replay: published {total} messages on {len(publishers)} topics"
+            f"camo replay: published {total - bag.rejected_count} messages on "
+            f"{len(publishers)} topics"
             f"{f' ({passes} passes)' if passes > 1 else ''}",
             file=sys.stderr,
         )
