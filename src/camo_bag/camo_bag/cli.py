@@ -10,6 +10,7 @@ from camo_bag.container import BagError, format_info
 from camo_bag.loader import Bag, open_bag, repair
 from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError
+from camo_core.shutdown import quiet_on_a_closed_pipe
 
 
 def build_parser() -> Parser:
@@ -45,6 +46,7 @@ def run_verdict(bag: Bag) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    quiet_on_a_closed_pipe()  # `./camo bag info BAG | head`
     try:
         args = build_parser().parse_args(argv)
         if args.command == "info":
