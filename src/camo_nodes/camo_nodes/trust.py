@@ -11,14 +11,20 @@ lists them (a robot alone, a background replayed from a bag) the first writer
 of the background is trusted. Everything refused is counted by reason and
 logged once per sender.
 
-What this cannot stop: a stranger that announces a tile before its real host
-does, or that forges DDS packets with another process's GUID (DDS Security
-does that; see docs/security.md).
+A stranger that announces a tile before its real host does takes it in every
+process that heard it first: they no longer hear the real host, and which one
+each process heard first, no other can tell. So a tile of the run's own
+processes announced by a process its launcher did not start is a conflict the
+launcher ends the run on (`held_by_others`), and a worker started by hand
+refuses cells another process announced. What this cannot stop: a process that forges DDS packets
+with another process's GUID (DDS Security does that; see docs/security.md).
 """
 
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
 
 from rclpy.serialization import deserialize_message
 
@@ -75,7 +81,8 @@ def merged(*reports: dict) -> dict:
 class Hosts:
     """Which process (by GID prefix) hosts which robots: the first to announce a tile. With the
     run's layout (its setup's `tiles` and `remote` ranges), only a tile of the layout, or one
-    inside the cells left to remote workers, can be announced at all."""
+    inside the cells left to remote workers, can be announced at all. Every process that
+    announced a tile is kept (`claims`), first or not."""
 
     def __init__(self, count: int, rejections: Rejections, setup: RunSetup | None = None) -> None:
         self.count = count
@@ -87,10 +94,13 @@ class Hosts:
         self.owner: dict[int, bytes] = {}  # robot -> the prefix of its host
         self.tiles: dict[tuple[int, int], bytes] = {}
         self.refused: dict[bytes, dict] = {}  # host prefix -> what it reported refusing
+        self.names: dict[bytes, str] = {}  # host prefix -> the name it announced first
+        self.claims: dict[tuple[int, int], set[bytes]] = {}  # tile -> every prefix announcing it
 
     def learn(self, msg: Host, gid: bytes) -> list[tuple[int, int]]:
         """An announcement: the tiles it gives its writer's process for the first time."""
         prefix = gid[:PREFIX]
+        self.names.setdefault(prefix, msg.name)
         self.refused[prefix] = {
             "by_reason": dict(zip(msg.rejected_reasons, msg.rejected_counts, strict=False))
         }
@@ -102,6 +112,7 @@ class Hosts:
             if self.layout is not None and not self._planned(first, last):
                 self.rejections.refuse("host announcement of a tile not in the run", gid, msg.name)
                 continue
+            self.claims.setdefault((first, last), set()).add(prefix)
             claimed = {self.owner.get(r) for r in range(first, last + 1)} - {None}
             if claimed - {prefix}:
                 self.rejections.refuse("tile already hosted by another process", gid, msg.name)
@@ -120,6 +131,38 @@ class Hosts:
 
     def speaks_for(self, gid: bytes, robot: int) -> bool:
         return self.owner.get(robot) == gid[:PREFIX]
+
+    def held_by_others(self, tiles, ours: Callable[[bytes], bool]) -> Conflict | None:
+        """Of `tiles`, those announced by a process not one of `ours` (by GUID prefix), first or
+        not (which announcement another process heard first, this one cannot know), with that
+        process: the tiles of the first such process, or None."""
+        found: dict[bytes, list[tuple[int, int]]] = {}
+        for tile in tiles:
+            for prefix in sorted(p for p in self.claims.get(tile, ()) if not ours(p)):
+                found.setdefault(prefix, []).append(tile)
+        if not found:
+            return None
+        prefix = min(found)
+        return Conflict(found[prefix], self.names.get(prefix, ""), prefix)
+
+
+@dataclass(frozen=True)
+class Conflict:
+    """Tiles that a process announced before their rightful host: nobody hears the rightful one.
+    `name` is the node name the process gave itself (anything it likes), `prefix` its GUID
+    prefix (what DDS says of it)."""
+
+    tiles: list[tuple[int, int]]
+    name: str
+    prefix: bytes
+
+    @property
+    def cells(self) -> str:
+        return ", ".join(f"{a}-{b}" if a != b else str(a) for a, b in self.tiles)
+
+    @property
+    def process(self) -> str:
+        return f"node {self.name or '(unnamed)'}, GUID prefix {self.prefix.hex()}"
 
 
 class FirstWriter:
