@@ -55,6 +55,7 @@ def run_round(session: Session, index: int, group: ProcessGroup) -> float:
         problem = group.failed()
         if problem:
             raise RunFailed(problem)
+        session.check_hosts(group.cells)
         for robot in group.lost_cells():
             monitor.lost[robot] = True
     print(f"camo run: {monitor.progress_line(index)}", file=sys.stderr)
@@ -112,6 +113,7 @@ def discover_once_created(config: RunConfig, group: ProcessGroup, session: Sessi
         problem = group.failed() or (group.lost_cells() and "a worker died creating its robots")
         if problem:
             raise RunFailed(problem)
+        session.check_hosts(group.cells)
         if time.monotonic() - last_print > 2.0:
             created = sum(_count(f) for f in ready.glob("*.count"))
             print(

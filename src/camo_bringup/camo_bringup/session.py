@@ -4,6 +4,7 @@ monitor, one executor that spins them, and the waits a run needs."""
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable
 
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
@@ -13,8 +14,14 @@ from camo_bringup.recording import Recorders
 from camo_bringup.run_config import RunConfig
 from camo_core.exceptions import CamoError
 from camo_core.shutdown import StopFlag
+from camo_nodes.host import host_node_name
 from camo_nodes.monitor_node import MonitorNode
 from camo_nodes.topics.qos import LATCHED
+
+# The exit code of a run that cannot go on because of another process in its domain: a live run
+# of the same id, or a stranger hosting its tiles (the code of bad input: nothing would change
+# by trying again as it is).
+EXIT_CONFLICT = 2
 
 
 class RunFailed(CamoError):
@@ -45,6 +52,7 @@ class Session:
         if config.named:
             self.refuse_a_live_run()
         setup = config.setup()
+        self.setup = setup
         self.monitor = MonitorNode(config.params, topics, setup, context=context)
         self.executor.add_node(self.monitor)
         self.loader = self.node.create_publisher(String, topics.load, 10)
@@ -62,9 +70,26 @@ class Session:
                 raise RunFailed(
                     f"a run named {self.topics.run} is already running in this domain; "
                     f"choose another --run-id (or leave it out for a new one)",
-                    2,
+                    EXIT_CONFLICT,
                 )
             self.spin(0.05)
+
+    def check_hosts(self, started: Iterable[int]) -> None:
+        """RunFailed (code 2) once a tile of the run's own processes (`started`: their pids) was
+        announced first by another process: the run's robots there would never be heard (every
+        process trusts a tile's first announcer, trust.py), so the run could only wait for good.
+        Its own processes are told by the name they announce (host_node_name); cells left to
+        remote workers are anyone's to take."""
+        ours = {host_node_name(pid) for pid in started}
+        hosts = self.monitor.trusted
+        conflict = hosts.held_by_others(self.setup.tiles, lambda p: hosts.names.get(p) in ours)
+        if conflict is not None:
+            raise RunFailed(
+                f"run {self.topics.run}: cells {conflict.cells} were announced first by a "
+                f"process this run did not start ({conflict.process}), so nobody would hear "
+                f"the run's own robots there; stop that process or choose another --run-id",
+                EXIT_CONFLICT,
+            )
 
     def spin(self, seconds: float = 0.1) -> None:
         if self.stop:

@@ -50,11 +50,16 @@ BATCH = 256
 TICKS_PER_TURN = 2048
 
 
+def host_node_name(pid: int | None = None) -> str:
+    """The name of the node of a process hosting robots on this machine (this one's by
+    default): worker_<machine>_<pid>. What its Host announcements say it is."""
+    name = f"worker_{socket.gethostname().split('.')[0]}_{os.getpid() if pid is None else pid}"
+    return "".join(c if c.isalnum() else "_" for c in name).lower()
+
+
 def host_node(topics: RunTopics) -> Node:
     """The process's own node: /<run>/camo/worker_<machine>_<pid>."""
-    name = f"worker_{socket.gethostname().split('.')[0]}_{os.getpid()}"
-    name = "".join(c if c.isalnum() else "_" for c in name).lower()
-    return Node(name, namespace=topics.robot_namespace, **LEAN_NODE)
+    return Node(host_node_name(), namespace=topics.robot_namespace, **LEAN_NODE)
 
 
 class Host:
