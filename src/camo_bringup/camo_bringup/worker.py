@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 from pathlib import Path
 
 import rclpy
@@ -23,10 +24,14 @@ from camo_core.algorithm.run_setup import RunSetup
 from camo_core.cli.options import Parser, parse_ranges
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
+from camo_msgs.msg import Host as HostMsg
+from camo_nodes.polled import PolledTopics
 from camo_nodes.robot_node import host_robots
 from camo_nodes.topics.names import RunTopics, check_run_id
+from camo_nodes.topics.qos import LATCHED_READER
 from camo_nodes.topics.runs import run_ended, wait_for_run, wait_for_setup
 from camo_nodes.topics.startup import LEAN_NODE, add_network_options, network_env, start_ros
+from camo_nodes.trust import Hosts, Rejections
 
 
 def build_parser() -> Parser:
@@ -62,10 +67,46 @@ def tiles_for(setup: RunSetup, texts: list[str], launched: bool):
         if not any(a <= first and last <= b for a, b in remote):
             left = ", ".join(f"{a}-{b}" for a, b in remote) or "none"
             raise UsageError(
-                f"cells {first}-{last} are not left to remote workers by this run "
-                f"(its --remote-cells: {left})"
+                f"run {setup.run}: cells {first}-{last} are not left to remote workers by this "
+                f"run (its --remote-cells: {left})"
             )
     return tiles
+
+
+class Hosted(CamoError):
+    """Cells another process hosts already: every process of the run trusts their first host."""
+
+
+class _Quiet:
+    def warning(self, line: str) -> None:
+        pass  # what the hosts topic holds besides announcements is not this worker's business
+
+
+def refuse_hosted(node: Node, topics: RunTopics, setup: RunSetup, tiles, stop, settle=1.0):
+    """Hosted if, within `settle` seconds, another process's announcement of any of `tiles`
+    is heard (they are latched: the run's processes and strangers alike have said theirs)."""
+    hosts = Hosts(setup.params.count, Rejections(_Quiet()), setup)
+    polled = PolledTopics("worker_join_hosts", topics.robot_namespace)
+
+    def learn(data: bytes, gid: bytes) -> None:
+        msg = hosts.rejections.decoded(data, HostMsg, gid, "an announcement")
+        if msg is not None:
+            hosts.learn(msg, gid)
+
+    polled.listen(HostMsg, topics.hosts, LATCHED_READER, learn)
+    deadline = time.monotonic() + settle
+    try:
+        while time.monotonic() < deadline and not stop:
+            polled.poll()
+            rclpy.spin_once(node, timeout_sec=0.05)
+    finally:
+        polled.close()
+    conflict = hosts.held_by_others(tiles, lambda prefix: False)
+    if conflict is not None:
+        raise Hosted(
+            f"run {topics.run}: cells {conflict.cells} are hosted already by another process "
+            f"({conflict.process}); a cell has one host"
+        )
 
 
 def join(node: Node, args, stop) -> tuple[RunTopics, RunSetup]:
@@ -99,13 +140,15 @@ def main(argv: list[str] | None = None) -> int:
         if launched:
             setup = RunSetup.from_json(args.setup)
             topics = RunTopics(check_run_id(setup.run))
+            tiles = tiles_for(setup, args.cells, launched)
         else:
             finder = Node("worker_join", **LEAN_NODE)
             try:
                 topics, setup = join(finder, args, stop)
+                tiles = tiles_for(setup, args.cells, launched)
+                refuse_hosted(finder, topics, setup, tiles, stop)
             finally:
                 finder.destroy_node()
-        tiles = tiles_for(setup, args.cells, launched)
         progress = Path(f"{args.ready}.count") if args.ready else None
         host = host_robots(
             setup.params,
