@@ -9,6 +9,12 @@ With tiles given it also publishes at once on the topics they would have (the na
 secret), as soon as the run's launcher has started. It prints "ready" (stderr) once its
 publishers exist, stops after SECONDS or on SIGTERM, and prints how many topics it attacked
 and messages it sent.
+
+    python tests/attacker.py RUN_ID SECONDS --hijack FIRST-LAST ...
+
+A quieter stranger (for tests/camo_bringup/test_launcher.py): it only announces those tiles as
+its own (latched, before the run's workers can) and beats a heartbeat, as a process hosting
+them would.
 """
 
 from __future__ import annotations
@@ -92,10 +98,39 @@ def forged(cls, k: int, count: int, cols: int):  # noqa: PLR0911 - one forgery a
     return String(data=json.dumps({"params": {"rows": 2, "cols": 2}, "backgrounds": ["x"]}))
 
 
+def hijack(node, run: str, seconds: float, tiles: list[str]) -> int:
+    """Announce `tiles` (FIRST-LAST) as this process's, then beat until SECONDS or SIGTERM."""
+    latched = QoSProfile(
+        depth=1,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+    ranges = [tuple(int(x) for x in tile.split("-")) for tile in tiles]
+    announcement = Host(name=node.get_name(), first=[a for a, _ in ranges])
+    announcement.last = [b for _, b in ranges]
+    node.create_publisher(Host, f"/{run}/camo/hosts", latched).publish(announcement)
+    beat = node.create_publisher(Heartbeat, f"/{run}/swarm/heartbeat", 10)
+    print("ready", file=sys.stderr, flush=True)
+    stop: list[bool] = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
+    deadline, sequence = time.monotonic() + seconds, 0
+    while time.monotonic() < deadline and not stop:
+        beat.publish(Heartbeat(name=node.get_name(), sequence=sequence))
+        sequence += 1
+        rclpy.spin_once(node, timeout_sec=0.2)
+    print(json.dumps({"announced": tiles, "beats": sequence}))
+    return 0
+
+
 def main() -> int:
     run, seconds, tiles = sys.argv[1], float(sys.argv[2]), sys.argv[3:]
     rclpy.init()
     node = rclpy.create_node("stranger")
+    if tiles[:1] == ["--hijack"]:
+        code = hijack(node, run, seconds, tiles[1:])
+        node.destroy_node()
+        rclpy.shutdown()
+        return code
     qos = QoSProfile(
         depth=1000,
         reliability=ReliabilityPolicy.RELIABLE,

@@ -441,6 +441,108 @@ def running(pid: int) -> bool:
         return False
 
 
+def stranger_hosting(run: str, domain_id: str, *tiles: str) -> subprocess.Popen:
+    """tests/attacker.py announcing `tiles` of run `run` as its own (and beating), once ready."""
+    stranger = subprocess.Popen(
+        [sys.executable, str(ROOT / "tests" / "attacker.py"), run, "300", "--hijack", *tiles],
+        env={**os.environ, "ROS_DOMAIN_ID": domain_id},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    wait_for_line(stranger, "ready")
+    return stranger
+
+
+DISCOVERY = 5.0  # s: the runs below wait this long for a robot's neighbours at most
+
+
+@pytest.mark.slow(SWARM)
+def test_a_stranger_hosting_the_runs_cells_first_ends_it_in_one_line(tmp_path):
+    """A process the launcher did not start announces cells 4-8 of run lab before its workers
+    do: the run ends (code 2) within its discovery timeout, says who took what in one line,
+    and leaves none of its processes behind."""
+    domain_id = str(domain())
+    stranger = stranger_hosting("lab", domain_id, "4-8")
+    err_path = tmp_path / "stderr"
+    started, children = time.monotonic(), set()
+    try:
+        with open(err_path, "w") as err:
+            run = subprocess.Popen(
+                [sys.executable, "-m", "camo_bringup.launcher", "--rows", "3", "--cols", "3"]
+                + ["--run-id", "lab", "--domain-id", domain_id, "--procs", "2"]
+                + ["--discovery-timeout", str(DISCOVERY), "--out", str(tmp_path / "run")],
+                cwd=ROOT,
+                stdout=subprocess.DEVNULL,
+                stderr=err,
+            )
+            while run.poll() is None and time.monotonic() - started < DISCOVERY + 60:
+                children.update(children_of(run.pid))
+                time.sleep(0.1)
+            took = time.monotonic() - started
+            if run.poll() is None:  # it hangs: as it did before the conflict was decided
+                run.send_signal(signal.SIGINT)
+                run.wait(60)
+    finally:
+        stranger.terminate()
+        stranger.communicate(timeout=30)
+    stderr = err_path.read_text()
+    assert run.returncode == 2 and took < DISCOVERY + 25, (took, stderr[-3000:])
+    errors = [line for line in stderr.splitlines() if "error" in line]
+    assert len(errors) == 1 and "Traceback" not in stderr, stderr[-3000:]
+    line = errors[0]
+    assert "run lab" in line and "cells 4-8" in line and "node stranger" in line, line
+    assert "GUID prefix 010f" in line and "0-3" not in line, line
+    assert len(children) >= 2 and not [pid for pid in children if running(pid)], children
+
+
+@pytest.mark.slow(SWARM)
+def test_a_worker_for_cells_hosted_already_or_not_left_to_it_says_so_in_one_line(tmp_path):
+    """A worker started by hand for run lab: for cells another process announced first, or for
+    cells the run hosts itself, it exits 2 at once with one line saying why."""
+    domain_id = str(domain())
+    env = {**os.environ, "ROS_DOMAIN_ID": domain_id}
+    run = subprocess.Popen(
+        [sys.executable, "-m", "camo_bringup.launcher", "--rows", "3", "--cols", "3"]
+        + ["--run-id", "lab", "--domain-id", domain_id, "--procs", "1", "--remote-cells", "6-8"]
+        + ["--discovery-timeout", "120", "--out", str(tmp_path / "run")],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    stranger = None
+    try:
+        wait_for_line(run, "topics under")
+        stranger = stranger_hosting("lab", domain_id, "6-8")
+        workers = {}
+        for cells in ("6-8", "0-2"):
+            started = time.monotonic()
+            workers[cells] = subprocess.run(
+                [sys.executable, "-m", "camo_bringup.worker", "--cells", cells]
+                + ["--run-id", "lab", "--wait", "30"],
+                capture_output=True,
+                text=True,
+                timeout=60,
+                env=env,
+            )
+            assert time.monotonic() - started < 20, (cells, workers[cells].stderr)
+    finally:
+        if stranger is not None:
+            stranger.terminate()
+            stranger.communicate(timeout=30)
+        run.send_signal(signal.SIGINT)
+        run.communicate(timeout=60)
+    for worker in workers.values():
+        errors = [line for line in worker.stderr.splitlines() if "error" in line]
+        assert worker.returncode == 2 and len(errors) == 1, worker.stderr
+        assert "Traceback" not in worker.stderr and "run lab" in errors[0], worker.stderr
+        assert "hosting robots" not in worker.stderr
+    hosted = workers["6-8"].stderr
+    assert "cells 6-8 are hosted already" in hosted and "node stranger" in hosted, hosted
+    assert "cells 0-2 are not left to remote workers" in workers["0-2"].stderr
+
+
 @pytest.mark.slow(SWARM)
 def test_nothing_the_launcher_started_outlives_its_sigkill(tmp_path):
     """Workers, a robot of its own process, the projector and the recorder all exit within
