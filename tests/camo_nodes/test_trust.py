@@ -111,6 +111,23 @@ def test_a_tile_belongs_to_the_process_that_announced_it_first_and_only_tiles_of
     }
 
 
+def test_a_tile_announced_by_a_process_not_of_the_run_is_a_conflict_first_or_not():
+    ours = lambda prefix: prefix == A[:12]  # noqa: E731
+    for order in ((A, B), (B, A)):  # which another process heard first, none can tell
+        hosts = Hosts(36, Rejections(Log()), RunSetup.from_dict(SETUP))
+        assert hosts.held_by_others(((0, 17), (18, 35)), ours) is None
+        for gid in order:
+            name = "w1" if gid == A else "stranger"
+            hosts.learn(Host(name=name, first=[0, 18], last=[17, 35]), gid)
+        conflict = hosts.held_by_others(((0, 17), (18, 35)), ours)
+        assert conflict.tiles == [(0, 17), (18, 35)] and conflict.cells == "0-17, 18-35"
+        assert conflict.process == f"node stranger, GUID prefix {B[:12].hex()}"
+    # A tile not of the run's layout is refused by every process of the run: no conflict.
+    hosts = Hosts(36, Rejections(Log()), RunSetup.from_dict(SETUP))
+    hosts.learn(Host(name="stranger", first=[0], last=[35]), B)
+    assert hosts.held_by_others(((0, 17), (18, 35)), ours) is None
+
+
 def test_cells_left_to_remote_workers_may_be_announced_in_any_tiling():
     setup = RunSetup.from_dict({**SETUP, "tiles": [[0, 17]], "remote": [[18, 35]]})
     hosts = Hosts(36, Rejections(Log()), setup)
