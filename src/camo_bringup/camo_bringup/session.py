@@ -75,19 +75,20 @@ class Session:
             self.spin(0.05)
 
     def check_hosts(self, started: Iterable[int]) -> None:
-        """RunFailed (code 2) once a tile of the run's own processes (`started`: their pids) was
-        announced first by another process: the run's robots there would never be heard (every
-        process trusts a tile's first announcer, trust.py), so the run could only wait for good.
-        Its own processes are told by the name they announce (host_node_name); cells left to
-        remote workers are anyone's to take."""
+        """RunFailed (code 2) once a tile of the run's own processes (`started`: their pids) is
+        announced by another process, first or not: every process that heard it first trusts it
+        as the tile's host (trust.py) and never hears the run's own robots there, which no
+        process can tell of another, so the run could only wait for good. Its own processes are
+        told by the name they announce (host_node_name); cells left to remote workers are
+        anyone's to take."""
         ours = {host_node_name(pid) for pid in started}
         hosts = self.monitor.trusted
         conflict = hosts.held_by_others(self.setup.tiles, lambda p: hosts.names.get(p) in ours)
         if conflict is not None:
             raise RunFailed(
-                f"run {self.topics.run}: cells {conflict.cells} were announced first by a "
-                f"process this run did not start ({conflict.process}), so nobody would hear "
-                f"the run's own robots there; stop that process or choose another --run-id",
+                f"run {self.topics.run}: cells {conflict.cells} were announced by a process "
+                f"this run did not start ({conflict.process}): wherever it was heard first, the "
+                f"run's own robots there go unheard; stop that process or choose another --run-id",
                 EXIT_CONFLICT,
             )
 

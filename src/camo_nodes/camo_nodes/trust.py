@@ -148,9 +148,9 @@ class Hosts:
 
 @dataclass(frozen=True)
 class Conflict:
-    """Tiles that a process announced before their rightful host: nobody hears the rightful one.
-    `name` is the node name the process gave itself (anything it likes), `prefix` its GUID
-    prefix (what DDS says of it)."""
+    """Tiles a process announced that are not its to host: wherever its announcement was heard
+    first, nobody hears their rightful host. `name` is the node name the process gave itself
+    (anything it likes), `prefix` its GUID prefix (what DDS says of it)."""
 
     tiles: list[tuple[int, int]]
     name: str
