@@ -80,11 +80,15 @@ class Session:
         as the tile's host (trust.py) and never hears the run's own robots there, which no
         process can tell of another, so the run could only wait for good. Its own processes are
         told by the name they announce (host_node_name); cells left to remote workers are
-        anyone's to take."""
+        anyone's to take. Said once the run's own processes have announced theirs (they are
+        past their start, and stop cleanly), or after the discovery timeout."""
         ours = {host_node_name(pid) for pid in started}
         hosts = self.monitor.trusted
         conflict = hosts.held_by_others(self.setup.tiles, lambda p: hosts.names.get(p) in ours)
-        if conflict is not None:
+        if conflict is None:
+            return
+        waited = time.monotonic() - self.started
+        if ours <= set(hosts.names.values()) or waited > self.setup.discovery_timeout:
             raise RunFailed(
                 f"run {self.topics.run}: cells {conflict.cells} were announced by a process "
                 f"this run did not start ({conflict.process}): wherever it was heard first, the "
