@@ -122,6 +122,12 @@ def test_a_tile_announced_by_a_process_not_of_the_run_is_a_conflict_first_or_not
         conflict = hosts.held_by_others(((0, 17), (18, 35)), ours)
         assert conflict.tiles == [(0, 17), (18, 35)] and conflict.cells == "0-17, 18-35"
         assert conflict.process == f"node stranger, GUID prefix {B[:12].hex()}"
+    # Cells left to remote workers: a claim of some of a worker's cells is a conflict too.
+    setup = RunSetup.from_dict({**SETUP, "tiles": [[0, 17]], "remote": [[18, 35]]})
+    hosts = Hosts(36, Rejections(Log()), setup)
+    hosts.learn(Host(name="stranger", first=[27], last=[30]), B)
+    assert hosts.held_by_others(((0, 17),), ours) is None
+    assert hosts.held_by_others(((18, 35),), ours).tiles == [(18, 35)]
     # A tile not of the run's layout is refused by every process of the run: no conflict.
     hosts = Hosts(36, Rejections(Log()), RunSetup.from_dict(SETUP))
     hosts.learn(Host(name="stranger", first=[0], last=[35]), B)

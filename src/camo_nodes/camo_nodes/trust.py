@@ -133,17 +133,21 @@ class Hosts:
         return self.owner.get(robot) == gid[:PREFIX]
 
     def held_by_others(self, tiles, ours: Callable[[bytes], bool]) -> Conflict | None:
-        """Of `tiles`, those announced by a process not one of `ours` (by GUID prefix), first or
-        not (which announcement another process heard first, this one cannot know), with that
-        process: the tiles of the first such process, or None."""
+        """Of `tiles`, those a process not one of `ours` (by GUID prefix) announced, or announced
+        cells of, first or not (which announcement another process heard first, this one cannot
+        know), with that process: the tiles of the first such process, or None."""
         found: dict[bytes, list[tuple[int, int]]] = {}
-        for tile in tiles:
-            for prefix in sorted(p for p in self.claims.get(tile, ()) if not ours(p)):
-                found.setdefault(prefix, []).append(tile)
+        for (a, b), prefixes in self.claims.items():
+            strangers = [p for p in prefixes if not ours(p)]
+            for tile in tiles if strangers else ():
+                if a <= tile[1] and tile[0] <= b:
+                    for prefix in strangers:
+                        if tile not in found.setdefault(prefix, []):
+                            found[prefix].append(tile)
         if not found:
             return None
         prefix = min(found)
-        return Conflict(found[prefix], self.names.get(prefix, ""), prefix)
+        return Conflict(sorted(found[prefix]), self.names.get(prefix, ""), prefix)
 
 
 @dataclass(frozen=True)
