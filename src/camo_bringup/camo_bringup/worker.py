@@ -82,9 +82,11 @@ class _Quiet:
         pass  # what the hosts topic holds besides announcements is not this worker's business
 
 
-def refuse_hosted(node: Node, topics: RunTopics, setup: RunSetup, tiles, stop, settle=1.0):
-    """Hosted if, within `settle` seconds, another process's announcement of any of `tiles`
-    is heard (they are latched: the run's processes and strangers alike have said theirs)."""
+def refuse_hosted(node: Node, topics: RunTopics, setup: RunSetup, tiles, stop, settle=(1.0, 5.0)):
+    """Hosted if another process's announcement of any of `tiles` is heard (they are latched:
+    the run's processes and strangers alike have said theirs): listened to for `settle[0]`
+    seconds, and on until every writer of announcements the graph shows was heard, for
+    `settle[1]` at most."""
     hosts = Hosts(setup.params.count, Rejections(_Quiet()), setup)
     polled = PolledTopics("worker_join_hosts", topics.robot_namespace)
 
@@ -94,11 +96,15 @@ def refuse_hosted(node: Node, topics: RunTopics, setup: RunSetup, tiles, stop, s
             hosts.learn(msg, gid)
 
     polled.listen(HostMsg, topics.hosts, LATCHED_READER, learn)
-    deadline = time.monotonic() + settle
+    started = time.monotonic()
     try:
-        while time.monotonic() < deadline and not stop:
+        while not stop:
             polled.poll()
             rclpy.spin_once(node, timeout_sec=0.05)
+            waited = time.monotonic() - started
+            heard_all = len(hosts.names) >= node.count_publishers(topics.hosts)
+            if waited > settle[1] or (waited > settle[0] and heard_all):
+                break
     finally:
         polled.close()
     conflict = hosts.held_by_others(tiles, lambda prefix: False)
@@ -163,8 +169,20 @@ def main(argv: list[str] | None = None) -> int:
         if not launched:
             cells = ", ".join(f"{a}-{b}" for a, b in tiles)
             print(f"camo worker: hosting robots {cells} of {topics.run}", file=sys.stderr)
-        code = host.run(stop, until=run_ended(host.node, topics), destroy=False)
-        if not launched and not stop:
+        ended = run_ended(host.node, topics)
+        # A worker by hand whose cells another process announces too leaves (its launcher, for
+        # a worker it started, ends the run: session.py).
+        contested = lambda: not launched and host.transport.conflict is not None  # noqa: E731
+        code = host.run(stop, until=lambda: ended() or contested(), destroy=False)
+        if contested():
+            conflict = host.transport.conflict
+            print(
+                f"camo worker: error: run {topics.run}: cells {conflict.cells} were announced by "
+                f"another process too ({conflict.process}); a cell has one host: stopping",
+                file=sys.stderr,
+            )
+            code = 2
+        elif not launched and not stop:
             print(f"camo worker: {topics.run} has ended", file=sys.stderr)
         # At once: tearing thousands of robot nodes down one by one takes longer than the run's
         # end allows, and the process's exit frees them all (its shared-memory files, left

@@ -66,10 +66,10 @@ from camo_msgs.msg import (
 )
 from camo_nodes.heartbeat import HeartbeatThread
 from camo_nodes.polled import PolledTopics
-from camo_nodes.rcl_take import PREFIX
+from camo_nodes.rcl_take import PREFIX, publisher_gid
 from camo_nodes.topics.names import RunTopics, tile_name
 from camo_nodes.topics.qos import HEARTBEAT_READER, LATCHED, LATCHED_READER, history_qos
-from camo_nodes.trust import Hosts, Rejections
+from camo_nodes.trust import Conflict, Hosts, Rejections
 
 MESSAGE_TYPES = {
     "hello": Hello,
@@ -284,6 +284,10 @@ class Transport:
         self._announced_rejections = 0
         self.polled = PolledTopics(f"{node.get_name()}_edges", node.get_namespace(), node.context)
         self.host_pub = node.create_publisher(Host, topics.hosts, LATCHED)
+        self.own = publisher_gid(self.host_pub)[:PREFIX]  # this process, as DDS names it
+        # This process's tiles as another process announced them too: wherever that one was
+        # heard first, this one's robots go unheard (trust.py).
+        self.conflict: Conflict | None = None
         self.listen(Host, topics.hosts, LATCHED_READER, self._on_host)
         # Which processes are alive, by their heartbeats; this one's own beats from now on (its
         # robot nodes are still to be created: a neighbour waits for them meanwhile).
@@ -362,7 +366,10 @@ class Transport:
 
     def _on_host(self, data: bytes, gid: bytes) -> None:
         msg = deserialize_message(data, Host)
-        for first, last in self.trusted.learn(msg, gid):
+        new = self.trusted.learn(msg, gid)
+        if self.conflict is None and gid[:PREFIX] != self.own:
+            self.conflict = self.trusted.held_by_others(self.tiles, lambda p: p == self.own)
+        for first, last in new:
             if first in self.hosted or not any(first <= n <= last for n in self.needed):
                 continue  # ours, or nothing there that this process's robots hear
             self.remote.add((first, last))
