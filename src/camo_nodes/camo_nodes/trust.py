@@ -16,8 +16,10 @@ process that heard it first: they no longer hear the real host, and which one
 each process heard first, no other can tell. So a tile of the run's own
 processes announced by a process its launcher did not start is a conflict the
 launcher ends the run on (`held_by_others`), and a worker started by hand
-refuses cells another process announced. What this cannot stop: a process that forges DDS packets
-with another process's GUID (DDS Security does that; see docs/security.md).
+refuses, or leaves, cells another process announces. What this cannot stop: a
+process that forges DDS packets with another process's GUID, or announces
+under the name of one of the launcher's own (DDS Security stops both; see
+docs/security.md).
 """
 
 from __future__ import annotations
