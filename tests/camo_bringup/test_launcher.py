@@ -485,7 +485,7 @@ def test_a_stranger_hosting_the_runs_cells_first_ends_it_in_one_line(tmp_path):
                 run.wait(60)
     finally:
         stranger.terminate()
-        stranger.communicate(timeout=30)
+        finished(stranger, 30)
     stderr = err_path.read_text()
     assert run.returncode == 2 and took < DISCOVERY + 25, (took, stderr[-3000:])
     errors = [line for line in stderr.splitlines() if "error" in line]
@@ -530,9 +530,9 @@ def test_a_worker_for_cells_hosted_already_or_not_left_to_it_says_so_in_one_line
     finally:
         if stranger is not None:
             stranger.terminate()
-            stranger.communicate(timeout=30)
+            finished(stranger, 30)
         run.send_signal(signal.SIGINT)
-        run.communicate(timeout=60)
+        finished(run, 60)
     for worker in workers.values():
         errors = [line for line in worker.stderr.splitlines() if "error" in line]
         assert worker.returncode == 2 and len(errors) == 1, worker.stderr
