@@ -9,7 +9,7 @@ import subprocess
 
 import pytest
 from hypothesis import HealthCheck, settings
-from support import BAG_OPTIONS, FOXGLOVE_CLIENT, camo_run
+from support import BAG_OPTIONS, FOXGLOVE_CLIENT, camo_run, run_keeping_output
 
 # Fuzz tests: the same inputs on every run (a failure in CI is one a developer can replay), no
 # example database written into the clone, and a bounded number of examples each.
@@ -42,6 +42,13 @@ def pytest_collection_modifyitems(config, items):
         for mark in item.iter_markers("slow"):
             if not (mark.args and isinstance(mark.args[0], str) and mark.args[0].strip()):
                 raise pytest.UsageError(f"{item.nodeid}: @pytest.mark.slow(WHY) needs its reason")
+
+
+@pytest.fixture(autouse=True)
+def whole_outputs(monkeypatch):
+    """Every process a test runs keeps its whole output for the report of a failure
+    (support.run_keeping_output; processes started with Popen: support.finished)."""
+    monkeypatch.setattr(subprocess, "run", run_keeping_output)
 
 
 @pytest.fixture

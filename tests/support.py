@@ -55,13 +55,14 @@ def finished(proc: subprocess.Popen, timeout: float) -> tuple[str, str]:
             "its processes are in its output (captured stdout)"
         ) from None
     show(proc, out, err)
-    return out or "", err or ""
+    return out, err
 
 
 def show(proc: subprocess.Popen, out: str | None, err: str | None) -> None:
     """A process's whole output, into the test's captured stdout."""
     print(f"==== {' '.join(map(str, proc.args))} (exit code {proc.returncode})")
-    print(f"---- stdout\n{out or ''}---- stderr\n{err or ''}", flush=True)
+    text = [x.decode(errors="replace") if isinstance(x, bytes) else x or "" for x in (out, err)]
+    print(f"---- stdout\n{text[0]}---- stderr\n{text[1]}", flush=True)
 
 
 def run_whole(argv: list[str], timeout: float, **kwargs) -> subprocess.CompletedProcess:
@@ -71,6 +72,25 @@ def run_whole(argv: list[str], timeout: float, **kwargs) -> subprocess.Completed
     )
     out, err = finished(proc, timeout)
     return subprocess.CompletedProcess(argv, proc.returncode, out, err)
+
+
+_subprocess_run = subprocess.run
+
+
+def run_keeping_output(args, *, capture_output=False, timeout=None, check=False, **kwargs):
+    """subprocess.run as the tests use it (conftest puts it in its place): a process whose
+    output is captured, with a timeout, goes through `finished`, so that its whole output is
+    shown if the test fails, and its stacks if it does not end in time."""
+    if not capture_output or timeout is None or "input" in kwargs:
+        return _subprocess_run(
+            args, capture_output=capture_output, timeout=timeout, check=check, **kwargs
+        )
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kwargs)
+    out, err = finished(proc, timeout)
+    done = subprocess.CompletedProcess(args, proc.returncode, out, err)
+    if check:
+        done.check_returncode()
+    return done
 
 
 def run_camo(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
