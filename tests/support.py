@@ -367,3 +367,80 @@ def assert_drivers_agree(params: CamoParams, raw: np.ndarray, fields: tuple[str,
     for field in fields:
         assert np.array_equal(getattr(fast, field), getattr(slow, field)), (*what, field)
     return fast, slow
+
+
+def png_bytes(
+    width: int,
+    height: int,
+    *,
+    depth: int = 8,
+    colour: int = 0,
+    pixels: tuple[int, int] | None = None,
+) -> bytes:
+    """A minimal PNG (signature, IHDR, one IDAT, IEND, every CRC right) whose header says
+    `width` x `height`, `depth` bits and colour type `colour`, and whose data holds grey
+    8-bit rows of `pixels` (width, height; default the header's): a valid container whose
+    fields may lie about what it holds."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        crc = zlib.crc32(kind + data) & 0xFFFFFFFF
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
+
+    w, h = pixels or (width, height)
+    rows = b"".join(b"\0" + bytes((7 * (x + y)) % 256 for x in range(w)) for y in range(h))
+    header = struct.pack(">IIBBBBB", width, height, depth, colour, 0, 0, 0)
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", header)
+        + chunk(b"IDAT", zlib.compress(rows))
+        + chunk(b"IEND", b"")
+    )
+
+
+# ---- every option of a command with bad values (issue 27) ------------------------------------
+
+BAD_VALUES = ("", "1e300", str(10**30), "nan", "-1", "/tmp/" + "p" * 5000)
+
+
+class Validated(Exception):
+    """Raised in place of a command's work: its command line was parsed and checked."""
+
+
+def validated(*args, **kwargs):
+    raise Validated
+
+
+def value_options(parser) -> list[str]:
+    """The option strings of a parser's options that take a value (flags, --help and
+    positionals left out), one per option: its long spelling."""
+    options = []
+    for action in parser._actions:
+        if not action.option_strings or action.nargs == 0:
+            continue
+        options.append(max(action.option_strings, key=len))
+    return options
+
+
+def bad_value_outcomes(main, argv, option: str, capsys) -> list[str]:
+    """For each BAD_VALUES value of `option`: what is wrong with how `main(argv + [option,
+    value])` ended (nothing if it exited 2 with one `... error: ...` line on stderr, or reached
+    its work, which the caller patched to raise Validated)."""
+    problems = []
+    for value in BAD_VALUES:
+        try:
+            code = main([*argv, option, value])
+        except Validated:
+            capsys.readouterr()
+            continue
+        except SystemExit as exc:  # argparse's own exits (a bug here: ours raise UsageError)
+            code = exc.code
+        except Exception as exc:  # noqa: BLE001 - what the test looks for
+            problems.append(f"{option} {value[:20]!r}: {type(exc).__name__}: {exc}"[:300])
+            continue
+        err = capsys.readouterr().err
+        lines = err.strip().splitlines()
+        if code != 2 or len(lines) != 1 or "error:" not in lines[0] or "Traceback" in err:
+            problems.append(f"{option} {value[:20]!r}: exit {code}, stderr {err[:200]!r}")
+    return problems

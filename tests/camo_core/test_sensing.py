@@ -1,14 +1,15 @@
 """Sensing: images, grey values, block means, measurement noise, real readings, calibration."""
 
 import json
+import os
 
 import cv2
 import numpy as np
 import pytest
 import yaml
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
-from support import COMPUTE, PROCESS
+from support import COMPUTE, PROCESS, png_bytes
 
 from camo_core.algorithm import sensing
 from camo_core.algorithm.params import ParameterError
@@ -65,6 +66,101 @@ def test_colour_alpha_and_grey_files_load(tmp_path):
     assert sensing.load_image(tmp_path / "a.png").shape == (16, 16, 3)
     cv2.imwrite(str(tmp_path / "g.png"), np.full((16, 16), 7, np.uint8))
     assert sensing.load_image(tmp_path / "g.png").shape == (16, 16)
+
+
+def _one_line_image_error(path):
+    with pytest.raises(ImageError) as caught:
+        sensing.load_image(path)
+    message = str(caught.value)
+    assert message and "\n" not in message and len(message) < 300, message
+    return message
+
+
+def test_an_image_whose_header_claims_too_many_pixels_is_refused_before_decoding(tmp_path):
+    big = tmp_path / "big.png"
+    big.write_bytes(png_bytes(100_000, 100_000, pixels=(8, 8)))
+    assert "pixels" in _one_line_image_error(big)
+    wide = tmp_path / "wide.png"  # under Pillow's own bomb limit, over ours
+    wide.write_bytes(png_bytes(sensing.MAX_IMAGE_PIXELS // 4 + 1, 4, pixels=(8, 8)))
+    assert "more than" in _one_line_image_error(wide)
+
+
+def test_an_image_whose_data_is_not_what_its_header_says_is_refused(tmp_path):
+    short = tmp_path / "short.png"
+    short.write_bytes(png_bytes(64, 64, pixels=(8, 8)))
+    _one_line_image_error(short)
+
+
+@pytest.mark.parametrize(
+    "name, expected",
+    [
+        ("", "empty"),
+        ("a" * 5000, "too long"),
+        ("d/" + "b" * 300 + ".png", "too long"),
+        ("folder", "folder"),
+        ("missing.png", "not found"),
+        ("nul\0.png", "NUL"),
+    ],
+)
+def test_a_bad_image_path_is_one_line(tmp_path, name, expected):
+    (tmp_path / "folder").mkdir()
+    path = "" if name == "" else str(tmp_path / name)
+    assert expected in _one_line_image_error(path)
+
+
+def test_an_image_that_is_not_a_regular_file_or_too_big_on_disk_is_refused(tmp_path, monkeypatch):
+    assert "regular file" in _one_line_image_error("/dev/null")
+    image = tmp_path / "ok.png"
+    image.write_bytes(png_bytes(8, 8))
+    monkeypatch.setattr(sensing, "MAX_IMAGE_BYTES", 10)
+    assert "bytes" in _one_line_image_error(image)
+
+
+def test_an_image_we_may_not_read_is_one_line(tmp_path):
+    image = tmp_path / "secret.png"
+    image.write_bytes(png_bytes(8, 8))
+    image.chmod(0)
+    try:
+        if os.access(image, os.R_OK):
+            pytest.skip("running as root: every file is readable")
+        assert "permission" in _one_line_image_error(image)
+    finally:
+        image.chmod(0o600)
+
+
+def test_a_file_that_is_no_image_format_is_one_line(tmp_path):
+    text = tmp_path / "notes.png"
+    text.write_text("hello\n" * 10)
+    assert "not a known image format" in _one_line_image_error(text)
+
+
+def test_sixteen_bit_and_grey_pngs_load_as_eight_bit(tmp_path):
+    cv2.imwrite(str(tmp_path / "deep.png"), np.full((8, 8), 40000, np.uint16))
+    image = sensing.load_image(tmp_path / "deep.png")
+    assert image.dtype == np.uint8 and image.shape[:2] == (8, 8)
+    (tmp_path / "tiny.png").write_bytes(png_bytes(3, 2))
+    assert sensing.load_image(tmp_path / "tiny.png").shape == (2, 3)
+
+
+@given(
+    width=st.one_of(st.integers(0, 64), st.integers(2**14, 2**31 - 1)),
+    height=st.one_of(st.integers(0, 64), st.integers(2**14, 2**31 - 1)),
+    depth=st.sampled_from([0, 1, 2, 4, 7, 8, 16, 255]),
+    colour=st.sampled_from([0, 1, 2, 3, 4, 5, 6, 7, 255]),
+)
+@settings(max_examples=60, deadline=None)
+def test_a_png_with_any_header_fields_loads_or_is_refused_in_one_line(
+    tmp_path_factory, width, height, depth, colour
+):
+    path = tmp_path_factory.mktemp("png") / "fuzz.png"
+    path.write_bytes(png_bytes(width, height, depth=depth, colour=colour, pixels=(8, 8)))
+    try:
+        image = sensing.load_image(path)
+    except ImageError as exc:
+        assert str(exc) and "\n" not in str(exc)
+    else:  # only a header that told the truth about its 8x8 grey 8-bit pixels loads
+        assert (width, height, depth, colour) == (8, 8, 8, 0)
+        assert image.shape == (8, 8) and image.dtype == np.uint8
 
 
 @pytest.mark.parametrize("profile", ["paper", "droplet"])

@@ -230,7 +230,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         projector = None
         # The background is whatever another projector publishes: say so, not the default's name.
         label = f"the background on {topics.background}"
-    elif args.image:
+    elif args.image is not None:
         projector = ros_arguments(ProjectorParams(image=str(Path(args.image).resolve())))
     else:
         projector = ros_arguments(ProjectorParams(pattern=args.pattern or args.default_pattern))

@@ -242,7 +242,9 @@ def emulator_from(args: argparse.Namespace) -> DropletEmulator:
             raise UsageError(f"--{name} is a probability in 0..1")
     if args.delay < 0 or args.disconnect_after < 0 or args.disconnect_for < 0:
         raise UsageError("--delay, --disconnect-after and --disconnect-for must not be negative")
-    image = load_image(args.image) if args.image else background(args.pattern or "forest")
+    image = (
+        load_image(args.image) if args.image is not None else background(args.pattern or "forest")
+    )
     if image.shape[0] < arena.rows or image.shape[1] < arena.cols:
         raise UsageError(f"the image is smaller than the {arena.rows}x{arena.cols} arena")
     faults = Faults(

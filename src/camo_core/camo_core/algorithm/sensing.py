@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import hashlib
 import math
+import struct
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,26 +16,84 @@ import yaml
 from camo_core.algorithm import rng
 from camo_core.algorithm.params import ParameterError
 from camo_core.exceptions import CamoError
+from camo_core.inputs import checked_file, shown
 
 
 class ImageError(CamoError):
-    """An image that cannot be used: missing, unreadable or too small."""
+    """An image that cannot be used: missing, unreadable, too big, of an odd kind or too small."""
+
+
+MAX_IMAGE_BYTES = 512 * 1024 * 1024  # on disk: a 2**27-pixel BMP is 400 MB
+MAX_IMAGE_PIXELS = 2**27  # 16384 x 8192: a 8192 x 8192 grid's image and more, 400 MB as BGR
+DEPTHS = (np.uint8, np.uint16, np.float32)  # what OpenCV's codecs decode to
+
+
+def image_header(path: Path) -> tuple[int, int, str, str]:
+    """(width, height, format, mode) from the file's header alone (Pillow reads no pixels), or
+    ImageError: not an image Pillow recognises, or one that claims more than MAX_IMAGE_PIXELS."""
+    from PIL import Image  # only here: Pillow is matplotlib's, we read headers with it
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            with Image.open(path) as header:
+                width, height = header.size
+                kind, mode = header.format or "?", header.mode
+    except Image.DecompressionBombError:
+        raise ImageError(
+            f"image {shown(path)}: its header claims more than {MAX_IMAGE_PIXELS} pixels"
+        ) from None
+    except (OSError, SyntaxError, ValueError, EOFError, struct.error, MemoryError) as exc:
+        detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        if isinstance(exc, Image.UnidentifiedImageError):
+            detail = "not a known image format (PNG, JPEG, BMP, TIFF, WebP, ...)"
+        raise ImageError(f"cannot read image {shown(path)}: {detail}") from None
+    if width < 1 or height < 1:
+        raise ImageError(f"image {shown(path)}: its header says {width}x{height} pixels")
+    if width * height > MAX_IMAGE_PIXELS:
+        raise ImageError(
+            f"image {shown(path)}: its header claims {width}x{height} pixels, more than "
+            f"{MAX_IMAGE_PIXELS} are not decoded"
+        )
+    return width, height, kind, mode
+
+
+def _decoded(path: Path, flags: int) -> np.ndarray | None:
+    try:
+        return cv2.imread(str(path), flags)
+    except cv2.error as exc:
+        detail = str(exc).strip().splitlines()[-1].strip() if str(exc).strip() else "cv2.error"
+        raise ImageError(f"cannot decode image {shown(path)}: {detail}") from None
 
 
 def load_image(path: str | Path) -> np.ndarray:
-    """Read an image as uint8, grey (H x W) or BGR (H x W x 3); alpha is dropped."""
-    path = Path(path)
-    if not path.is_file():
-        raise ImageError(f"image not found: {path}")
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    """Read an image as uint8, grey (H x W) or BGR (H x W x 3); alpha is dropped.
+
+    Checked level by level, each failure an ImageError in one line: the path (empty, too long,
+    missing, a folder, unreadable), the size on disk (MAX_IMAGE_BYTES), the header's dimensions
+    before any pixel is decoded (MAX_IMAGE_PIXELS), the decoding, and what it decoded to
+    (dimensions as the header said, 1, 3 or 4 channels of 8 or 16 bits or float)."""
+    path = checked_file(path, "image", MAX_IMAGE_BYTES, ImageError)
+    width, height, kind, _ = image_header(path)
+    image = _decoded(path, cv2.IMREAD_UNCHANGED)
     if image is None or image.size == 0:
         raise ImageError(
-            f"cannot read image (not an image OpenCV understands, or corrupt): {path}"
+            f"cannot read image (not an image OpenCV understands, or corrupt): {shown(path)}"
+        )
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (1, 3, 4)):
+        raise ImageError(f"image {shown(path)}: {image.shape} is not 1, 3 or 4 channels")
+    if image.dtype not in DEPTHS:
+        raise ImageError(f"image {shown(path)}: pixels of {image.dtype} are not read")
+    if image.shape[0] * image.shape[1] != width * height:
+        raise ImageError(
+            f"image {shown(path)}: decoded as {image.shape[1]}x{image.shape[0]} pixels, its "
+            f"{kind} header says {width}x{height}"
         )
     if image.dtype != np.uint8:
         # 16-bit or float images: bring to 0..255 the way OpenCV's IMREAD_COLOR does.
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        assert image is not None  # read as it was a line above, now converted to 8 bits
+        image = _decoded(path, cv2.IMREAD_COLOR)
+        if image is None or image.dtype != np.uint8:
+            raise ImageError(f"cannot convert image {shown(path)} to 8 bits")
     if image.ndim == 3 and image.shape[2] == 4:
         image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
     if image.ndim == 3 and image.shape[2] == 1:

@@ -15,6 +15,7 @@ from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import load_image, with_contrast
 from camo_core.exceptions import UsageError
+from camo_core.inputs import checked_path
 from camo_core.results.folders import output_folder
 from camo_core.schema import Declared, with_role
 
@@ -36,7 +37,7 @@ class Parser(argparse.ArgumentParser):
         self.add_argument(
             "--params-file",
             metavar="FILE",
-            type=Path,
+            type=a_path,
             default=None,
             help=f"ROS 2 parameters YAML (keys /** and {node}); the command line overrides it",
         )
@@ -64,6 +65,15 @@ class Parser(argparse.ArgumentParser):
         # The file's values as defaults, so that what the command line gives wins.
         self.set_defaults(**options_from_file(self, path, first.params_node))
         return super().parse_known_args(args, namespace)
+
+
+def a_path(text: str) -> Path:
+    """A path option's argparse type: not empty (Path("") would be ".", the current folder),
+    not longer than the system takes."""
+    return checked_path(text, "", argparse.ArgumentTypeError)
+
+
+a_path.__name__ = "path"
 
 
 def add_options(
@@ -157,7 +167,7 @@ def add_run_options(
 
 def add_out_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
-        "--out", type=Path, default=None, help="output folder (default results/<timestamp>/)"
+        "--out", type=a_path, default=None, help="output folder (default results/<timestamp>/)"
     )
     parser.add_argument(
         "--force", action="store_true", help="write into --out even if it holds something"
@@ -177,7 +187,7 @@ def params_from(args: argparse.Namespace) -> CamoParams:
 
 def image_from(args: argparse.Namespace) -> tuple[np.ndarray, str]:
     """The background and its label; with a --contrast (sim's, errors'), at that contrast."""
-    if args.image:
+    if args.image is not None:  # "" too: an empty path is an error, not the default
         image, label = load_image(args.image), str(args.image)
     else:
         name = args.pattern or args.default_pattern
