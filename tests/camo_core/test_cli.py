@@ -5,9 +5,10 @@ import json
 import cv2
 import numpy as np
 import pytest
-from support import PROCESS, run_camo
+from support import PROCESS, bad_value_outcomes, run_camo, validated, value_options
 
 from camo_core.algorithm.result import SUMMARY_KEYS
+from camo_core.cli import commands
 
 
 @pytest.mark.slow(PROCESS)
@@ -188,3 +189,22 @@ def test_output_into_a_pipe_nobody_reads_ends_quietly(tmp_path):
     err = proc.stderr.read()
     assert proc.wait(timeout=60) == -signal.SIGPIPE
     assert "Traceback" not in err and "BrokenPipeError" not in err
+
+
+def _sim_parser():
+    return commands.add_sim_arguments(commands.Parser(prog="camo sim"))
+
+
+@pytest.mark.parametrize("option", value_options(_sim_parser()))
+def test_every_option_of_sim_with_a_bad_value_is_one_line_and_exit_2(
+    option, tmp_path, monkeypatch, capsys
+):
+    # Only the command line runs: the simulation itself is replaced by Validated (where a
+    # value is fine: -1 for a weight, a folder named nan).
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(commands, "simulate", validated)
+    monkeypatch.setattr(commands, "run_per_robot", validated)
+    argv = ["sim", "--rows", "2", "--cols", "2"]
+    if option != "--out":
+        argv += ["--out", str(tmp_path / "out"), "--force"]
+    assert bad_value_outcomes(commands.main, argv, option, capsys) == []

@@ -22,6 +22,7 @@ from typing import Any, cast
 import yaml
 
 from camo_core.exceptions import UsageError
+from camo_core.inputs import checked_file
 
 PARAMETERS_KEY = "ros__parameters"
 MAX_BYTES = 16 * 1024 * 1024  # a parameters file is a few lines; anything bigger is not one
@@ -71,10 +72,8 @@ def _check_nodes(path: Path, entries: dict, prefix: str) -> None:
 def check_params_file(path: str | Path) -> list[dict]:
     """The file's documents, or the mistakes people make in a parameters file named in one
     line (ParamsFileError). Whatever else rcl refuses, it says itself when the node starts."""
-    path = Path(path)
+    path = checked_file(path, "parameters file", MAX_BYTES, ParamsFileError)
     try:
-        if path.stat().st_size > MAX_BYTES:
-            raise ParamsFileError(f"{path}: {path.stat().st_size} bytes is not a parameters file")
         text = path.read_bytes().decode("utf-8")
     except OSError as exc:
         raise ParamsFileError(f"cannot read parameters file {path}: {exc.strerror}") from None
