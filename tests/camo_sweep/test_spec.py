@@ -5,6 +5,9 @@ import hashlib
 
 import numpy as np
 import pytest
+import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from support import PROCESS
 
 from camo_core.exceptions import UsageError
@@ -171,3 +174,80 @@ def test_millisecond_trials_are_batched_into_tasks_of_about_batch_s(tmp_path):
     # An 8x8 trial takes about a millisecond: tens of trials a task, not one (the kernels'
     # compilation, on a first run, must not be taken for a trial's cost).
     assert 10 <= max(engine.sizes) <= 600 and len(engine.sizes) < 60
+
+
+# ---- structured bad sweep files (issue 27) ---------------------------------------------------
+
+VALUES = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**30), 10**30),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from(["", "nan", "inf", "-1", "1e300", "0:1:0", "1:0:1", "0:1e9:1e-9", "a,b"]),
+    st.sampled_from(["0.1,0.1", "x" * 300, "hex", "paper", "forest", "auto", "8"]),
+    st.lists(st.one_of(st.integers(-2, 10), st.floats(0, 1), st.none(), st.text(max_size=3))),
+    st.dictionaries(st.text(max_size=3), st.integers(), max_size=2),
+)
+NAMES = st.one_of(
+    st.sampled_from(
+        ["rows", "cols", "rho_comm", "rho_meas,rho_comm", "threshold", "pattern", "image"]
+        + ["seed", "layout", "sensed", "contrast", "force", "out", "bogus", "", "rows,rows"]
+    ),
+    st.integers(0, 2),
+    st.none(),
+    st.booleans(),
+)
+SWEEP_FILES = st.one_of(
+    st.fixed_dictionaries(
+        {},
+        optional={
+            "axes": st.one_of(st.dictionaries(NAMES, VALUES, max_size=2), VALUES),
+            "options": st.one_of(st.dictionaries(NAMES, VALUES, max_size=2), VALUES),
+            "trials": VALUES,
+            "seed": VALUES,
+            "driver": VALUES,
+            "blocks": st.one_of(st.lists(st.dictionaries(NAMES, VALUES, max_size=2)), VALUES),
+            "slurm": VALUES,
+            "bogus": VALUES,
+        },
+    ),
+    VALUES,
+)
+
+
+@given(tree=SWEEP_FILES)
+@settings(max_examples=120, deadline=None)
+def test_a_sweep_file_of_wrong_types_and_ranges_is_one_line_or_a_spec(tmp_path_factory, tree):
+    path = tmp_path_factory.mktemp("sweep") / "s.yaml"
+    path.write_text(yaml.safe_dump(tree, sort_keys=False))
+    try:
+        spec = build_spec(spec_from_yaml(path), [], [], None, None, None)
+    except UsageError as exc:
+        assert str(exc) and "\n" not in str(exc)
+    else:
+        assert 1 <= spec.count() <= 10_000_000
+
+
+@pytest.mark.parametrize(
+    "content, said",
+    [
+        (b"axes:\n  1: [1, 2]\n", "axes: 1 is not an option name"),
+        (b"blocks:\n  - {null: [1]}\n", "blocks: None is not an option name"),
+        (b"\xff\xfe\x00binary", "a sweep file is UTF-8 text"),
+        (b"1: 2\nbogus: 3\n", "unknown key 1"),
+    ],
+)
+def test_a_sweep_file_with_keys_that_are_not_names_or_not_text_is_one_line(
+    tmp_path, content, said
+):
+    path = tmp_path / "sweep.yaml"
+    path.write_bytes(content)
+    with pytest.raises(UsageError, match=said):
+        build_spec(spec_from_yaml(path), [], [], None, None, None)
+
+
+@pytest.mark.parametrize("name, said", [("", "empty"), ("x" * 5000, "too long"), (".", "folder")])
+def test_a_sweep_file_path_that_is_no_file_is_one_line(tmp_path, monkeypatch, name, said):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(UsageError, match=said):
+        spec_from_yaml(name)

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import yaml
 
-from camo_core.cli.options import Parser
+from camo_core.cli.options import Parser, a_path
 from camo_core.exceptions import CamoError, UsageError, reported
 from camo_sweep import engines
 from camo_sweep.spec import DRIVERS, SweepSpec, build_spec, spec_from_yaml
@@ -24,8 +24,8 @@ def build_parser() -> Parser:
         description="trials of ./camo sim (or of the swarm) over the product of axes, into a "
         "resumable Parquet table DIR/trials/; `./camo sweep plot DIR --x AXIS` draws it",
     )
-    parser.add_argument("file", nargs="?", type=Path, help="SWEEP.yaml (docs/sweeps.md)")
-    parser.add_argument("--out", type=Path, help="the sweep's folder (resumable); required")
+    parser.add_argument("file", nargs="?", type=a_path, help="SWEEP.yaml (docs/sweeps.md)")
+    parser.add_argument("--out", type=a_path, help="the sweep's folder (resumable); required")
     parser.add_argument(
         "--axis",
         action="append",

@@ -28,6 +28,7 @@ import yaml
 from camo_core.cli.commands import add_sim_arguments
 from camo_core.cli.options import Parser
 from camo_core.exceptions import UsageError
+from camo_core.inputs import checked_file, shown
 
 DRIVERS = ("sim", "ros")
 # Options of ./camo sim that are not a trial's: where it writes, the seed (a trial's own, from the
@@ -35,6 +36,7 @@ DRIVERS = ("sim", "ros")
 NOT_AXES = {"out", "force", "seed", "sensed", "params_file", "help"}
 SPEC_KEYS = {"seed", "trials", "driver", "options", "axes", "blocks", "slurm"}
 MAX_TRIALS = 10_000_000
+MAX_FILE_BYTES = 16 * 1024 * 1024  # a sweep file is a few lines
 
 
 @cache
@@ -263,34 +265,50 @@ class SweepSpec:
         return SweepSpec(self.blocks, self.options, trials, self.seed, self.driver, self.slurm)
 
 
-def spec_from_yaml(path: Path) -> dict[str, Any]:
+def spec_from_yaml(path: str | Path) -> dict[str, Any]:
     """A SWEEP.yaml's contents, checked for shape (values are checked by SweepSpec)."""
+    path = checked_file(path, "sweep file", MAX_FILE_BYTES, UsageError)
     try:
-        data = yaml.safe_load(Path(path).read_text())
+        data = yaml.safe_load(path.read_bytes().decode("utf-8"))
     except OSError as exc:
-        raise UsageError(f"cannot read {path}: {exc.strerror}") from None
+        raise UsageError(f"cannot read {shown(path)}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise UsageError(f"{shown(path)}: a sweep file is UTF-8 text") from None
     except yaml.YAMLError as exc:
         where = getattr(exc, "problem_mark", None)
         at = f" (line {where.line + 1})" if where is not None else ""
-        raise UsageError(f"{path} is not valid YAML{at}") from None
+        raise UsageError(f"{shown(path)} is not valid YAML{at}") from None
+    except RecursionError:
+        raise UsageError(f"{shown(path)} nests too deeply to be a sweep file") from None
+    name = shown(path)
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise UsageError(f"{path}: a sweep file is a mapping of {', '.join(sorted(SPEC_KEYS))}")
+        raise UsageError(f"{name}: a sweep file is a mapping of {', '.join(sorted(SPEC_KEYS))}")
     unknown = set(data) - SPEC_KEYS
     if unknown:
-        raise UsageError(
-            f"{path}: unknown key {sorted(unknown)[0]!r} (keys: {', '.join(sorted(SPEC_KEYS))})"
-        )
+        first = sorted(unknown, key=str)[0]
+        raise UsageError(f"{name}: unknown key {first!r} (keys: {', '.join(sorted(SPEC_KEYS))})")
     if "axes" in data and "blocks" in data:
-        raise UsageError(f"{path}: give axes or blocks, not both")
+        raise UsageError(f"{name}: give axes or blocks, not both")
     for key in ("options", "axes", "slurm"):
         if not isinstance(data.get(key, {}), dict):
-            raise UsageError(f"{path}: {key} must be a mapping")
+            raise UsageError(f"{name}: {key} must be a mapping")
     blocks = data.get("blocks", [])
     if not isinstance(blocks, list) or not all(isinstance(b, dict) for b in blocks):
-        raise UsageError(f"{path}: blocks must be a list of mappings of axes")
+        raise UsageError(f"{name}: blocks must be a list of mappings of axes")
+    for key in ("options", "axes", "slurm"):
+        _names_only(name, key, [data.get(key, {})])
+    _names_only(name, "blocks", blocks)
     return data
+
+
+def _names_only(name: str, key: str, mappings: list[dict]) -> None:
+    """The keys of a sweep file's mappings are option names: text, not 1 or null."""
+    for mapping in mappings:
+        for option in mapping:
+            if not isinstance(option, str):
+                raise UsageError(f"{name}: {key}: {option!r} is not an option name")
 
 
 def build_spec(
