@@ -8,7 +8,7 @@ import re
 
 import pytest
 import yaml
-from hypothesis import event, given
+from hypothesis import event, given, settings
 from hypothesis import strategies as st
 from support import PROCESS, SWARM
 
@@ -221,3 +221,49 @@ def test_a_wrong_parameter_in_the_file_is_one_line(tmp_path, text, said):
     )
     assert out.returncode == 2 and said in out.stderr, out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
+
+
+# ---- structured bad values, through `camo sim --params-file` in process (issue 27) ---------
+
+SIM_KEYS = ("rows", "cols", "seed", "rho_comm", "threshold", "profile", "image", "pattern")
+SIM_KEYS += ("layout", "contrast", "sensed", "consensus_steps", "no_such_option")
+WRONG = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**30), 10**30),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from(["", "auto", "nan", "-1", "1e300", "x" * 300, "0,0=1", "hex", "paper"]),
+    st.lists(st.integers(-3, 3), max_size=2),
+    st.dictionaries(st.sampled_from(["a", "ros__parameters"]), st.integers(), max_size=2),
+)
+SIM_FILES = st.one_of(
+    st.dictionaries(st.sampled_from(SIM_KEYS), WRONG, min_size=1, max_size=3).map(
+        lambda values: {"/**": {"ros__parameters": values}}
+    ),
+    st.builds(lambda v: {"camo_sim": {"ros__parameters": v}}, WRONG),
+    st.builds(lambda v: {"/**": v}, WRONG),
+    WRONG,
+)
+
+
+@given(tree=SIM_FILES)
+@settings(max_examples=80, deadline=None)
+def test_a_params_file_of_wrong_types_and_ranges_is_one_line_or_runs(
+    tmp_path_factory, monkeypatch, capsys, tree
+):
+    from support import Validated, validated
+
+    from camo_core.cli import commands
+
+    folder = tmp_path_factory.mktemp("pf")
+    path = folder / "p.yaml"
+    path.write_text(yaml.safe_dump(tree))
+    monkeypatch.setattr(commands, "simulate", validated)
+    monkeypatch.setattr(commands, "run_per_robot", validated)
+    argv = ["sim", "--params-file", str(path), "--out", str(folder / "out"), "--force"]
+    try:
+        code = commands.main(argv)
+    except Validated:
+        return
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and err.startswith("camo: error: "), err
