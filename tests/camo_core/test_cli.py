@@ -60,7 +60,7 @@ def test_sim_accepts_a_colour_image_file(tmp_path):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--image", "/no/such/file.png"], "image not found"),
+        (["--image", "/no/such/file.png"], "cannot read image /no/such/file.png: not found"),
         (["--rows", "0"], "rows must be"),
         (["--rho-meas", "-0.5"], "rho_meas must be"),
         (["--rows", "200", "--cols", "200"], "smaller than"),
