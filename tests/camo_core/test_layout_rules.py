@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from support import COMPUTE, PROCESS, brick_courses, run_camo
 
 from camo_core.algorithm import orientation
@@ -47,7 +49,7 @@ def test_a_layout_file_is_read_or_refused_in_one_line(tmp_path):
         bad.write_text(text)
         with pytest.raises(LayoutError, match=said):
             layout_of(str(bad), 8, 8, 0)
-    with pytest.raises(LayoutError, match="cannot read the layout"):
+    with pytest.raises(LayoutError, match="cannot read layout"):
         layout_of(str(tmp_path / "missing.csv"), 8, 8, 0)
 
 
@@ -138,4 +140,83 @@ def test_sim_on_a_layout_writes_its_positions_and_refuses_what_it_cannot(tmp_pat
     missing = run_camo("sim", "--layout", str(tmp_path / "no.csv"), "--orientation", "any",
                        "--out", str(tmp_path / "c"))  # fmt: skip
     assert missing.returncode != 0 and len(missing.stderr.strip().splitlines()) == 1
-    assert "cannot read the layout" in missing.stderr
+    assert "cannot read layout" in missing.stderr
+
+
+# ---- layout files: every level in one line (issue 27) ----------------------------------------
+
+
+def _one_line_layout_error(path) -> str:
+    with pytest.raises(LayoutError) as caught:
+        CamoParams.from_options(layout=str(path))
+    message = str(caught.value)
+    assert message and "\n" not in message and len(message) < 300, message
+    return message
+
+
+@pytest.mark.parametrize(
+    "content, said",
+    [
+        (b"x,y\n0,0\n1,nan\n", "line 3"),
+        (b"0,0\n1,inf\n", "line 2"),
+        (b"0,0\n1e300,0\n", "line 2"),
+        (b"0,0\n1,2,3\n", "line 2"),
+        (b"0,0\n1\n", "line 2"),
+        (b"0,0\n0,0\n", "apart"),
+        (b"x,y\n", "no positions"),
+        (b"", "no positions"),
+        (b"0,0\n\xff\xfe,1\n", "not a CSV"),
+        (b"0,0\n" + b"1" * 200_000 + b",1\n", "not a CSV"),
+        (b"0,0\n1,0\x00\n", "line 2"),
+    ],
+)
+def test_a_layout_file_with_bad_numbers_or_rows_is_one_line(tmp_path, content, said):
+    path = tmp_path / "layout.csv"
+    path.write_bytes(content)
+    assert said in _one_line_layout_error(path)
+
+
+@pytest.mark.parametrize(
+    "name, said",
+    [("", "empty"), ("l" * 5000, "too long"), (".", "folder"), ("gone.csv", "not found")],
+)
+def test_a_layout_path_that_is_no_file_is_one_line(tmp_path, monkeypatch, name, said):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(LayoutError, match=said) as caught:
+        from camo_core.algorithm.layout import file_positions
+
+        file_positions(name)
+    assert "\n" not in str(caught.value)
+
+
+def test_a_layout_file_too_big_to_be_one_is_refused_before_reading(tmp_path, monkeypatch):
+    from camo_core.algorithm import layout
+
+    path = tmp_path / "big.csv"
+    path.write_text("0,0\n1,0\n")
+    monkeypatch.setattr(layout, "MAX_FILE_BYTES", 4)
+    with pytest.raises(LayoutError, match="bytes"):
+        layout.file_positions(str(path))
+
+
+NUMBERS = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.integers(-(10**30), 10**30).map(str),
+    st.sampled_from(["", " ", "nan", "-inf", "1e309", "0x10", "1_0", "--1", "x", '"1"']),
+)
+ROWS = st.lists(st.lists(NUMBERS, min_size=0, max_size=3).map(",".join), max_size=6)
+
+
+@given(rows=ROWS)
+@settings(max_examples=80, deadline=None)
+def test_a_layout_csv_of_any_numbers_is_one_line_or_positions(tmp_path_factory, rows):
+    path = tmp_path_factory.mktemp("layout") / "l.csv"
+    path.write_text("\n".join(rows) + "\n")
+    try:
+        params = CamoParams.from_options(layout=str(path))
+        places_for(params)
+    except (LayoutError, ParameterError) as exc:
+        assert str(exc) and "\n" not in str(exc)
+    else:
+        positions = np.array(params.positions)
+        assert np.isfinite(positions).all() and np.abs(positions).max() <= 1e6

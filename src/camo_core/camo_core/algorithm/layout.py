@@ -25,6 +25,7 @@ from camo_core.algorithm.grid import neighbor_ids
 from camo_core.algorithm.params import MAX_COORDINATE, CamoParams
 from camo_core.algorithm.sensing import to_gray
 from camo_core.exceptions import CamoError
+from camo_core.inputs import checked_file, shown
 
 NEAR = 1.5
 FAR = 2.3
@@ -33,6 +34,7 @@ MAX_SLOTS = 64  # neighbours within FAR: RobotStatus.known_slots is a 64-bit mas
 KINDS = ("hex", "jitter:A", "FILE")
 STREAM_JITTER = 9  # rng stream of the jitter draws (a = coordinate, b = robot)
 MAX_ROBOTS = 65536
+MAX_FILE_BYTES = 16 * 1024 * 1024  # 65536 lines of x,y and then some
 
 
 class LayoutError(CamoError):
@@ -100,7 +102,7 @@ def slot_ids(params: CamoParams, robot: int) -> list[int | None]:
 
 def file_positions(path: str) -> tuple[tuple[float, float], ...]:
     """--layout FILE's positions, as CamoParams carries them."""
-    return tuple((float(x), float(y)) for x, y in read_positions(Path(path)))
+    return tuple((float(x), float(y)) for x, y in read_positions(path))
 
 
 def layout_of(spec: str, rows: int, cols: int, seed: int) -> Layout:
@@ -124,8 +126,9 @@ def layout_of(spec: str, rows: int, cols: int, seed: int) -> Layout:
     return Layout(spec, read_positions(Path(spec)))
 
 
-def read_positions(path: Path) -> np.ndarray:
+def read_positions(path: str | Path) -> np.ndarray:
     """x,y per line (spacings); a header line of words is skipped."""
+    path = checked_file(path, "layout", MAX_FILE_BYTES, LayoutError)
     try:
         with open(path, newline="") as handle:
             lines = [
@@ -134,25 +137,24 @@ def read_positions(path: Path) -> np.ndarray:
                 if row and any(c.strip() for c in row)
             ]
     except OSError as exc:
-        raise LayoutError(f"cannot read the layout {path}: {exc.strerror or exc}") from None
+        raise LayoutError(f"cannot read layout {shown(path)}: {exc.strerror or exc}") from None
     except (UnicodeDecodeError, csv.Error):
-        raise LayoutError(f"layout {path} is not a CSV file of x,y positions") from None
+        raise LayoutError(f"layout {shown(path)} is not a CSV file of x,y positions") from None
     if lines and not _parses(lines[0][1]):
         lines = lines[1:]  # a header of words
     bad = next((n for n, row in lines if len(row) != 2 or not _numbers(row)), None)
     if bad is not None or not lines:
         where = f"line {bad}" if bad is not None else "no positions"
-        raise LayoutError(
-            f"layout {path}: {where}: want x,y (two numbers within +-{MAX_COORDINATE:g}) a line"
-        )
+        want = f"want x,y (two numbers within +-{MAX_COORDINATE:g}) a line"
+        raise LayoutError(f"layout {shown(path)}: {where}: {want}")
     rows = [row for _, row in lines]
     if len(rows) > MAX_ROBOTS:
-        raise LayoutError(f"layout {path} has {len(rows)} robots, above {MAX_ROBOTS}")
+        raise LayoutError(f"layout {shown(path)} has {len(rows)} robots, above {MAX_ROBOTS}")
     positions = np.array([[float(x), float(y)] for x, y in rows])
     close = _closest_pair(positions)
     if close is not None and close < MIN_GAP:
         raise LayoutError(
-            f"layout {path} has two robots {close:.3g} spacings apart (< {MIN_GAP:g})"
+            f"layout {shown(path)} has two robots {close:.3g} spacings apart (< {MIN_GAP:g})"
         )
     return positions
 
