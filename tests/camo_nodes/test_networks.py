@@ -8,7 +8,7 @@ import sys
 import time
 
 import pytest
-from support import SWARM, assert_like_sim, domain, finished, run_camo
+from support import PROCESS, SWARM, assert_like_sim, domain, finished, run_camo
 from two_hosts import TwoHosts, lossy_available, netns_available
 
 OK, WHY = netns_available()
@@ -172,3 +172,72 @@ def test_a_tenth_of_the_packets_lost_between_hosts_leaves_the_result_equal_to_th
         launcher, worker = split_run(net, tmp_path, environment())
         equals_the_simulator(tmp_path, launcher, worker)
         assert net.dropped("a") + net.dropped("b") > 100
+
+
+# ---- the environment a run inherits (issue 27) -----------------------------------------------
+
+
+def _network_args(**given):
+    import argparse
+
+    return argparse.Namespace(
+        **{"domain_id": None, "network": None, "discovery_server": None, **given}
+    )
+
+
+@pytest.mark.parametrize(
+    "name, value, said",
+    [
+        ("ROS_DOMAIN_ID", "abc", "ROS_DOMAIN_ID must be an integer in 0..232 (got 'abc')"),
+        ("ROS_DOMAIN_ID", "-1", "ROS_DOMAIN_ID must be"),
+        ("ROS_DOMAIN_ID", "233", "ROS_DOMAIN_ID must be"),
+        ("ROS_DOMAIN_ID", "1e300", "ROS_DOMAIN_ID must be"),
+        ("ROS_DOMAIN_ID", "7" * 5000, "ROS_DOMAIN_ID must be"),
+        ("ROS_DOMAIN_ID", "nan", "ROS_DOMAIN_ID must be"),
+        ("ROS_DOMAIN_ID", "\u00b2", "ROS_DOMAIN_ID must be"),
+        ("ROS_AUTOMATIC_DISCOVERY_RANGE", "everywhere", "must be one of LOCALHOST, SUBNET"),
+        ("ROS_AUTOMATIC_DISCOVERY_RANGE", "\x00", "must be one of"),
+    ],
+)
+def test_a_bad_ros_variable_in_the_environment_is_one_line(name, value, said):
+    from camo_core.exceptions import UsageError
+    from camo_nodes.topics.startup import network_env
+
+    with pytest.raises(UsageError) as caught:
+        network_env(_network_args(), {name: value})
+    assert said in str(caught.value) and "\n" not in str(caught.value)
+    assert len(str(caught.value)) < 300
+
+
+def test_good_or_empty_ros_variables_pass_and_options_override_bad_ones():
+    from camo_nodes.topics.startup import network_env
+
+    env = network_env(_network_args(), {"ROS_DOMAIN_ID": "", "ROS_AUTOMATIC_DISCOVERY_RANGE": ""})
+    assert env["ROS_DOMAIN_ID"] == "" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+    env = network_env(
+        _network_args(), {"ROS_DOMAIN_ID": "232", "ROS_AUTOMATIC_DISCOVERY_RANGE": "subnet"}
+    )
+    assert env["ROS_DOMAIN_ID"] == "232" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "SUBNET"
+    env = network_env(
+        _network_args(domain_id=3, network="localhost"),
+        {"ROS_DOMAIN_ID": "abc", "ROS_AUTOMATIC_DISCOVERY_RANGE": "everywhere"},
+    )
+    assert env["ROS_DOMAIN_ID"] == "3" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+
+
+@pytest.mark.slow(PROCESS)
+@pytest.mark.parametrize("value", ["/nonexistent", "x" * 5000])
+def test_a_bad_camo_rcl_lib_is_one_line_and_exit_2(value):
+    import subprocess
+
+    env = {**os.environ, "CAMO_RCL_LIB": value}
+    done = subprocess.run(
+        [sys.executable, "-c", "import camo_nodes.rcl_take"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+    )
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("camo: error: CAMO_RCL_LIB="), done.stderr

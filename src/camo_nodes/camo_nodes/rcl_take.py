@@ -19,9 +19,13 @@ from __future__ import annotations
 
 import ctypes
 import os
+import sys
 from pathlib import Path
 
 import rclpy
+
+from camo_core.exceptions import EXIT_USAGE
+from camo_core.inputs import shown
 
 RMW_GID_STORAGE_SIZE = 16
 RCL_RET_OK = 0
@@ -69,11 +73,20 @@ class MessageInfo(ctypes.Structure):
 def _libraries() -> tuple[ctypes.CDLL, ctypes.CDLL, ctypes.CDLL]:
     """librcutils, librcl and the Fast DDS rmw: the very files rclpy's extension loaded."""
     folder = Path(rclpy.__file__).resolve().parents[3]  # <venv>/lib/python3.X/site-packages/rclpy
-    lib = Path(os.environ.get("CAMO_RCL_LIB", folder))
-    return tuple(
-        ctypes.CDLL(str(lib / name))
-        for name in ("librcutils.so", "librcl.so", "librmw_fastrtps_cpp.so")
-    )
+    override = os.environ.get("CAMO_RCL_LIB")  # a folder of one's own build of them
+    lib = Path(override) if override else folder
+    try:
+        return tuple(
+            ctypes.CDLL(str(lib / name))
+            for name in ("librcutils.so", "librcl.so", "librmw_fastrtps_cpp.so")
+        )
+    except OSError as exc:
+        if not override:
+            raise  # the venv's own files: a broken installation, not a bad input
+        # At import, before any entry point's error handling: one line and exit 2 here.
+        detail = str(exc).splitlines()[0] if str(exc) else "cannot load"
+        print(f"camo: error: CAMO_RCL_LIB={shown(override)!r}: {shown(detail)}", file=sys.stderr)
+        raise SystemExit(EXIT_USAGE) from None
 
 
 _rcutils, _rcl, _rmw = _libraries()

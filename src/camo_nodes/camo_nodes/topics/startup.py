@@ -21,6 +21,7 @@ from rclpy.parameter import Parameter
 from camo_core.cli.options import Parser
 from camo_core.cli.params_file import check_ros_args
 from camo_core.exceptions import EXIT_USAGE, UsageError
+from camo_core.inputs import shown
 from camo_core.shutdown import stacks_on_faults
 
 from ..shm import remove_stale
@@ -120,6 +121,8 @@ def node_command_line(prog: str, args: list[str] | None) -> list[str]:
 # ---- how a process finds the others: DDS discovery ----------------------------------------
 
 NETWORKS = ("localhost", "subnet")
+DISCOVERY_RANGES = ("LOCALHOST", "SUBNET", "OFF", "SYSTEM_DEFAULT")  # rcl's, for the variable
+MAX_DOMAIN_ID = 232  # rcl's limit with Fast DDS's default ports
 
 
 def add_network_options(parser: argparse.ArgumentParser) -> None:
@@ -145,9 +148,29 @@ def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, 
     """The environment a ROS process of ours runs in, from --network, --discovery-server and
     --domain-id (raises UsageError)."""
     env = dict(environ)
+    if args.domain_id is None:
+        inherited = env.get("ROS_DOMAIN_ID", "").strip()
+        whole = inherited.isascii() and inherited.isdigit() and len(inherited) <= 3
+        if inherited and not (whole and int(inherited) <= MAX_DOMAIN_ID):
+            raise UsageError(
+                f"ROS_DOMAIN_ID must be an integer in 0..{MAX_DOMAIN_ID} (got "
+                f"{shown(inherited)!r}): unset it or give --domain-id"
+            )
+    if args.network is None:
+        inherited = env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").strip().upper()
+        if inherited and inherited not in DISCOVERY_RANGES:
+            raise UsageError(
+                f"ROS_AUTOMATIC_DISCOVERY_RANGE must be one of {', '.join(DISCOVERY_RANGES)} "
+                f"(got {shown(env['ROS_AUTOMATIC_DISCOVERY_RANGE'])!r}): unset it or give "
+                "--network"
+            )
+        if inherited:
+            env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = inherited
+        else:
+            env.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)  # "" is the default, as unset
     if args.domain_id is not None:
         if not 0 <= args.domain_id <= 232:
-            raise UsageError(f"--domain-id must be in 0..232 (got {args.domain_id})")
+            raise UsageError(f"--domain-id must be in 0..{MAX_DOMAIN_ID} (got {args.domain_id})")
         env["ROS_DOMAIN_ID"] = str(args.domain_id)
     if args.network is not None:
         env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = args.network.upper()
