@@ -2,6 +2,7 @@
 
 import math
 
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from support import ROOT
@@ -44,3 +45,28 @@ def test_any_printout_leaves_a_state_the_monitor_can_take(lines):
     assert state.p is None or probability_vector(state.p, REPORT_TOLERANCE)
     assert math.isnan(state.sensed) or 0 <= state.sensed <= 255
     assert state.pattern in (None, 0, 1, 2)
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        "Px: nan Py: 0.1",
+        "Px: 1e400 Py: 0",
+        "Px: -0.5 Py: 0.2",
+        "Px: 1.2.3 Py: 0",
+        "Pre-pattern: [0 0 1] Cur-pattern: [nan 0.5 0.5]",
+        "Pre-pattern: [0 0 1] Cur-pattern: [inf 0 0]",
+        "Pre-pattern: [0 0 1] Cur-pattern: [0.5 0.5]",
+        "Pre-pattern: [0 0 1] Cur-pattern: [2 -1 0]",
+        "195[00C3] Color: 256",
+        "195[00C3] Color: " + "9" * 5000,
+        "195[00C3] Color: \u0661\u0662",
+        "195[00C3] Color: -1",
+        "\x00\x01\x02",
+        "P" * 5000,
+    ],
+)
+def test_a_line_with_a_number_no_robot_prints_is_ignored_and_counted(line):
+    state = FirmwareState(droplet_id=0x00C3)
+    assert state.feed(line) is False
+    assert state.ignored == 1 and state.p is None and math.isnan(state.sensed)

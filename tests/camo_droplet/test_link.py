@@ -131,3 +131,21 @@ def test_a_command_answered_with_anything_returns_or_raises_a_droplet_error(chun
             assert "\n" not in str(exc)
         else:
             assert value == (1, 2, 3) or value == 0x00C3
+
+
+def test_nul_bytes_and_a_line_one_byte_too_long_are_discarded_and_counted():
+    reader = LineReader()
+    lines = reader.feed(b"a\x00b\r\n" + b"x" * 201 + b"\r\n" + b"y" * 200 + b"\r\n")
+    assert lines == ["y" * 200] and reader.discarded == 2
+
+
+@pytest.mark.parametrize(
+    "reply", [b"r: nan, g: 0, b: 0\r\n", b"r: -1, g: 0, b: 0\r\n", b"r: 1e3, g: 0, b: 0\r\n"]
+)
+def test_a_colour_reply_that_is_no_number_in_range_is_one_droplet_error(reply):
+    chunks = [b"get_rgb\r\n", reply] * 3
+    link = DropletLink("/dev/fuzz", opener=lambda path: ScriptedPort(chunks), timeout=0.01)
+    link.open()
+    with pytest.raises(DropletError) as caught:
+        link.get_rgb()
+    assert "\n" not in str(caught.value)

@@ -23,7 +23,9 @@ from camo_core.algorithm.validation import REPORT_TOLERANCE, probability_vector
 
 PX_PY = re.compile(r"^Px:\s*(-?[\d.]+)\s+Py:\s*(-?[\d.]+)$")
 PATTERNS = re.compile(r"^Pre-pattern:\s*\[([^\]]*)\]\s*Cur-pattern:\s*\[([^\]]*)\]$")
-COLOR = re.compile(r"^(\d+)\[([0-9A-Fa-f]{4})\]\s*Color:\s*(\d+)$")
+# ASCII digits only (\d takes any script's), and few of them: a 5000-digit value is no colour
+# (and beyond int()'s 4300-digit limit).
+COLOR = re.compile(r"^([0-9]+)\[([0-9A-Fa-f]{4})\]\s*Color:\s*([0-9]{1,9})$", re.ASCII)
 
 
 @dataclass
