@@ -18,14 +18,19 @@ from support import (
     ROOT,
     SWARM,
     assert_like_sim,
+    bad_value_outcomes,
     bag_tool,
     camo_run,
     domain,
     finished,
     ros_context,
     run_camo,
+    validated,
+    value_options,
     wait_for_line,
 )
+
+from camo_bringup import launcher, run_config, worker
 
 
 def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:
@@ -533,10 +538,10 @@ def test_a_worker_for_cells_hosted_already_or_not_left_to_it_says_so_in_one_line
             finished(stranger, 30)
         run.send_signal(signal.SIGINT)
         finished(run, 60)
-    for worker in workers.values():
-        errors = [line for line in worker.stderr.splitlines() if "error" in line]
-        assert worker.returncode == 2 and len(errors) == 1, worker.stderr
-        assert "Traceback" not in worker.stderr and "run lab" in errors[0], worker.stderr
+    for refused in workers.values():
+        errors = [line for line in refused.stderr.splitlines() if "error" in line]
+        assert refused.returncode == 2 and len(errors) == 1, refused.stderr
+        assert "Traceback" not in refused.stderr and "run lab" in errors[0], refused.stderr
     # Said before it hosts anything if it heard the stranger in time, else once it does.
     hosted = workers["6-8"].stderr
     assert "cells 6-8 are hosted already" in hosted or "cells 6-8 were announced" in hosted
@@ -964,3 +969,40 @@ def test_a_recording_onto_a_full_disk_costs_the_bag_and_never_the_run(tmp_path):
     sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
     assert sim.returncode == 0, sim.stderr
     assert_like_sim(tmp_path / "run", tmp_path / "sim")
+
+
+# ---- every option with bad values (issue 27) -------------------------------------------------
+
+
+@pytest.mark.parametrize("option", value_options(run_config.build_parser()))
+def test_every_option_of_run_with_a_bad_value_is_one_line_and_exit_2(
+    option, tmp_path, monkeypatch, capsys
+):
+    # Only the command line and the run's set-up are checked: starting the swarm is replaced.
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(launcher, "run", validated)
+    argv = ["--rows", "2", "--cols", "2"]
+    if option != "--out":
+        argv += ["--out", str(tmp_path / "out"), "--force"]
+    assert bad_value_outcomes(launcher.main, argv, option, capsys) == []
+
+
+@pytest.mark.parametrize("option", ["--step-timeout", "--discovery-timeout"])
+def test_a_timeout_beyond_a_day_is_refused(option, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(launcher, "run", validated)
+    argv = ["--rows", "2", "--cols", "2", "--out", str(tmp_path / "o"), option, "1e300"]
+    assert launcher.main(argv) == 2
+    assert "86400" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("option", value_options(worker.build_parser()))
+def test_every_option_of_worker_with_a_bad_value_is_one_line_and_exit_2(
+    option, tmp_path, monkeypatch, capsys
+):
+    # Only the command line and the network it asks for are checked: joining is replaced
+    # (and the environment it would set is this test's own copy).
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(os, "environ", dict(os.environ))
+    monkeypatch.setattr(worker, "start_ros", validated)
+    argv = [] if option == "--cells" else ["--cells", "0-3"]
+    assert bad_value_outcomes(worker.main, argv, option, capsys) == []

@@ -4,7 +4,10 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
+from support import bad_value_outcomes, validated, value_options
 
+from camo_droplet import emulator
 from camo_droplet.emulator import emulated_rgb
 
 
@@ -33,3 +36,25 @@ def test_emulator_command_line_rejects_bad_options(tmp_path):
     )
     assert out.returncode == 2 and "inside the 8x8 arena" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
+
+
+# ---- every option with bad values (issue 27) -------------------------------------------------
+
+
+@pytest.mark.parametrize("option", value_options(emulator.build_parser()))
+def test_every_option_of_the_emulator_with_a_bad_value_is_one_line_and_exit_2(
+    option, tmp_path, monkeypatch, capsys
+):
+    # Only the command line is checked: making the pty is replaced.
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(emulator, "DropletEmulator", validated)
+    argv = [] if option == "--link" else ["--link", str(tmp_path / "pty")]
+    assert bad_value_outcomes(emulator.main, argv, option, capsys) == []
+
+
+@pytest.mark.parametrize("option", ["--delay", "--disconnect-for"])
+@pytest.mark.parametrize("value", ["nan", "1e300", "inf"])
+def test_a_fault_of_no_finite_duration_is_refused(option, value, tmp_path, capsys):
+    argv = ["--link", str(tmp_path / "pty"), option, value]
+    assert emulator.main(argv) == 2
+    assert "must be seconds in 0..3600" in capsys.readouterr().err

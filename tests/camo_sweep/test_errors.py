@@ -7,8 +7,9 @@ import sys
 
 import cv2
 import pytest
-from support import COMPUTE, ROOT, sweep_table
+from support import COMPUTE, ROOT, bad_value_outcomes, sweep_table, validated, value_options
 
+from camo_sweep import errors as errors_cli
 from camo_sweep.errors import CSV_COLUMNS
 
 
@@ -85,3 +86,19 @@ def test_at_lower_contrast_measurement_errors_change_the_forests_pattern(tmp_pat
     table = sweep_table(tmp_path / "faint")
     assert all(r["sim_args"].startswith("--pattern forest") for r in table)
     assert all("--contrast 0.3" in r["sim_args"] for r in table)  # each row says how to rerun
+
+
+# ---- every option with bad values (issue 27) -------------------------------------------------
+
+
+@pytest.mark.parametrize("option", value_options(errors_cli.build_parser()))
+def test_every_option_of_errors_with_a_bad_value_is_one_line_and_exit_2(
+    option, tmp_path, monkeypatch, capsys
+):
+    # Only the command line runs: planning the sweep (its first simulation) is replaced.
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(errors_cli, "plan", validated)
+    argv = ["--rows", "2", "--cols", "2", "--trials", "1", "--quiet"]
+    if option != "--out":
+        argv += ["--out", str(tmp_path / "out"), "--force"]
+    assert bad_value_outcomes(errors_cli.main, argv, option, capsys) == []

@@ -12,13 +12,25 @@ import sys
 import cv2
 import pyarrow.dataset as ds
 import pytest
-from support import CLUSTER, PROCESS, ROOT, SWARM, finished, run_camo, sweep
+from support import (
+    CLUSTER,
+    PROCESS,
+    ROOT,
+    SWARM,
+    bad_value_outcomes,
+    finished,
+    run_camo,
+    sweep,
+    validated,
+    value_options,
+)
 from support import sweep_table as table
 
 from camo_core.algorithm.backgrounds import background
 from camo_core.algorithm.sensing import sense_image
 from camo_core.algorithm.simulator import simulate
 from camo_core.cli.options import params_from
+from camo_sweep import cli
 from camo_sweep.spec import sim_parser
 
 
@@ -251,3 +263,28 @@ def test_a_sweep_refuses_a_layout_it_would_not_run(tmp_path):
     assert out.stderr.strip().endswith(
         "sweeps run on the grid: --layout is for ./camo sim and run, for now"
     )
+
+
+# ---- every option with bad values (issue 27) -------------------------------------------------
+
+
+@pytest.mark.parametrize("option", value_options(cli.build_parser()))
+def test_every_option_of_sweep_with_a_bad_value_is_one_line_and_exit_2(
+    option, tmp_path, monkeypatch, capsys
+):
+    # Only the command line and the spec are checked: planning (its first trial) is replaced.
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(cli, "plan", validated)
+    argv = ["--axis", "rho_comm=0,0.1"]
+    if option != "--out":
+        argv += ["--out", str(tmp_path / "out")]
+    assert bad_value_outcomes(cli.main, argv, option, capsys) == []
+
+
+@pytest.mark.parametrize("value", ["", "nan", "-1", "1e300", "/tmp/" + "p" * 5000])
+def test_a_bad_sweep_file_argument_is_one_line_and_exit_2(value, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(cli, "plan", validated)
+    assert cli.main([value, "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("camo sweep: error: "), err

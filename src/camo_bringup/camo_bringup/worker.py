@@ -20,7 +20,7 @@ import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from camo_core.algorithm.run_setup import RunSetup
+from camo_core.algorithm.run_setup import MAX_WAIT, RunSetup
 from camo_core.cli.options import Parser, parse_ranges
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
@@ -134,8 +134,8 @@ def main(argv: list[str] | None = None) -> int:
     stop = StopFlag()
     try:
         args, ros_args = build_parser().parse_with_ros_args(argv)
-        if not args.wait > 0:
-            raise UsageError(f"--wait must be positive (got {args.wait})")
+        if not 0 < args.wait <= MAX_WAIT:
+            raise UsageError(f"--wait must be seconds in (0, {MAX_WAIT:g}] (got {args.wait})")
         os.environ.update(network_env(args, os.environ))
     except CamoError as exc:
         print(f"camo worker: error: {exc}", file=sys.stderr)

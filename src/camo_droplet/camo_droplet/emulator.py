@@ -31,9 +31,11 @@ import numpy as np
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import block_means, load_image
-from camo_core.cli.options import Parser, add_options, options_of
+from camo_core.cli.options import Parser, a_path, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import interrupt_on_signals
+
+MAX_FAULT_S = 3600.0  # s: the longest delay or disconnect an emulated fault lasts
 
 
 @dataclass
@@ -191,7 +193,10 @@ def build_parser() -> Parser:
         description="a Droplet with stock firmware on a pseudo-terminal",
     )
     parser.add_argument(
-        "--link", required=True, help="path of the symlink to the pty (the bridge's PORT)"
+        "--link",
+        required=True,
+        type=a_path,
+        help="path of the symlink to the pty (the bridge's PORT)",
     )
     parser.add_argument(
         "--id", default="1A2B", help="the Droplet's id, 4 hex digits (default 1A2B)"
@@ -204,7 +209,7 @@ def build_parser() -> Parser:
     add_options(parser, CamoParams, only=("rows", "cols"))  # the arena's grid of robots
     parser.add_argument("--cell", default="0,0", help="ROW,COL of this Droplet in the arena")
     parser.add_argument(
-        "--led-log", default=None, help="append every LED setting here (JSON lines)"
+        "--led-log", type=a_path, default=None, help="append every LED setting here (JSON lines)"
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of the injected faults")
     for name, kind, text in (
@@ -240,8 +245,12 @@ def emulator_from(args: argparse.Namespace) -> DropletEmulator:
     for name in ("drop", "garbage", "chatter"):
         if not 0 <= getattr(args, name) <= 1:
             raise UsageError(f"--{name} is a probability in 0..1")
-    if args.delay < 0 or args.disconnect_after < 0 or args.disconnect_for < 0:
-        raise UsageError("--delay, --disconnect-after and --disconnect-for must not be negative")
+    for name in ("delay", "disconnect_for"):  # not NaN, which `< 0` lets through
+        if not 0 <= getattr(args, name) <= MAX_FAULT_S:
+            flag = "--" + name.replace("_", "-")
+            raise UsageError(f"{flag} must be seconds in 0..{MAX_FAULT_S:g}")
+    if args.disconnect_after < 0:
+        raise UsageError("--disconnect-after must not be negative")
     image = (
         load_image(args.image) if args.image is not None else background(args.pattern or "forest")
     )

@@ -18,6 +18,9 @@ from camo_core.schema import ParameterError, check_fields, from_dict, param, to_
 Tile = tuple[int, int]  # first and last robot id, inclusive
 
 
+MAX_WAIT = 86400.0  # s: a day; longer is a mistake, and 1e300 overflows threading's waits
+
+
 @dataclass(frozen=True)
 class ProtocolParams:
     """How long a robot waits (docs/swarm.md, "The step protocol")."""
@@ -27,6 +30,7 @@ class ProtocolParams:
         "seconds a robot waits for a silent neighbour before moving on",
         low=0.0,
         above=True,
+        high=MAX_WAIT,
         unit="s",
     )
     discovery_timeout: float | None = param(
@@ -35,6 +39,7 @@ class ProtocolParams:
         "the remote workers; a robot that never starts costs this once)",
         low=0.0,
         above=True,
+        high=MAX_WAIT,
         unit="s",
         none_means="60 + 0.01 per robot",
     )
