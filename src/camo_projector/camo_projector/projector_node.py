@@ -38,7 +38,7 @@ def load(image_path: str, pattern: str) -> np.ndarray:
 class ProjectorParams:
     """The background a projector shows first: a file, else a built-in pattern."""
 
-    image: str = param("", "background image file (any format OpenCV reads)")
+    image: str = param("", "background image file (PNG, JPEG, BMP, TIFF, WebP, ...)")
     pattern: str = param("forest", "built-in background", choices=BACKGROUNDS)
 
 

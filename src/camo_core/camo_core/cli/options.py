@@ -153,7 +153,7 @@ def add_run_options(
     """The options shared by every command that runs one camouflage (sim, errors, run): the
     background and CamoParams' declared parameters."""
     source = parser.add_mutually_exclusive_group()
-    source.add_argument("--image", help="background image file (any format OpenCV reads)")
+    source.add_argument("--image", help="background image file (PNG, JPEG, BMP, TIFF, WebP, ...)")
     source.add_argument(
         "--pattern",
         choices=BACKGROUNDS,
