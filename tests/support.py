@@ -423,16 +423,31 @@ def value_options(parser) -> list[str]:
     return options
 
 
-def bad_value_outcomes(main, argv, option: str, capsys) -> list[str]:
+# What a number option must refuse whatever its range: no option of camo takes these.
+NOT_A_NUMBER = ("", "nan", "1e300", BAD_VALUES[-1])
+
+
+def numeric(parser, option: str) -> bool:
+    """Whether the parser's `option` takes a number (int, float, seconds, a declared one)."""
+    action = parser._option_string_actions[option]
+    kind = getattr(action.type, "kind", action.type)
+    return kind in (int, float) or getattr(kind, "__name__", "") in ("int", "float", "seconds")
+
+
+def bad_value_outcomes(main, argv, option: str, capsys, parser=None) -> list[str]:
     """For each BAD_VALUES value of `option`: what is wrong with how `main(argv + [option,
-    value])` ended (nothing if it exited 2 with one `... error: ...` line on stderr, or reached
-    its work, which the caller patched to raise Validated)."""
+    value])` ended. Fine: exit 2 with one `... error: ...` line on stderr, or reaching its
+    work (which the caller patched to raise Validated), except that an option of `parser` that
+    takes a number must refuse NOT_A_NUMBER."""
+    must_refuse = NOT_A_NUMBER if parser is not None and numeric(parser, option) else ()
     problems = []
     for value in BAD_VALUES:
         try:
             code = main([*argv, option, value])
         except Validated:
             capsys.readouterr()
+            if value in must_refuse:
+                problems.append(f"{option} {value[:20]!r}: taken as a number")
             continue
         except SystemExit as exc:  # argparse's own exits (a bug here: ours raise UsageError)
             code = exc.code
@@ -444,3 +459,25 @@ def bad_value_outcomes(main, argv, option: str, capsys) -> list[str]:
         if code != 2 or len(lines) != 1 or "error:" not in lines[0] or "Traceback" in err:
             problems.append(f"{option} {value[:20]!r}: exit {code}, stderr {err[:200]!r}")
     return problems
+
+
+def parser_of_main(main, argv, monkeypatch):
+    """The parser a command's main() builds for itself (the last one it parses with: a
+    subcommand's), found by running main(argv) up to its work (which the caller patched to
+    raise Validated)."""
+    from camo_core.cli.options import Parser
+
+    parsers = []
+    parse = Parser.parse_known_args
+
+    def spy(self, args=None, namespace=None):
+        parsers.append(self)
+        return parse(self, args, namespace)
+
+    monkeypatch.setattr(Parser, "parse_known_args", spy)
+    try:
+        main(argv)
+    except Validated:
+        pass
+    monkeypatch.setattr(Parser, "parse_known_args", parse)
+    return parsers[-1]

@@ -93,3 +93,31 @@ def test_a_topic_nobody_publishes_is_one_line():
     assert out.returncode == 2
     assert "topic /nothing does not appear to be published yet" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1
+
+
+# ---- every option with bad values (issue 27) -------------------------------------------------
+
+
+@pytest.mark.parametrize("verb", ["echo", "hz"])
+def test_every_option_of_topic_with_a_bad_value_is_one_line_and_exit_2(
+    verb, tmp_path, monkeypatch, capsys
+):
+    # Only the command line and the network it asks for are checked: starting ROS is replaced
+    # (and the environment it would set is this test's own copy).
+    import os
+
+    from support import bad_value_outcomes, parser_of_main, validated, value_options
+
+    import camo_bag.introspect as command
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(os, "environ", dict(os.environ))
+    monkeypatch.setattr(command, "start_ros", validated)
+    argv = ["topic", verb, "/x"]
+    parser = parser_of_main(command.main, argv, monkeypatch)
+    options = value_options(parser)
+    assert "--wait" in options
+    problems = [
+        p for o in options for p in bad_value_outcomes(command.main, argv, o, capsys, parser)
+    ]
+    assert problems == []

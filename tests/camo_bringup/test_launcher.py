@@ -984,7 +984,7 @@ def test_every_option_of_run_with_a_bad_value_is_one_line_and_exit_2(
     argv = ["--rows", "2", "--cols", "2"]
     if option != "--out":
         argv += ["--out", str(tmp_path / "out"), "--force"]
-    assert bad_value_outcomes(launcher.main, argv, option, capsys) == []
+    assert bad_value_outcomes(launcher.main, argv, option, capsys, run_config.build_parser()) == []
 
 
 @pytest.mark.parametrize("option", ["--step-timeout", "--discovery-timeout"])
@@ -1005,4 +1005,4 @@ def test_every_option_of_worker_with_a_bad_value_is_one_line_and_exit_2(
     monkeypatch.setattr(os, "environ", dict(os.environ))
     monkeypatch.setattr(worker, "start_ros", validated)
     argv = [] if option == "--cells" else ["--cells", "0-3"]
-    assert bad_value_outcomes(worker.main, argv, option, capsys) == []
+    assert bad_value_outcomes(worker.main, argv, option, capsys, worker.build_parser()) == []

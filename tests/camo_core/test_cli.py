@@ -207,4 +207,4 @@ def test_every_option_of_sim_with_a_bad_value_is_one_line_and_exit_2(
     argv = ["sim", "--rows", "2", "--cols", "2"]
     if option != "--out":
         argv += ["--out", str(tmp_path / "out"), "--force"]
-    assert bad_value_outcomes(commands.main, argv, option, capsys) == []
+    assert bad_value_outcomes(commands.main, argv, option, capsys, _sim_parser()) == []

@@ -49,7 +49,7 @@ def test_every_option_of_the_emulator_with_a_bad_value_is_one_line_and_exit_2(
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(emulator, "DropletEmulator", validated)
     argv = [] if option == "--link" else ["--link", str(tmp_path / "pty")]
-    assert bad_value_outcomes(emulator.main, argv, option, capsys) == []
+    assert bad_value_outcomes(emulator.main, argv, option, capsys, emulator.build_parser()) == []
 
 
 @pytest.mark.parametrize("option", ["--delay", "--disconnect-for"])

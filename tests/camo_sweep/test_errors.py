@@ -101,4 +101,6 @@ def test_every_option_of_errors_with_a_bad_value_is_one_line_and_exit_2(
     argv = ["--rows", "2", "--cols", "2", "--trials", "1", "--quiet"]
     if option != "--out":
         argv += ["--out", str(tmp_path / "out"), "--force"]
-    assert bad_value_outcomes(errors_cli.main, argv, option, capsys) == []
+    assert (
+        bad_value_outcomes(errors_cli.main, argv, option, capsys, errors_cli.build_parser()) == []
+    )

@@ -278,7 +278,7 @@ def test_every_option_of_sweep_with_a_bad_value_is_one_line_and_exit_2(
     argv = ["--axis", "rho_comm=0,0.1"]
     if option != "--out":
         argv += ["--out", str(tmp_path / "out")]
-    assert bad_value_outcomes(cli.main, argv, option, capsys) == []
+    assert bad_value_outcomes(cli.main, argv, option, capsys, cli.build_parser()) == []
 
 
 @pytest.mark.parametrize("value", ["", "nan", "-1", "1e300", "/tmp/" + "p" * 5000])

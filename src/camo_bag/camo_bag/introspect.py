@@ -22,7 +22,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from camo_bag import msgdefs
 from camo_bag.graph_topics import taking_qos
-from camo_core.cli.options import Parser
+from camo_core.cli.options import Parser, seconds
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag, quiet_on_a_closed_pipe
 from camo_nodes.topics.startup import add_network_options, network_env, start_ros
@@ -175,7 +175,7 @@ def build_parser() -> Parser:
     hz.add_argument("-w", "--window", type=int, default=10000, help="messages to average over")
     for sub in (echo, hz):
         sub.add_argument(
-            "--wait", type=float, default=5.0, help="seconds to wait for the topic (default 5)"
+            "--wait", type=seconds, default=5.0, help="seconds to wait for the topic (default 5)"
         )
     node = verbs.add_parser("node", help="nodes: list")
     node_verbs = node.add_subparsers(dest="verb", required=True, parser_class=Parser)

@@ -40,7 +40,7 @@ from camo_bag.completeness import done_reports
 from camo_bag.container import BagWriter, TopicInfo
 from camo_bag.graph_topics import new_topics, taking_qos
 from camo_bag.ledger import ROBOT_KINDS, Ledger, robot_messages
-from camo_core.cli.options import Parser
+from camo_core.cli.options import Parser, seconds
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.results.folders import new_folder_problem
 from camo_core.shutdown import StopFlag
@@ -243,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
         "--run-id", default=None, help="the run to record (default: the only one in the domain)"
     )
     parser.add_argument(
-        "--wait", type=float, default=120.0, help="seconds to wait for the run (default 120)"
+        "--wait", type=seconds, default=120.0, help="seconds to wait for the run (default 120)"
     )
     add_network_options(parser)
     try:

@@ -25,7 +25,7 @@ from rclpy.signals import SignalHandlerOptions
 from camo_bag import msgdefs
 from camo_bag.graph_topics import new_topics, taking_qos
 from camo_bag.recorder_node import join
-from camo_core.cli.options import Parser
+from camo_core.cli.options import Parser, seconds
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
 from camo_nodes.topics.names import RunTopics, check_run_id
@@ -142,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
         "--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1; 0.0.0.0: all)"
     )
     parser.add_argument(
-        "--wait", type=float, default=120.0, help="seconds to wait for a run (default 120)"
+        "--wait", type=seconds, default=120.0, help="seconds to wait for a run (default 120)"
     )
     add_network_options(parser)
     try:

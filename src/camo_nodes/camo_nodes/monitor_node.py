@@ -37,7 +37,7 @@ from camo_core.algorithm.run_setup import RunSetup
 from camo_core.algorithm.sensing import image_digest
 from camo_core.algorithm.status_rows import RowsError, StatusRows
 from camo_core.algorithm.validation import rows_problems
-from camo_core.cli.options import Parser, add_out_options, out_dir
+from camo_core.cli.options import Parser, add_out_options, out_dir, seconds
 from camo_core.exceptions import CamoError
 from camo_core.results.animation import Snapshots, write_animation
 from camo_core.results.output import run_title, write_round
@@ -254,7 +254,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = Parser(prog="monitor_node", description="watch a running swarm and write its results")
     add_out_options(parser)
     parser.add_argument("--run-id", default=None, help="the run to watch (default: the only one)")
-    parser.add_argument("--wait", type=float, default=60.0, help="seconds to wait for a run")
+    parser.add_argument("--wait", type=seconds, default=60.0, help="seconds to wait for a run")
     add_network_options(parser)
     try:
         args, ros_args = parser.parse_with_ros_args(argv)

@@ -76,6 +76,23 @@ def a_path(text: str) -> Path:
 a_path.__name__ = "path"
 
 
+MAX_SECONDS = 86400.0  # a day: a wait longer than that is a mistake (and 1e300 overflows timers)
+
+
+def seconds(text: str) -> float:
+    """A duration option's argparse type: a number of seconds in (0, MAX_SECONDS] (not NaN)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seconds, a number (got {text!r})") from None
+    if not 0 < value <= MAX_SECONDS:
+        raise argparse.ArgumentTypeError(f"seconds in (0, {MAX_SECONDS:g}] (got {text!r})")
+    return value
+
+
+seconds.__name__ = "seconds"
+
+
 def add_options(
     parser: argparse.ArgumentParser, cls: type, only: tuple[str, ...] | None = None
 ) -> None:
