@@ -5,10 +5,21 @@ import json
 import cv2
 import numpy as np
 import pytest
-from support import PROCESS, bad_value_outcomes, run_camo, validated, value_options
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from support import (
+    PROCESS,
+    Validated,
+    bad_value_outcomes,
+    run_camo,
+    validated,
+    value_options,
+)
 
+from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import SUMMARY_KEYS
 from camo_core.cli import commands
+from camo_core.schema import with_role
 
 
 @pytest.mark.slow(PROCESS)
@@ -208,3 +219,45 @@ def test_every_option_of_sim_with_a_bad_value_is_one_line_and_exit_2(
     if option != "--out":
         argv += ["--out", str(tmp_path / "out"), "--force"]
     assert bad_value_outcomes(commands.main, argv, option, capsys, _sim_parser()) == []
+
+
+def _out_of_range(d) -> st.SearchStrategy[str]:
+    """Values of a declared parameter's option on either side of its range, and beyond."""
+    s = d.spec
+    edges = [st.sampled_from(["nan", "inf", "-inf", "1e300", str(10**30), "", "-1"])]
+    if s.low is not None:
+        edges.append(st.just(repr(s.low - 1 if d.kind is int else s.low - 1e-9)))
+    if s.high is not None:
+        edges.append(st.just(repr(s.high + 1 if d.kind is int else s.high * (1 + 1e-9) + 1e-9)))
+    if s.choices:
+        edges.append(st.just(s.choices[0] + "x"))
+    return st.one_of(*edges)
+
+
+SIM_OPTIONS = list(with_role(CamoParams, "cli").values())
+ARGVS = st.lists(
+    st.sampled_from(SIM_OPTIONS).flatmap(
+        lambda d: st.tuples(st.just(d.option), st.none() if d.kind is bool else _out_of_range(d))
+    ),
+    min_size=1,
+    max_size=3,
+)
+
+
+@given(pairs=ARGVS)
+@settings(max_examples=60, deadline=None)
+def test_sim_with_declared_options_out_of_range_is_one_line_or_runs(
+    tmp_path_factory, monkeypatch, capsys, pairs
+):
+    folder = tmp_path_factory.mktemp("sim")
+    monkeypatch.setattr(commands, "simulate", validated)
+    monkeypatch.setattr(commands, "run_per_robot", validated)
+    argv = ["sim", "--rows", "2", "--cols", "2", "--out", str(folder / "o"), "--force"]
+    for option, value in pairs:
+        argv += [option] if value is None else [option, value]  # a flag takes no value
+    try:
+        code = commands.main(argv)
+    except Validated:
+        return
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and err.startswith("camo: error: "), err
