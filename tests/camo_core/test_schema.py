@@ -115,7 +115,7 @@ def test_a_run_setup_is_checked_once_and_keeps_its_json_form():
     assert again == setup and again.params == setup.params
     with pytest.raises(SetupError, match="not of other"):
         RunSetup.from_json(setup.to_json(), "other")
-    with pytest.raises(SetupError, match="step_timeout must be a number > 0"):
+    with pytest.raises(SetupError, match=r"step_timeout must be a number in \(0, 86400\]"):
         RunSetup.from_dict({**setup.to_dict(), "step_timeout": 0})
     with pytest.raises(SetupError, match="tiles"):
         RunSetup.from_dict({**setup.to_dict(), "tiles": [[0, 16]]})

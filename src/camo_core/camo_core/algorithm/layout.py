@@ -128,7 +128,7 @@ def layout_of(spec: str, rows: int, cols: int, seed: int) -> Layout:
 
 def read_positions(path: str | Path) -> np.ndarray:
     """x,y per line (spacings); a header line of words is skipped."""
-    path = checked_file(path, "layout", MAX_FILE_BYTES, LayoutError)
+    path = checked_file(path, "layout file", MAX_FILE_BYTES, LayoutError)
     try:
         with open(path, newline="") as handle:
             lines = [
