@@ -14,15 +14,19 @@ from __future__ import annotations
 
 import faulthandler
 import signal
+import sys
 
 
 def stacks_on_faults() -> None:
     """A crash (SIGSEGV, SIGABRT, ...) writes every thread's Python stack to stderr before the
     process dies, and SIGUSR1 writes them and goes on: what a process hung or crashed in is
     in its output (the tests send SIGUSR1 to a process that does not end in time)."""
+    stderr = sys.__stderr__  # the process's own: sys.stderr may be replaced (pytest's capture)
+    if stderr is None:
+        return  # no stderr to write to (pythonw, a daemon)
     if not faulthandler.is_enabled():
-        faulthandler.enable(all_threads=True)
-    faulthandler.register(signal.SIGUSR1, all_threads=True)
+        faulthandler.enable(stderr, all_threads=True)
+    faulthandler.register(signal.SIGUSR1, stderr, all_threads=True)
 
 
 def quiet_on_a_closed_pipe() -> None:
