@@ -481,3 +481,18 @@ def parser_of_main(main, argv, monkeypatch):
         pass
     monkeypatch.setattr(Parser, "parse_known_args", parse)
     return parsers[-1]
+
+
+def bad_values_of_a_ros_tool(module, argv, monkeypatch, capsys) -> tuple[list[str], list[str]]:
+    """(its options that take a value, what is wrong with how each BAD_VALUES value of each
+    ended) for a ROS tool's main(argv + ...). Only the command line and the network it asks
+    for are checked: starting ROS is replaced, and the environment it would set is the test's
+    own copy. The caller chdirs to a folder of its own."""
+    monkeypatch.setattr(os, "environ", dict(os.environ))
+    monkeypatch.setattr(module, "start_ros", validated)
+    parser = parser_of_main(module.main, argv, monkeypatch)
+    options = value_options(parser)
+    problems = [
+        p for o in options for p in bad_value_outcomes(module.main, argv, o, capsys, parser)
+    ]
+    return options, problems

@@ -102,22 +102,13 @@ def test_a_topic_nobody_publishes_is_one_line():
 def test_every_option_of_topic_with_a_bad_value_is_one_line_and_exit_2(
     verb, tmp_path, monkeypatch, capsys
 ):
-    # Only the command line and the network it asks for are checked: starting ROS is replaced
-    # (and the environment it would set is this test's own copy).
-    import os
-
-    from support import bad_value_outcomes, parser_of_main, validated, value_options
+    from support import bad_values_of_a_ros_tool
 
     import camo_bag.introspect as command
 
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(os, "environ", dict(os.environ))
-    monkeypatch.setattr(command, "start_ros", validated)
-    argv = ["topic", verb, "/x"]
-    parser = parser_of_main(command.main, argv, monkeypatch)
-    options = value_options(parser)
+    options, problems = bad_values_of_a_ros_tool(
+        command, ["topic", verb, "/x"], monkeypatch, capsys
+    )
     assert "--wait" in options
-    problems = [
-        p for o in options for p in bad_value_outcomes(command.main, argv, o, capsys, parser)
-    ]
     assert problems == []

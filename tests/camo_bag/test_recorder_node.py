@@ -249,21 +249,11 @@ def test_recording_into_an_existing_bag_is_refused_before_anything_starts(tmp_pa
 def test_every_option_of_record_with_a_bad_value_is_one_line_and_exit_2(
     tmp_path, monkeypatch, capsys
 ):
-    # Only the command line and the network it asks for are checked: starting ROS is replaced
-    # (and the environment it would set is this test's own copy).
-    import os
-
-    from support import bad_value_outcomes, parser_of_main, validated, value_options
+    from support import bad_values_of_a_ros_tool
 
     import camo_bag.recorder_node as command
 
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(os, "environ", dict(os.environ))
-    monkeypatch.setattr(command, "start_ros", validated)
-    parser = parser_of_main(command.main, ["bag"], monkeypatch)
-    options = value_options(parser)
+    options, problems = bad_values_of_a_ros_tool(command, ["bag"], monkeypatch, capsys)
     assert len(options) >= 4
-    problems = [
-        p for o in options for p in bad_value_outcomes(command.main, ["bag"], o, capsys, parser)
-    ]
     assert problems == []

@@ -144,21 +144,11 @@ def test_monitor_counts_bridged_robots_whose_hardware_is_offline():
 def test_every_option_of_monitor_with_a_bad_value_is_one_line_and_exit_2(
     tmp_path, monkeypatch, capsys
 ):
-    # Only the command line and the network it asks for are checked: starting ROS is replaced
-    # (and the environment it would set is this test's own copy).
-    import os
-
-    from support import bad_value_outcomes, parser_of_main, validated, value_options
+    from support import bad_values_of_a_ros_tool
 
     import camo_nodes.monitor_node as command
 
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(os, "environ", dict(os.environ))
-    monkeypatch.setattr(command, "start_ros", validated)
-    parser = parser_of_main(command.main, [], monkeypatch)
-    options = value_options(parser)
+    options, problems = bad_values_of_a_ros_tool(command, [], monkeypatch, capsys)
     assert len(options) >= 4
-    problems = [
-        p for o in options for p in bad_value_outcomes(command.main, [], o, capsys, parser)
-    ]
     assert problems == []
