@@ -4,7 +4,9 @@ Messages go out as the raw CDR bytes recorded, at their recorded log times
 scaled by 1/R, each topic with the QoS its publishers offered (from the bag's
 offered_qos_profiles), so Foxglove, a monitor or a fresh swarm see the run
 again. Publishers stay up `--linger` seconds after the last message, so that
-latched (transient-local) topics still reach subscribers that join late.
+latched (transient-local) topics still reach subscribers that join late, and
+then until reliable subscribers have acknowledged every message (ACK_WAIT
+seconds at most).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import sys
 import time
 
 import rclpy
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
@@ -72,6 +75,9 @@ def renamed(topic: str, run_id: str | None) -> str:
     return "/" + run_id + "/" + topic.split("/", 2)[2]
 
 
+ACK_WAIT = 10.0  # s a finished replay waits at most for its messages to be acknowledged
+
+
 def sleep_until(due: float, stop: StopFlag) -> None:
     while not stop and (left := due - time.monotonic()) > 0:
         time.sleep(min(left, 0.1))
@@ -123,6 +129,11 @@ def replay(args, bag: Bag, stop: StopFlag) -> int:
             if not args.loop:
                 break
         sleep_until(time.monotonic() + args.linger, stop)
+        # Reliable readers get everything before the publishers go (a loaded machine may still
+        # be delivering when the linger ends): ACK_WAIT at most, all topics together.
+        end = time.monotonic() + ACK_WAIT
+        for publisher in publishers.values():
+            publisher.wait_for_all_acked(Duration(seconds=max(0.0, end - time.monotonic())))
         if bag.note():
             print(f"camo replay: warning: {bag.note()}", file=sys.stderr)
         print(
