@@ -76,6 +76,8 @@ def test_replay_publishes_recorded_messages_with_their_qos(recorded):
                 str(bag),
                 "--rate",
                 "20",
+                "--linger",  # the statuses are latched: a listener discovered late gets them
+                "6",
                 "--topics",
                 f"/{BAG_RUN}/swarm/status",
                 "--domain-id",
