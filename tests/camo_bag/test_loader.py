@@ -229,6 +229,19 @@ def test_metadata_giving_a_topic_another_type_is_refused(bag):
     assert "gives /chatter the type std_msgs/msg/Int32" in refused(bag)
 
 
+def test_metadata_counting_other_messages_than_the_file_holds_is_refused(bag):
+    data = metadata_of(bag)
+    info = data["rosbag2_bagfile_information"]
+    held = info["message_count"]
+    info["message_count"] = 1_000_000
+    write_metadata(bag, data)
+    assert f"gives message_count 1000000, bag_0.mcap holds {held} messages" in refused(bag)
+    info["message_count"] = held
+    info["topics_with_message_count"][0]["message_count"] += 1
+    write_metadata(bag, data)
+    assert "gives /chatter" in refused(bag) and "messages, bag_0.mcap holds" in refused(bag)
+
+
 def test_metadata_listing_a_topic_twice_is_refused(bag):
     data = metadata_of(bag)
     info = data["rosbag2_bagfile_information"]

@@ -456,13 +456,32 @@ def _channels_into(bag: Bag, schemas: dict, channels: dict, counts: dict, partia
         )
 
 
-def _check_listed(folder: Path, bag: Bag, channels: dict, schemas: dict) -> None:
-    """metadata.yaml must list the topics the file holds, with their types."""
+def _check_listed(
+    folder: Path, bag: Bag, channels: dict, schemas: dict, counts: dict | None = None
+) -> None:
+    """metadata.yaml must list the topics the file holds, with their types, and (`counts`:
+    the file's messages per channel, from its statistics) as many messages as it holds."""
     meta_file = folder / METADATA
     held = {}
-    for channel in channels.values():
+    held_count: dict[str, int] = {}
+    for channel_id, channel in channels.items():
         schema = schemas.get(channel.schema_id)
         held[channel.topic] = _full(schema.name) if schema is not None else ""
+        held_count[channel.topic] = (counts or {}).get(channel_id, 0)
+    if counts is not None:
+        total = (bag.metadata or {}).get("message_count", sum(counts.values()))
+        if total != sum(counts.values()):
+            raise BagError(
+                f"{meta_file} gives message_count {total}, {bag.file.name} holds "
+                f"{sum(counts.values())} messages"
+            )
+        for listed in (bag.metadata or {}).get("topics_with_message_count", []):
+            name, count = listed["topic_metadata"]["name"], listed["message_count"]
+            if name in held and count != held_count[name]:
+                raise BagError(
+                    f"{meta_file} gives {name} {count} messages, {bag.file.name} holds "
+                    f"{held_count[name]}"
+                )
     listed_types = {
         t["topic_metadata"]["name"]: t["topic_metadata"]["type"]
         for t in (bag.metadata or {}).get("topics_with_message_count", [])
@@ -510,7 +529,7 @@ def open_bag(path: str | Path, partial: bool = False, stream: bool = False) -> B
     bag.notes.extend(notes)
     if metadata is not None and bag.complete:
         try:
-            _check_listed(path, bag, channels, schemas)
+            _check_listed(path, bag, channels, schemas, counts)
         except BagError as exc:
             if not partial:
                 raise
