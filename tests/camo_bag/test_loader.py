@@ -633,3 +633,49 @@ def test_a_bag_cut_anywhere_gives_one_line_or_what_it_holds_up_to_the_cut(tiny, 
     _, count = repair(bag, tmp_path / "fixed")
     assert count == len(messages)
     assert [m.data for m in open_bag(tmp_path / "fixed").messages()] == messages
+
+
+# ---- every option of the bag commands with bad values (issue 27) -----------------------------
+
+
+@pytest.mark.parametrize(
+    "module, argv, work",
+    [
+        ("camo_bag.render", ["BAG", "--out", "OUT"], "render"),
+        ("camo_bag.replay", ["BAG"], "start_ros"),
+        ("camo_bag.cli", ["repair", "BAG"], "repair"),
+    ],
+)
+def test_every_option_of_render_replay_and_repair_with_a_bad_value_is_one_line(
+    module, argv, work, tiny, tmp_path, monkeypatch, capsys
+):
+    # Only the command line and the bag are checked: the work itself is replaced.
+    import importlib
+
+    from support import bad_value_outcomes, parser_of_main, validated, value_options
+
+    command = importlib.import_module(module)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(command, work, validated)
+    argv = [str(tiny) if a == "BAG" else str(tmp_path / "out") if a == "OUT" else a for a in argv]
+    parser = parser_of_main(command.main, argv, monkeypatch)
+    options = value_options(parser)
+    assert options, module
+    problems = [
+        p for o in options for p in bad_value_outcomes(command.main, argv, o, capsys, parser)
+    ]
+    assert problems == []
+
+
+def test_every_option_of_the_discovery_server_with_a_bad_value_is_one_line(
+    tmp_path, monkeypatch, capsys
+):
+    from support import bad_value_outcomes, validated
+
+    from camo_nodes import discovery_server as command
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(command.os, "execve", validated)
+    monkeypatch.setattr(command, "server_command", lambda *a: ("x", ["x"], {}))
+    for option in ("--port", "--address", "--server-id"):
+        assert bad_value_outcomes(command.main, [], option, capsys) == [], option
