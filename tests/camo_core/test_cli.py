@@ -1,6 +1,7 @@
 """The reference tools from the command line: outputs, and one-line errors on bad input."""
 
 import json
+import math
 
 import cv2
 import numpy as np
@@ -261,3 +262,103 @@ def test_sim_with_declared_options_out_of_range_is_one_line_or_runs(
         return
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and err.startswith("camo: error: "), err
+
+
+# ---- numbers in outside text: one grammar (camo_core.inputs) ---------------------------------
+
+NUMBER_CHARS = st.sampled_from(list("0123456789+-.eE_ ") + ["\u0661", "\uff11", "\u00b2", "x"])
+NUMBER_TEXT = st.one_of(
+    st.text(NUMBER_CHARS, max_size=12),
+    st.sampled_from(["nan", "-inf", "Infinity", "1e309", "1_000", "\u0661\u0662", "\uff15"]),
+)
+
+
+def _by_the_grammar(text: str, special: bool) -> float | None:
+    """The documented grammar, spelt out by hand: the number `text` means, or None."""
+    bare = text.strip(" \t")
+    if (
+        special
+        and bare.lstrip("+-").lower() in ("nan", "inf", "infinity")
+        and (len(bare) - len(bare.lstrip("+-")) <= 1)
+    ):
+        return float(bare)
+    body = bare[1:] if bare[:1] in ("+", "-") else bare
+    mantissa, e, exponent = body.replace("E", "e").partition("e")
+    whole, _, fraction = mantissa.partition(".")
+    digits = set("0123456789")
+    if not (whole or fraction) or not set(whole + fraction) <= digits:
+        return None
+    if e:
+        exponent = exponent[1:] if exponent[:1] in ("+", "-") else exponent
+        if not exponent or not set(exponent) <= digits:
+            return None
+    value = float(bare)
+    return value if special or math.isfinite(value) else None
+
+
+@given(text=NUMBER_TEXT, special=st.booleans())
+@settings(max_examples=400, deadline=None)
+def test_a_number_parses_by_the_documented_grammar_or_is_a_one_line_error(text, special):
+    from camo_core.inputs import NumberError, integer, number
+
+    want = _by_the_grammar(text, special)
+    try:
+        got = number(text, special=special)
+    except NumberError as exc:
+        assert want is None, (text, want)
+        assert "\n" not in str(exc) and str(exc).startswith("want a number")
+    else:
+        assert want is not None and (got == want or (math.isnan(got) and math.isnan(want)))
+    bare = text.strip(" \t")
+    whole = bare[1:] if bare[:1] in ("+", "-") else bare
+    if whole and set(whole) <= set("0123456789"):
+        assert integer(text) == int(bare)
+    else:
+        with pytest.raises(NumberError, match="want a whole number"):
+            integer(text)
+
+
+def test_a_list_with_an_empty_item_is_refused_not_shortened():
+    from camo_core.inputs import NumberError, items
+
+    assert items("0, 1 ,2", "--x") == ["0", "1", "2"]
+    for text in ("0,,1", "0,1,", ",0", ""):
+        with pytest.raises(NumberError, match="--x has an empty item"):
+            items(text, "--x")
+
+
+@pytest.mark.parametrize("value", ["1_0", "\u0661", "\uff11", "\u00b2", "1e999", "nan", "0x1"])
+def test_int_and_float_options_refuse_what_python_alone_would_take(value):
+    from camo_core.cli.options import Parser
+    from camo_core.exceptions import UsageError
+
+    parser = Parser(prog="p")
+    parser.add_argument("--n", type=int)
+    parser.add_mutually_exclusive_group().add_argument("--x", type=float)
+    sub = parser.add_subparsers(dest="cmd").add_parser("sub")
+    sub.add_argument("--m", type=int)
+    assert parser.parse_args(["--n", " 12", "--x=-1.5e3"]).x == -1500.0
+    for argv in (["--n", value], ["--x", value], ["sub", "--m", value]):
+        with pytest.raises(UsageError, match=r"invalid (int|float) value"):
+            parser.parse_args(argv)
+
+
+@pytest.mark.parametrize("text", ["1,1=1_00", "\uff11,1=5", "1,1=\u0665", "1,=5", "1,1=inf"])
+def test_sensed_refuses_numbers_python_would_take(text):
+    from camo_core.exceptions import UsageError
+
+    with pytest.raises(UsageError, match="--sensed takes ROW,COL=VALUE"):
+        commands.sensed_overrides([text], 4, 4)
+
+
+def test_a_value_beginning_with_a_dash_says_how_to_give_it():
+    from camo_core.cli.options import Parser
+    from camo_core.exceptions import UsageError
+
+    parser = Parser(prog="p")
+    parser.add_argument("--sensed", action="append")
+    with pytest.raises(UsageError, match=r"given as --option=VALUE"):
+        parser.parse_args(["--sensed", "-1,1=5"])
+    assert parser.parse_args(["--sensed=-1,1=5"]).sensed == ["-1,1=5"]
+    with pytest.raises(UsageError, match="outside the 4x4 grid"):
+        commands.sensed_overrides(["-1,1=5"], 4, 4)

@@ -30,6 +30,7 @@ from camo_core.cli.options import (
 from camo_core.cli.params_file import write_params_file
 from camo_core.cli.progress import ProgressBar
 from camo_core.exceptions import UsageError, reported
+from camo_core.inputs import integer, items, number
 from camo_core.results import figures
 from camo_core.results.animation import Snapshots, write_animation
 from camo_core.results.output import run_title
@@ -42,8 +43,8 @@ def sensed_overrides(texts: list[str], rows: int, cols: int) -> dict[tuple[int, 
     for text in texts:
         try:
             cell, grey = text.split("=")
-            row, col = (int(x) for x in cell.split(","))
-            value = float(grey)
+            row, col = (integer(x) for x in items(cell, "--sensed"))
+            value = number(grey)
         except ValueError:
             raise UsageError(f"--sensed takes ROW,COL=VALUE (got {text!r})") from None
         if not (0 <= row < rows and 0 <= col < cols):
@@ -101,7 +102,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    sizes = tuple(int(s) for s in args.sizes.split(",")) if args.sizes else bench.SIZES
+    sizes = tuple(integer(s) for s in items(args.sizes, "--sizes")) if args.sizes else bench.SIZES
     report = bench.run(sizes=sizes, whole=args.whole)
     print(json.dumps(report) if args.json else bench.format_table(report))
     return 0

@@ -15,7 +15,7 @@ from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import load_image, with_contrast
 from camo_core.exceptions import UsageError
-from camo_core.inputs import checked_path
+from camo_core.inputs import checked_path, integer, number
 from camo_core.results.folders import output_folder
 from camo_core.schema import Declared, with_role
 
@@ -27,8 +27,14 @@ class Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs) -> None:
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
+        # `type=int` and `type=float` read by camo_core.inputs' grammar, not Python's (`1_0`,
+        # `١`); argparse looks types up here, for this parser's groups and subcommands too.
+        self.register("type", int, strict_int)
+        self.register("type", float, strict_float)
 
     def error(self, message: str) -> NoReturn:  # one line, not usage + message
+        if message.endswith("expected one argument"):  # `--sensed -1,1=5`: "-1,1=5" is an option
+            message += " (a value that begins with '-' is given as --option=VALUE)"
         raise UsageError(message)
 
     def add_params_file_option(self, node: str) -> None:
@@ -67,6 +73,16 @@ class Parser(argparse.ArgumentParser):
         return super().parse_known_args(args, namespace)
 
 
+def strict_int(text: str) -> int:
+    """`type=int` of a Parser: camo_core.inputs.integer (argparse says "invalid int value")."""
+    return integer(text)
+
+
+def strict_float(text: str) -> float:
+    """`type=float` of a Parser: camo_core.inputs.number, finite."""
+    return number(text)
+
+
 def a_path(text: str) -> Path:
     """A path option's argparse type: not empty (Path("") would be ".", the current folder),
     not longer than the system takes."""
@@ -82,7 +98,7 @@ MAX_SECONDS = 86400.0  # a day: a wait longer than that is a mistake (and 1e300 
 def seconds(text: str) -> float:
     """A duration option's argparse type: a number of seconds in (0, MAX_SECONDS] (not NaN)."""
     try:
-        value = float(text)
+        value = number(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"seconds, a number (got {text!r})") from None
     if not 0 < value <= MAX_SECONDS:
@@ -133,7 +149,7 @@ def help_of(d: Declared) -> str:
 
 def converter(d: Declared):
     """The option's argparse type: its kind, or its keyword ("auto") as itself."""
-    kind = {int: _whole, float: float}.get(d.kind, str)
+    kind = {int: _whole, float: _real}.get(d.kind, str)
 
     def convert(text):
         if not d.spec.keyword:
@@ -159,8 +175,17 @@ def _whole(value) -> int:
     """An integer from a command line or a parameters file ("+3" too; not 3.5, not true)."""
     if isinstance(value, int) and not isinstance(value, bool):
         return value
-    if isinstance(value, str) and value.strip().lstrip("+-").isdigit():
-        return int(value)
+    if isinstance(value, str):
+        return integer(value)
+    raise ValueError(value)
+
+
+def _real(value) -> float:
+    """A number from a command line or a parameters file (a YAML 3 or 0.5 too; not true)."""
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(value, str):
+        return number(value)
     raise ValueError(value)
 
 
@@ -237,7 +262,7 @@ def parse_ranges(texts: list[str], count: int, option: str = "--cells") -> list[
     for text in texts:
         first, dash, last = text.partition("-")
         try:
-            a, b = int(first), int(last if dash else first)
+            a, b = integer(first), integer(last if dash else first)
         except ValueError:
             raise UsageError(f"{option} takes FIRST-LAST, robot ids (got {text!r})") from None
         if not 0 <= a <= b < count:
