@@ -168,12 +168,28 @@ def _one_line_layout_error(path) -> str:
         (b"0,0\n\xff\xfe,1\n", "not a CSV"),
         (b"0,0\n" + b"1" * 200_000 + b",1\n", "not a CSV"),
         (b"0,0\n1,0\x00\n", "line 2"),
+        (b"1_0,0\n2,0\n", "line 1"),  # not x=10, nor taken for a header
+        ("0,0\n\u0661,0\n".encode(), "line 2"),  # an Arabic-Indic 1
+        ("0,0\n\uff11,0\n".encode(), "line 2"),  # a full-width 1
+        (b"x,0\n1,0\n", "line 1"),  # a number in it: data, not a header
+        (b"\xef\xbb\xbfx,0\n1,0\n", "line 1"),
     ],
 )
 def test_a_layout_file_with_bad_numbers_or_rows_is_one_line(tmp_path, content, said):
     path = tmp_path / "layout.csv"
     path.write_bytes(content)
     assert said in _one_line_layout_error(path)
+
+
+@pytest.mark.parametrize("header", [b"", b"x,y\n"])
+def test_a_layout_csv_with_a_byte_order_mark_keeps_every_robot(tmp_path, header):
+    from camo_core.algorithm.layout import read_positions
+
+    path = tmp_path / "layout.csv"
+    rows = b"".join(b"%d,%d\n" % (c, r) for r in range(4) for c in range(4))
+    path.write_bytes(b"\xef\xbb\xbf" + header + rows)  # as Excel's "CSV UTF-8" writes it
+    positions = read_positions(path)
+    assert len(positions) == 16 and positions[0].tolist() == [0.0, 0.0]
 
 
 @pytest.mark.parametrize(

@@ -25,7 +25,7 @@ from camo_core.algorithm.grid import neighbor_ids
 from camo_core.algorithm.params import MAX_COORDINATE, CamoParams
 from camo_core.algorithm.sensing import to_gray
 from camo_core.exceptions import CamoError
-from camo_core.inputs import checked_file, shown
+from camo_core.inputs import checked_file, number, shown
 
 NEAR = 1.5
 FAR = 2.3
@@ -113,7 +113,7 @@ def layout_of(spec: str, rows: int, cols: int, seed: int) -> Layout:
         return Layout(spec, positions.reshape(-1, 2))
     if spec.startswith("jitter:"):
         try:
-            amount = float(spec.split(":", 1)[1])
+            amount = number(spec.split(":", 1)[1])
         except ValueError:
             raise LayoutError(f"jitter:A needs a number A of spacings (got {spec!r})") from None
         if not 0.0 <= amount < 0.5:
@@ -127,10 +127,13 @@ def layout_of(spec: str, rows: int, cols: int, seed: int) -> Layout:
 
 
 def read_positions(path: str | Path) -> np.ndarray:
-    """x,y per line (spacings); a header line of words is skipped."""
+    """x,y per line (spacings), numbers as camo_core.inputs.number reads them. The file is
+    UTF-8, with or without a byte-order mark. Its first line is a header, and skipped, only if
+    none of its fields is a number (`x,y`): a line with a number in it is data, and a data
+    line that does not parse is an error, never taken for a header."""
     path = checked_file(path, "layout file", MAX_FILE_BYTES, LayoutError)
     try:
-        with open(path, newline="") as handle:
+        with open(path, newline="", encoding="utf-8-sig") as handle:
             lines = [
                 (number, row)
                 for number, row in enumerate(csv.reader(handle), 1)
@@ -140,7 +143,7 @@ def read_positions(path: str | Path) -> np.ndarray:
         raise LayoutError(f"cannot read layout {shown(path)}: {exc.strerror or exc}") from None
     except (UnicodeDecodeError, csv.Error):
         raise LayoutError(f"layout {shown(path)} is not a CSV file of x,y positions") from None
-    if lines and not _parses(lines[0][1]):
+    if lines and not any(_parses(c) for c in lines[0][1]):
         lines = lines[1:]  # a header of words
     bad = next((n for n, row in lines if len(row) != 2 or not _numbers(row)), None)
     if bad is not None or not lines:
@@ -150,7 +153,7 @@ def read_positions(path: str | Path) -> np.ndarray:
     rows = [row for _, row in lines]
     if len(rows) > MAX_ROBOTS:
         raise LayoutError(f"layout {shown(path)} has {len(rows)} robots, above {MAX_ROBOTS}")
-    positions = np.array([[float(x), float(y)] for x, y in rows])
+    positions = np.array([[number(x), number(y)] for x, y in rows])
     close = _closest_pair(positions)
     if close is not None and close < MIN_GAP:
         raise LayoutError(
@@ -159,9 +162,9 @@ def read_positions(path: str | Path) -> np.ndarray:
     return positions
 
 
-def _parses(row: list[str]) -> bool:
+def _parses(field: str) -> bool:
     try:
-        [float(c) for c in row]
+        number(field, special=True)
     except ValueError:
         return False
     return True
@@ -169,7 +172,7 @@ def _parses(row: list[str]) -> bool:
 
 def _numbers(row: list[str]) -> bool:
     try:
-        return all(abs(float(c)) <= MAX_COORDINATE for c in row)  # NaN fails too
+        return all(abs(number(c)) <= MAX_COORDINATE for c in row)
     except ValueError:
         return False
 
