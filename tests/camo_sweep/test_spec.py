@@ -33,6 +33,13 @@ def test_a_range_includes_its_end_and_keeps_integers_integers():
         ("rho_comm", "0.5:0:0.1", "needs FROM <= TO"),
         ("seed", "1,2", "seed is not an axis"),
         ("rho_comm", "0.1,0.1", "repeats a value"),
+        ("rho_comm", "0,,0.1", "axis rho_comm has an empty item"),  # not 2 values
+        ("rho_comm", "0,0.1,", "axis rho_comm has an empty item"),
+        ("rows", "1_0,8", "'1_0' is not a valid value"),
+        ("rows", "\uff18,16", "is not a valid value"),  # a full-width 8
+        ("rho_comm", "0:0.5:0.1_0", "'0:0.5:0.1_0' is not a valid value"),
+        (",", "0,1", "axis ',' has an empty option name"),
+        ("rho_comm,", "0,1", "has an empty option name"),
     ],
 )
 def test_a_bad_axis_is_one_line(name, values, said):

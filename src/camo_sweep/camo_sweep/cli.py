@@ -11,6 +11,7 @@ import yaml
 
 from camo_core.cli.options import Parser, a_path
 from camo_core.exceptions import CamoError, UsageError, reported
+from camo_core.inputs import integer
 from camo_sweep import engines
 from camo_sweep.spec import DRIVERS, SweepSpec, build_spec, spec_from_yaml
 from camo_sweep.sweep import plan, run_sweep
@@ -94,7 +95,9 @@ def slurm_settings(args, given: dict) -> dict:
         value = getattr(args, f"slurm_{key}")
         if value is not None:
             settings[key] = (
-                int(value) if key in ("cores", "max_jobs") and value.isdigit() else value
+                integer(value, f"--slurm-{key.replace('_', '-')}, a whole number")
+                if key in ("cores", "max_jobs")
+                else value
             )
     return settings
 

@@ -27,6 +27,7 @@ from camo_core.cli.options import (
     params_from,
 )
 from camo_core.exceptions import UsageError, reported
+from camo_core.inputs import items, number
 from camo_core.results import figures
 from camo_sweep import engines
 from camo_sweep.cli import SPEC_FILE, check_folder
@@ -134,7 +135,7 @@ def write_csv(points: list[ErrorPoint], path: Path) -> None:
 def parse_rhos(text: str) -> list[float]:
     """'0,0.05,0.1' -> floats; each must be a probability."""
     try:
-        values = [float(part) for part in text.split(",") if part.strip()]
+        values = [number(part) for part in items(text, "--rhos")]
     except ValueError:
         raise UsageError(f"--rhos must be comma-separated numbers (got {text!r})") from None
     if not values or any(not math.isfinite(v) or not 0.0 <= v <= 1.0 for v in values):

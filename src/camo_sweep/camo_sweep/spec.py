@@ -28,7 +28,7 @@ import yaml
 from camo_core.cli.commands import add_sim_arguments
 from camo_core.cli.options import Parser
 from camo_core.exceptions import UsageError
-from camo_core.inputs import checked_file, shown
+from camo_core.inputs import checked_file, items, number, shown
 
 DRIVERS = ("sim", "ros")
 # Options of ./camo sim that are not a trial's: where it writes, the seed (a trial's own, from the
@@ -79,7 +79,8 @@ def typed(name: str, value: Any) -> Any:
     if isinstance(value, list | dict | tuple) or value is None:
         raise UsageError(f"{name}: one value, not {value!r}")
     text = str(value).strip()
-    convert = action.type or str
+    # The type as the parser converts it: a Parser reads type=int/float strictly.
+    convert = sim_parser()._registry_get("type", action.type, action.type) or str
     try:
         out = convert(text)
     except (TypeError, ValueError, argparse.ArgumentTypeError):
@@ -104,7 +105,8 @@ def axis_values(name: str, given: Any) -> list[Any]:
     elif isinstance(given, str) and RANGE.match(given):
         raw = value_range(name, *RANGE.match(given).groups())
     elif isinstance(given, str):
-        raw = [part for part in given.split(",") if part.strip()]
+        # `0,,1`: an empty value is an error (and no value at all, "axis ... is empty")
+        raw = items(given, f"axis {name}") if given.strip() else []
     else:
         raw = [given]
     names = name.split(",")
@@ -121,7 +123,7 @@ def axis_values(name: str, given: Any) -> list[Any]:
 
 def value_range(name: str, first: str, last: str, step: str) -> list[Any]:
     try:
-        a, b, d = float(first), float(last), float(step)
+        a, b, d = number(first), number(last), number(step)
     except ValueError:
         raise UsageError(f"axis {name}: {first}:{last}:{step} is not FROM:TO:STEP") from None
     if not d > 0 or not all(map(math.isfinite, (a, b, d))) or b < a:
@@ -334,6 +336,8 @@ def build_spec(
         seen: set[str] = set()
         for axis in block:
             names = [n.strip() for n in axis.split(",")]
+            if not all(names):
+                raise UsageError(f"axis {axis!r} has an empty option name (tied: NAME,NAME)")
             twice = (seen & set(names)) or {n for n in names if names.count(n) > 1}
             if twice:
                 raise UsageError(f"axis {sorted(twice)[0]} is given twice")
