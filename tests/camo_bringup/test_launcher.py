@@ -425,6 +425,68 @@ def test_a_worker_with_no_run_to_join_says_so_in_one_line():
     assert len(errors) == 1 and "Traceback" not in out.stderr  # after the line saying it waits
 
 
+@pytest.mark.parametrize(
+    "cells, said",
+    [
+        ("5-2", "--cells 5-2: robot ids run from 0 to 67108863, first <= last"),
+        ("0-99999999", "--cells 0-99999999: robot ids run from 0 to 67108863"),
+        ("1_0-20", "--cells takes FIRST-LAST"),
+        ("\uff10-3", "--cells takes FIRST-LAST"),
+    ],
+)
+def test_a_worker_refuses_a_backward_or_too_large_range_before_looking_for_a_run(
+    cells, said, capsys
+):
+    assert worker.main(["--cells", cells, "--wait", "0.01"]) == 2
+    err = capsys.readouterr().err
+    assert said in err and len(err.strip().splitlines()) == 1, err
+
+
+def _config(tmp_path, *options):
+    return run_config.config_from(
+        run_config.build_parser().parse_args(
+            ["--rows", "4", "--cols", "4", "--out", str(tmp_path / "o"), *options]
+        ),
+        {},
+    )
+
+
+@pytest.mark.parametrize(
+    "options, said",
+    [
+        (
+            ["--own-process", "0,0", "--own-process", "0,0"],
+            "--own-process 0,0: that cell is given",
+        ),
+        (["--own-process", "0,0", "--own-process", "00,+0"], "that cell is given twice"),
+        (["--own-process", "1_0,0"], "--own-process takes ROW,COL (got '1_0,0')"),
+        (["--own-process", "0,"], "--own-process takes ROW,COL"),
+        (["--remote-cells", "1_0-12"], "--remote-cells takes FIRST-LAST"),
+        (["--bridge", "0,0=REGULAR"], "--bridge 0,0=REGULAR: not a serial port"),
+        (["--bridge", "0,0=MISSING"], "--bridge 0,0=MISSING: no such port"),
+        (["--bridge", "0,0=FOLDER"], "not a serial port"),
+        (["--bridge", "\uff10,0=/dev/null"], "--bridge takes ROW,COL"),
+    ],
+)
+def test_run_refuses_a_cell_given_twice_or_a_port_that_is_no_serial_port(tmp_path, options, said):
+    from camo_core.exceptions import UsageError
+
+    (tmp_path / "regular").write_text("")
+    where = {"REGULAR": tmp_path / "regular", "MISSING": tmp_path / "gone", "FOLDER": tmp_path}
+    options = [
+        next((o.replace(k, str(v)) for k, v in where.items() if k in o), o) for o in options
+    ]
+    said = next((said.replace(k, str(v)) for k, v in where.items() if k in said), said)
+    with pytest.raises(UsageError) as caught:
+        _config(tmp_path, *options)
+    assert said in str(caught.value) and "\n" not in str(caught.value)
+
+
+def test_a_bridge_on_a_character_device_passes_the_launchers_check(tmp_path):
+    config = _config(tmp_path, "--bridge", "1,1=/dev/null")
+    assert config.bridges == {5: "/dev/null"}
+
+
 def children_of(pid: int) -> list[int]:
     """The processes whose parent is `pid` (from /proc)."""
     found = []

@@ -180,7 +180,8 @@ def test_bad_bridge_options_are_one_line_errors(tmp_path):
     for bad in (
         ["--bridge", "2,3"],
         ["--bridge", "9,9=/dev/null"],
-        ["--bridge", "1,1=/a", "--bridge", "1,1=/b"],
+        ["--bridge", "1,1=/dev/null", "--bridge", "1,1=/dev/zero"],
+        ["--bridge", "1,1=/tmp"],  # not a serial port
         ["--bridge", "1,1=/a", "--calibration", str(tmp_path / "missing.yaml")],
     ):
         out = camo_run("--rows", "4", "--cols", "4", *bad, "--out", str(tmp_path / "o"))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import os
 import socket
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,6 +30,7 @@ from camo_core.cli.options import (
     parse_ranges,
 )
 from camo_core.exceptions import UsageError
+from camo_core.inputs import checked_path, integer, items, shown
 from camo_core.results.folders import new_folder_problem
 from camo_nodes.topics.names import RunTopics, check_run_id, new_run_id
 from camo_nodes.topics.parameters import ros_arguments
@@ -167,16 +169,35 @@ class RunConfig:
 
 
 def parse_cells(texts: list[str], params: CamoParams, option: str = "--own-process") -> list[int]:
-    cells = []
+    """ROW,COL options as robot ids; a cell given twice is an error."""
+    cells: list[int] = []
     for text in texts:
         try:
-            row, col = (int(x) for x in text.split(","))
+            row, col = (integer(x) for x in items(text, option))
         except ValueError:
             raise UsageError(f"{option} takes ROW,COL (got {text!r})") from None
         if not (0 <= row < params.rows and 0 <= col < params.cols):
             raise UsageError(f"{option} {text}: outside the {params.rows}x{params.cols} grid")
+        if row * params.cols + col in cells:
+            raise UsageError(f"{option} {row},{col}: that cell is given twice")
         cells.append(row * params.cols + col)
     return cells
+
+
+def check_port(port: str, cell: str) -> None:
+    """A bridge's PORT: an existing character device (a serial port, a pty or a symlink to
+    one), checked before anything starts."""
+    path = checked_path(port, "--bridge port", UsageError)
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise UsageError(f"--bridge {cell}={shown(port)}: no such port") from None
+    except OSError as exc:
+        raise UsageError(f"--bridge {cell}={shown(port)}: {exc.strerror or exc}") from None
+    if not stat.S_ISCHR(mode):
+        raise UsageError(
+            f"--bridge {cell}={shown(port)}: not a serial port (a character device or a pty)"
+        )
 
 
 def parse_bridges(texts: list[str], params: CamoParams) -> dict[int, str]:
@@ -189,6 +210,7 @@ def parse_bridges(texts: list[str], params: CamoParams) -> dict[int, str]:
         robot = parse_cells([cell], params, "--bridge")[0]
         if robot in bridges:
             raise UsageError(f"--bridge {cell}: that cell is bridged twice")
+        check_port(port, cell)
         bridges[robot] = port
     return bridges
 

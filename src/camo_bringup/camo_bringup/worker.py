@@ -20,6 +20,7 @@ import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from camo_core.algorithm.params import MAX_SIDE
 from camo_core.algorithm.run_setup import RunSetup
 from camo_core.cli.options import Parser, parse_ranges, seconds
 from camo_core.exceptions import CamoError, UsageError
@@ -134,6 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = StopFlag()
     try:
         args, ros_args = build_parser().parse_with_ros_args(argv)
+        parse_ranges(args.cells, MAX_SIDE**2)  # FIRST <= LAST, inside the largest grid: up front
         os.environ.update(network_env(args, os.environ))
     except CamoError as exc:
         print(f"camo worker: error: {exc}", file=sys.stderr)
