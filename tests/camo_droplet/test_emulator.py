@@ -34,8 +34,29 @@ def test_emulator_command_line_rejects_bad_options(tmp_path):
         text=True,
         timeout=60,
     )
-    assert out.returncode == 2 and "inside the 8x8 arena" in out.stderr
+    assert out.returncode == 2 and "--cell 9,9: outside the 8x8 arena" in out.stderr
+    assert "--id" not in out.stderr  # the --cell at fault only, not --id too
     assert len(out.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    "options, said",
+    [
+        (["--id", "12"], "--id takes 4 hex digits, 0000..FFFF (got '12')"),
+        (["--id", "0x1A"], "--id takes 4 hex digits"),
+        (["--cell", "1_0,0"], "--cell takes ROW,COL (got '1_0,0')"),
+        (["--cell", "\uff11,0"], "--cell takes ROW,COL"),
+        (["--cell", "1,"], "--cell takes ROW,COL"),
+    ],
+)
+def test_a_bad_id_or_cell_names_only_the_option_at_fault(tmp_path, options, said):
+    from camo_core.exceptions import UsageError
+
+    args = emulator.build_parser().parse_args(["--link", str(tmp_path / "x"), *options])
+    with pytest.raises(UsageError) as caught:
+        emulator.emulator_from(args)
+    assert said in str(caught.value)
+    assert ("--id" in str(caught.value)) == (options[0] == "--id")
 
 
 # ---- every option with bad values (issue 27) -------------------------------------------------
@@ -57,4 +78,5 @@ def test_every_option_of_the_emulator_with_a_bad_value_is_one_line_and_exit_2(
 def test_a_fault_of_no_finite_duration_is_refused(option, value, tmp_path, capsys):
     argv = ["--link", str(tmp_path / "pty"), option, value]
     assert emulator.main(argv) == 2
-    assert "must be seconds in 0..3600" in capsys.readouterr().err
+    err = capsys.readouterr().err  # nan and inf are no numbers to a Parser's type=float
+    assert "must be seconds in 0..3600" in err or f"invalid float value: '{value}'" in err

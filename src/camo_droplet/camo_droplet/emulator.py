@@ -18,6 +18,7 @@ import json
 import os
 import pty
 import random
+import re
 import select
 import sys
 import threading
@@ -33,6 +34,7 @@ from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import block_means, load_image
 from camo_core.cli.options import Parser, a_path, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
+from camo_core.inputs import integer, items
 from camo_core.shutdown import interrupt_on_signals
 
 MAX_FAULT_S = 3600.0  # s: the longest delay or disconnect an emulated fault lasts
@@ -231,17 +233,15 @@ def build_parser() -> Parser:
 
 def emulator_from(args: argparse.Namespace) -> DropletEmulator:
     arena = CamoParams.from_options(**options_of(args, CamoParams))
+    if not re.fullmatch(r"[0-9A-Fa-f]{4}", args.id, re.ASCII):
+        raise UsageError(f"--id takes 4 hex digits, 0000..FFFF (got {args.id!r})")
+    droplet_id = int(args.id, 16)
     try:
-        droplet_id = int(args.id, 16)
-        row, col = (int(x) for x in args.cell.split(","))
+        row, col = (integer(x) for x in items(args.cell, "--cell"))
     except ValueError:
-        raise UsageError(
-            f"--id takes 4 hex digits and --cell ROW,COL (got {args.id!r}, {args.cell!r})"
-        ) from None
-    if not (0 <= droplet_id <= 0xFFFF and 0 <= row < arena.rows and 0 <= col < arena.cols):
-        raise UsageError(
-            f"--id must be 0000..FFFF and --cell inside the {arena.rows}x{arena.cols} arena"
-        )
+        raise UsageError(f"--cell takes ROW,COL (got {args.cell!r})") from None
+    if not (0 <= row < arena.rows and 0 <= col < arena.cols):
+        raise UsageError(f"--cell {args.cell}: outside the {arena.rows}x{arena.cols} arena")
     for name in ("drop", "garbage", "chatter"):
         if not 0 <= getattr(args, name) <= 1:
             raise UsageError(f"--{name} is a probability in 0..1")
