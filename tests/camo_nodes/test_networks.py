@@ -197,6 +197,13 @@ def _network_args(**given):
         ("ROS_DOMAIN_ID", "\u00b2", "ROS_DOMAIN_ID must be"),
         ("ROS_AUTOMATIC_DISCOVERY_RANGE", "everywhere", "must be one of LOCALHOST, SUBNET"),
         ("ROS_AUTOMATIC_DISCOVERY_RANGE", "\x00", "must be one of"),
+        ("ROS_AUTOMATIC_DISCOVERY_RANGE", "off", "OFF: a run's processes could not find each"),
+        ("ROS_STATIC_PEERS", ";;;:::garbage", "ROS_STATIC_PEERS: ':::garbage' is not a host"),
+        ("ROS_STATIC_PEERS", "a b", "is not a host name or an IP address"),
+        ("ROS_STATIC_PEERS", "-host", "is not a host name"),
+        ("ROS_STATIC_PEERS", "x" * 300, "is not a host name"),
+        ("RMW_IMPLEMENTATION", "rmw_bogus", "RMW_IMPLEMENTATION='rmw_bogus' is not installed"),
+        ("RMW_IMPLEMENTATION", "rmw_dds_common", "is not installed"),  # a library, no RMW
     ],
 )
 def test_a_bad_ros_variable_in_the_environment_is_one_line(name, value, said):
@@ -223,6 +230,23 @@ def test_good_or_empty_ros_variables_pass_and_options_override_bad_ones():
         {"ROS_DOMAIN_ID": "abc", "ROS_AUTOMATIC_DISCOVERY_RANGE": "everywhere"},
     )
     assert env["ROS_DOMAIN_ID"] == "3" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+
+
+def test_static_peers_of_names_and_addresses_and_an_installed_rmw_pass():
+    from camo_nodes.topics.startup import installed_rmws, network_env
+
+    prefix = os.environ["AMENT_PREFIX_PATH"]
+    assert "rmw_fastrtps_cpp" in installed_rmws(prefix)
+    assert "rmw_implementation" not in installed_rmws(prefix)
+    given = {
+        "ROS_STATIC_PEERS": "robot-1.local;192.168.0.7;;fe80::1; ",  # empty entries ignored
+        "RMW_IMPLEMENTATION": "rmw_fastrtps_cpp",
+        "AMENT_PREFIX_PATH": prefix,
+    }
+    assert network_env(_network_args(), given)["ROS_STATIC_PEERS"] == given["ROS_STATIC_PEERS"]
+    network_env(_network_args(), {"RMW_IMPLEMENTATION": "", "ROS_STATIC_PEERS": ""})
+    env = network_env(_network_args(network="subnet"), {"ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"})
+    assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "SUBNET"  # --network overrides OFF
 
 
 @pytest.mark.slow(PROCESS)

@@ -9,6 +9,7 @@ place that sets them.
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import os
 import re
 import sys
@@ -125,6 +126,63 @@ DISCOVERY_RANGES = ("LOCALHOST", "SUBNET", "OFF", "SYSTEM_DEFAULT")  # rcl's, fo
 MAX_DOMAIN_ID = 232  # rcl's limit with Fast DDS's default ports
 
 
+MAX_PEER_CHARS = 255  # of one static peer, as rmw's RMW_DISCOVERY_OPTIONS_STATIC_PEERS_MAX_LENGTH
+HOST_LABEL = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)", re.ASCII)
+
+
+def check_static_peers(value: str) -> None:
+    """ROS_STATIC_PEERS as rcl reads it: `;`-separated host names (RFC 1123) or IP addresses.
+    Empty entries (`a;;b`, a trailing `;`) are ignored, as rcl's split ignores them; anything
+    else is a UsageError here, not an RCLError traceback when the first node is created."""
+    for peer in value.split(";"):
+        peer = peer.strip()
+        if not peer:
+            continue
+        try:
+            ipaddress.ip_address(peer)
+            continue
+        except ValueError:
+            pass
+        labels = peer.removesuffix(".").split(".")
+        if len(peer) > MAX_PEER_CHARS or not all(HOST_LABEL.fullmatch(x) for x in labels):
+            raise UsageError(
+                f"ROS_STATIC_PEERS: {shown(peer)!r} is not a host name or an IP address "
+                "(want NAME-OR-IP;NAME-OR-IP...): fix or unset it"
+            )
+
+
+def installed_rmws(ament_prefix_path: str) -> set[str]:
+    """The RMW implementations installed: those the ament index of a prefix names
+    (resource type rmw_typesupport, as rmw_implementation finds them) whose library is there."""
+    found = set()
+    for prefix in filter(None, ament_prefix_path.split(os.pathsep)):
+        index = Path(prefix, "share", "ament_index", "resource_index", "rmw_typesupport")
+        if not index.is_dir():
+            continue
+        for entry in index.iterdir():
+            if (
+                entry.name != "rmw_implementation"
+                and Path(prefix, "lib", f"lib{entry.name}.so").exists()
+            ):
+                found.add(entry.name)
+    return found
+
+
+def check_rmw(value: str, ament_prefix_path: str) -> None:
+    """RMW_IMPLEMENTATION empty (the default, Fast DDS) or one that is installed; else a
+    UsageError, not rcl's exit 102."""
+    value = value.strip()
+    if not value:
+        return
+    known = installed_rmws(ament_prefix_path)
+    if value not in known:
+        have = ", ".join(sorted(known)) or "none found on AMENT_PREFIX_PATH"
+        raise UsageError(
+            f"RMW_IMPLEMENTATION={shown(value)!r} is not installed (installed: {have}): "
+            "unset it or name one of those"
+        )
+
+
 def add_network_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--network",
@@ -164,6 +222,11 @@ def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, 
                 f"(got {shown(env['ROS_AUTOMATIC_DISCOVERY_RANGE'])!r}): unset it or give "
                 "--network"
             )
+        if inherited == "OFF":
+            raise UsageError(
+                "ROS_AUTOMATIC_DISCOVERY_RANGE=OFF: a run's processes could not find each other; "
+                "unset it or give --network"
+            )
         if inherited:
             env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = inherited
         else:
@@ -175,6 +238,8 @@ def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, 
     if args.network is not None:
         env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = args.network.upper()
     env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    check_static_peers(env.get("ROS_STATIC_PEERS", ""))
+    check_rmw(env.get("RMW_IMPLEMENTATION", ""), env.get("AMENT_PREFIX_PATH", ""))
     if args.discovery_server is not None:
         host, _, port = args.discovery_server.rpartition(":")
         if not host or not port.isdigit() or not 0 < int(port) < 65536:
