@@ -357,7 +357,11 @@ def test_a_value_beginning_with_a_dash_says_how_to_give_it():
 
     parser = Parser(prog="p")
     parser.add_argument("--sensed", action="append")
-    with pytest.raises(UsageError, match=r"given as --option=VALUE"):
+    with pytest.raises(
+        UsageError,
+        match=r"--sensed: expected one argument \(a value that begins with '-' is given as "
+        r"--sensed=VALUE\)$",
+    ):
         parser.parse_args(["--sensed", "-1,1=5"])
     assert parser.parse_args(["--sensed=-1,1=5"]).sensed == ["-1,1=5"]
     with pytest.raises(UsageError, match="outside the 4x4 grid"):

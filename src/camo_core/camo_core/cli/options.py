@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import copy
 import itertools
+import re
 import sys
 from pathlib import Path
 from typing import NoReturn
@@ -33,8 +34,10 @@ class Parser(argparse.ArgumentParser):
         self.register("type", float, strict_float)
 
     def error(self, message: str) -> NoReturn:  # one line, not usage + message
-        if message.endswith("expected one argument"):  # `--sensed -1,1=5`: "-1,1=5" is an option
-            message += " (a value that begins with '-' is given as --option=VALUE)"
+        # `--sensed -1,1=5`: argparse takes "-1,1=5" for an option, and says only this.
+        dashed = re.fullmatch(r"argument (?:\S+/)?(--?[^\s/:]+): expected one argument", message)
+        if dashed:
+            message += f" (a value that begins with '-' is given as {dashed[1]}=VALUE)"
         raise UsageError(message)
 
     def add_params_file_option(self, node: str) -> None:
