@@ -204,6 +204,7 @@ def _network_args(**given):
         ("ROS_STATIC_PEERS", "x" * 300, "is not a host name"),
         ("RMW_IMPLEMENTATION", "rmw_bogus", "RMW_IMPLEMENTATION='rmw_bogus' is not installed"),
         ("RMW_IMPLEMENTATION", "rmw_dds_common", "is not installed"),  # a library, no RMW
+        ("RMW_IMPLEMENTATION", " ", "is not installed"),  # rcl takes it for a name too
     ],
 )
 def test_a_bad_ros_variable_in_the_environment_is_one_line(name, value, said):
@@ -247,6 +248,25 @@ def test_static_peers_of_names_and_addresses_and_an_installed_rmw_pass():
     network_env(_network_args(), {"RMW_IMPLEMENTATION": "", "ROS_STATIC_PEERS": ""})
     env = network_env(_network_args(network="subnet"), {"ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"})
     assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "SUBNET"  # --network overrides OFF
+
+
+@pytest.mark.slow(PROCESS)
+@pytest.mark.parametrize("value", ["rmw_bogus", " ", "rmw_x\nTraceback"])
+def test_the_camo_script_refuses_an_rmw_that_is_not_installed_before_rcl_exits_102(value):
+    import subprocess
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[2] / "camo"
+    done = subprocess.run(
+        [str(script), "worker", "--cells", "0-1", "--wait", "1"],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "RMW_IMPLEMENTATION": value},
+        timeout=120,
+    )
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    assert lines[0].startswith("camo: error: RMW_IMPLEMENTATION=") and "not installed" in lines[0]
 
 
 @pytest.mark.slow(PROCESS)

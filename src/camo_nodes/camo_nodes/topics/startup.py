@@ -170,8 +170,9 @@ def installed_rmws(ament_prefix_path: str) -> set[str]:
 
 def check_rmw(value: str, ament_prefix_path: str) -> None:
     """RMW_IMPLEMENTATION empty (the default, Fast DDS) or one that is installed; else a
-    UsageError, not rcl's exit 102."""
-    value = value.strip()
+    UsageError, not rcl's exit 102 (which rcl does as soon as rclpy is imported: the camo script
+    checks the same rule before Python starts; this is for an environment given to a child).
+    Blanks are no name: rcl takes " " for one, and so do we."""
     if not value:
         return
     known = installed_rmws(ament_prefix_path)
