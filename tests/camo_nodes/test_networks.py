@@ -233,6 +233,16 @@ def test_good_or_empty_ros_variables_pass_and_options_override_bad_ones():
     assert env["ROS_DOMAIN_ID"] == "3" and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
 
 
+@pytest.mark.parametrize("server", ["host:\uff11\uff11", "host:1_1", "host:", "host:0"])
+def test_a_discovery_server_port_is_ascii_digits_in_1_to_65535(server):
+    from camo_core.exceptions import UsageError
+    from camo_nodes.topics.startup import network_env
+
+    with pytest.raises(UsageError, match="--discovery-server takes HOST:PORT"):
+        network_env(_network_args(discovery_server=server), {})
+    assert network_env(_network_args(discovery_server="h:11811"), {})["ROS_SUPER_CLIENT"]
+
+
 def test_static_peers_of_names_and_addresses_and_an_installed_rmw_pass():
     from camo_nodes.topics.startup import installed_rmws, network_env
 

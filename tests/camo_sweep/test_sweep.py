@@ -288,3 +288,13 @@ def test_a_bad_sweep_file_argument_is_one_line_and_exit_2(value, tmp_path, monke
     assert cli.main([value, "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.startswith("camo sweep: error: "), err
+
+
+@pytest.mark.parametrize("trials", ["1_000", "\uff11\uff10\uff10"])
+def test_bench_sweep_reads_trials_as_ascii_digits_in_one_line(trials, capsys):
+    from camo_sweep import bench
+
+    assert bench.main(["--trials", trials]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("camo bench sweep: error: argument --trials: invalid int value")
+    assert len(err.strip().splitlines()) == 1

@@ -9,7 +9,6 @@ the workers' kernel warm-up are printed apart).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import tempfile
@@ -18,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from camo_core.cli.options import Parser
 from camo_core.exceptions import EXIT_USAGE, CamoError, UsageError
 from camo_sweep import engines
 from camo_sweep.spec import SweepSpec
@@ -95,11 +95,11 @@ def format_table(report: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="camo bench sweep", allow_abbrev=False)
+    parser = Parser(prog="camo bench sweep")  # type=int by camo_core.inputs' grammar
     parser.add_argument("--trials", type=int, default=20000, help="trials in all (default 20000)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    args = parser.parse_args(argv)
     try:
+        args = parser.parse_args(argv)
         if not 11 <= args.trials <= 10_000_000:
             raise UsageError(f"--trials must be in 11..10000000 (got {args.trials})")
         engines.worker_environment()  # the loop and the in-process sweep run on one thread too

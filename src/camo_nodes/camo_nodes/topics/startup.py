@@ -22,7 +22,7 @@ from rclpy.parameter import Parameter
 from camo_core.cli.options import Parser
 from camo_core.cli.params_file import check_ros_args
 from camo_core.exceptions import EXIT_USAGE, UsageError
-from camo_core.inputs import shown
+from camo_core.inputs import INTEGER, shown
 from camo_core.shutdown import stacks_on_faults
 
 from ..shm import remove_stale
@@ -243,7 +243,7 @@ def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, 
     check_rmw(env.get("RMW_IMPLEMENTATION", ""), env.get("AMENT_PREFIX_PATH", ""))
     if args.discovery_server is not None:
         host, _, port = args.discovery_server.rpartition(":")
-        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        if not host or not INTEGER.fullmatch(port) or not 0 < int(port) < 65536:
             raise UsageError(f"--discovery-server takes HOST:PORT (got {args.discovery_server!r})")
         env["ROS_DISCOVERY_SERVER"] = args.discovery_server
         # A server tells plain clients only of endpoints that match theirs; tools that list the
