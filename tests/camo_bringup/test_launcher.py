@@ -482,9 +482,13 @@ def test_run_refuses_a_cell_given_twice_or_a_port_that_is_no_serial_port(tmp_pat
     assert said in str(caught.value) and "\n" not in str(caught.value)
 
 
-def test_a_bridge_on_a_character_device_passes_the_launchers_check(tmp_path):
-    config = _config(tmp_path, "--bridge", "1,1=/dev/null")
-    assert config.bridges == {5: "/dev/null"}
+def test_a_bridge_port_is_a_character_device_and_a_regular_file_is_not(tmp_path):
+    from camo_core.exceptions import UsageError
+
+    assert _config(tmp_path, "--bridge", "1,1=/dev/null").bridges == {5: "/dev/null"}
+    (tmp_path / "regfile").write_text("")
+    with pytest.raises(UsageError, match="not a serial port"):
+        _config(tmp_path, "--bridge", f"1,1={tmp_path / 'regfile'}")
 
 
 def children_of(pid: int) -> list[int]:
