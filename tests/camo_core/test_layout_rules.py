@@ -37,6 +37,12 @@ def test_jitter_is_seeded_and_bounded():
         layout_of("jitter:0.7", 5, 5, seed=0)
 
 
+@pytest.mark.parametrize("amount", ["0_1", "\u0660.1", "\uff10.1", "nan", ""])
+def test_jitter_reads_its_amount_as_ascii_digits_only(amount):
+    with pytest.raises(LayoutError, match="jitter:A needs a number A"):
+        layout_of(f"jitter:{amount}", 5, 5, seed=0)
+
+
 def test_a_layout_file_is_read_or_refused_in_one_line(tmp_path):
     good = tmp_path / "swarm.csv"
     good.write_text("x,y\n0,0\n1,0\n0.5,0.9\n")
