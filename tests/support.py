@@ -376,11 +376,14 @@ def png_bytes(
     depth: int = 8,
     colour: int = 0,
     pixels: tuple[int, int] | None = None,
+    filter_byte: int = 0,
+    extra: tuple[tuple[bytes, bytes], ...] = (),
 ) -> bytes:
     """A minimal PNG (signature, IHDR, one IDAT, IEND, every CRC right) whose header says
     `width` x `height`, `depth` bits and colour type `colour`, and whose data holds grey
-    8-bit rows of `pixels` (width, height; default the header's): a valid container whose
-    fields may lie about what it holds."""
+    8-bit rows of `pixels` (width, height; default the header's), each behind `filter_byte`
+    (0, none, is valid; 5 and up are not): a valid container whose fields may lie about what
+    it holds. `extra`: (kind, data) chunks between IHDR and IDAT."""
     import struct
     import zlib
 
@@ -389,11 +392,14 @@ def png_bytes(
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
 
     w, h = pixels or (width, height)
-    rows = b"".join(b"\0" + bytes((7 * (x + y)) % 256 for x in range(w)) for y in range(h))
+    rows = b"".join(
+        bytes([filter_byte]) + bytes((7 * (x + y)) % 256 for x in range(w)) for y in range(h)
+    )
     header = struct.pack(">IIBBBBB", width, height, depth, colour, 0, 0, 0)
     return (
         b"\x89PNG\r\n\x1a\n"
         + chunk(b"IHDR", header)
+        + b"".join(chunk(kind, data) for kind, data in extra)
         + chunk(b"IDAT", zlib.compress(rows))
         + chunk(b"IEND", b"")
     )

@@ -2,6 +2,7 @@
 
 import json
 import os
+import zlib
 
 import cv2
 import numpy as np
@@ -251,3 +252,83 @@ def test_sim_at_a_contrast_senses_what_it_senses_on_that_image_written_out(tmp_p
         out.returncode == 2
         and out.stderr.strip() == "camo: error: --contrast must be in (0, 1] (got 2)"
     )
+
+
+# ---- what the native decoders say (issue 27) -------------------------------------------------
+
+
+def _noise(width: int = 64, height: int = 48) -> np.ndarray:
+    return np.random.default_rng(0).integers(0, 256, (height, width, 3), dtype=np.uint8)
+
+
+def _truncated_jpeg() -> bytes:
+    ok, data = cv2.imencode(".jpg", _noise())
+    assert ok
+    return data.tobytes()[: len(data) // 2]
+
+
+@pytest.mark.parametrize(
+    "name, content, said",
+    [
+        ("bad_filter.png", png_bytes(16, 16, filter_byte=9), "libpng error: bad adaptive filter"),
+        ("few_rows.png", png_bytes(16, 16, pixels=(16, 4)), "libpng error: Not enough image data"),
+        ("truncated.jpg", _truncated_jpeg(), "Premature end of JPEG file"),
+    ],
+    ids=["bad_filter", "few_rows", "truncated_jpeg"],
+)
+def test_an_image_the_decoder_calls_damaged_is_refused_quoting_it_and_nothing_else_is_written(
+    tmp_path, capfd, name, content, said
+):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(ImageError, match=f"cannot decode image .*: the decoder says '{said}"):
+        sensing.load_image(path)
+    assert capfd.readouterr().err == ""
+
+
+def test_a_png_with_only_a_harmless_libpng_warning_loads_and_writes_nothing(tmp_path, capfd):
+    path = tmp_path / "short_profile.png"
+    profile = b"p\0\0" + zlib.compress(b"garbage")  # "iCCP: too short"
+    path.write_bytes(png_bytes(16, 16, extra=((b"iCCP", profile),)))
+    assert sensing.load_image(path).shape == (16, 16)
+    assert capfd.readouterr().err == ""
+
+
+def test_a_float_tiff_opencv_cannot_bring_to_eight_bits_is_refused_with_its_reason(
+    tmp_path, capfd
+):
+    path = tmp_path / "float.tiff"
+    assert cv2.imwrite(str(path), np.random.default_rng(0).random((8, 8)).astype(np.float32))
+    with pytest.raises(ImageError, match=r"the decoder says 'OpenCV TIFF: .*32-bit samples'"):
+        sensing.load_image(path)
+    assert capfd.readouterr().err == ""
+
+
+def test_decoder_messages_are_matched_as_damage_or_dropped_as_harmless():
+    said = sensing.decoder_messages(
+        "[ WARN:0@0.078] global grfmt_tiff.cpp:811 readData OpenCV TIFF: Sorry, no\n\n"
+        "libpng warning: iCCP: known incorrect sRGB profile\n"
+    )
+    assert said == ["OpenCV TIFF: Sorry, no", "libpng warning: iCCP: known incorrect sRGB profile"]
+    damage = [m for m in said if sensing.DECODER_DAMAGE.search(m)]
+    assert damage == ["OpenCV TIFF: Sorry, no"]
+    for harmless in ("libpng warning: iCCP: too short", "Warning: unknown JFIF revision number"):
+        assert not sensing.DECODER_DAMAGE.search(harmless)
+    for bad in ("Corrupt JPEG data: 3 extraneous bytes before marker 0xd9", "libpng error: x"):
+        assert sensing.DECODER_DAMAGE.search(bad)
+
+
+@pytest.mark.slow(PROCESS)
+def test_a_damaged_image_given_to_the_command_line_is_exactly_one_line_on_stderr(tmp_path):
+    from support import run_camo
+
+    for name, content in (
+        ("bad.png", png_bytes(16, 16, filter_byte=9)),
+        ("cut.jpg", _truncated_jpeg()),
+    ):
+        path = tmp_path / name
+        path.write_bytes(content)
+        out = run_camo("sim", "--image", str(path), "--out", str(tmp_path / name / "out"))
+        assert out.returncode == 2, out.stderr
+        lines = out.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("camo: error: cannot decode image"), lines

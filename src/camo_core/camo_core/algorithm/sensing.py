@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
+import re
 import struct
+import sys
+import tempfile
+import threading
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,12 +63,66 @@ def image_header(path: Path) -> tuple[int, int, str, str]:
     return width, height, kind, mode
 
 
+# What the native decoders write to file descriptor 2 while they decode, as lines. Those that
+# mean damaged or unreadable data refuse the image, quoting the first; the rest are dropped as
+# harmless: libpng's warnings (about ancillary chunks: iCCP and sRGB colour profiles, text,
+# gamma; common in valid PNGs, and none changes the pixels read), libjpeg's other warnings
+# (an unknown JFIF revision, a thumbnail's size) and OpenCV's notes on a decoded image.
+DECODER_DAMAGE = re.compile(
+    r"libpng error|Premature end of JPEG|Corrupt JPEG data|JPEG datastream contains no image"
+    r"|Invalid (SOS|JPEG)|Bogus|TIFF.*\b([Ee]rror|Sorry|[Cc]annot|can ?not)\b|\[\s*ERROR:"
+)
+_OPENCV_LOG = re.compile(r"^\[\s*\w+:[^\]]*\]\s+(?:global\s+)?\S+:\d+\s+\S+\s+(.*)$")
+_STDERR = threading.Lock()  # fd 2 is the process's: one capture at a time
+MAX_DECODER_TEXT = 64 * 1024  # read of what was written
+MAX_QUOTED = 200  # characters of a decoder's message in camo's one line
+
+
+def decoder_messages(text: str) -> list[str]:
+    """What native decoders wrote, one message a line, OpenCV's log prefix taken off."""
+    lines = (line.strip() for line in text.splitlines())
+    return [(_OPENCV_LOG.sub(r"\1", line)).strip() for line in lines if line]
+
+
+def _captured_stderr(decode):
+    """decode()'s result and what native code wrote to file descriptor 2 meanwhile (libpng,
+    libjpeg and OpenCV's logging write there, around camo's one line of error). Anything
+    another thread writes to fd 2 in that window is taken too: decoding is short."""
+    with _STDERR:
+        sys.stderr.flush()
+        try:
+            saved = os.dup(2)
+        except OSError:  # no fd 2 (started with 2>&-): nothing to keep apart
+            return decode(), ""
+        try:
+            with tempfile.TemporaryFile() as sink:
+                os.dup2(sink.fileno(), 2)
+                try:
+                    result = decode()
+                finally:
+                    os.dup2(saved, 2)
+                sink.seek(0)
+                text = sink.read(MAX_DECODER_TEXT).decode("utf-8", "replace")
+        finally:
+            os.close(saved)
+    return result, text
+
+
 def _decoded(path: Path, flags: int) -> np.ndarray | None:
+    """cv2.imread, with what the decoders write to fd 2 kept from the terminal: an image they
+    say is damaged (a truncated JPEG decodes, half grey, with only a warning) is an
+    ImageError quoting their first word on it."""
     try:
-        return cv2.imread(str(path), flags)
+        image, text = _captured_stderr(lambda: cv2.imread(str(path), flags))
     except cv2.error as exc:
         detail = str(exc).strip().splitlines()[-1].strip() if str(exc).strip() else "cv2.error"
         raise ImageError(f"cannot decode image {shown(path)}: {detail}") from None
+    messages = decoder_messages(text)
+    damage = [m for m in messages if DECODER_DAMAGE.search(m)]
+    if damage or (image is None and messages):
+        said = (damage or messages)[0][:MAX_QUOTED]
+        raise ImageError(f"cannot decode image {shown(path)}: the decoder says {said!r}")
+    return image
 
 
 def load_image(path: str | Path) -> np.ndarray:
@@ -71,8 +130,9 @@ def load_image(path: str | Path) -> np.ndarray:
 
     Checked level by level, each failure an ImageError in one line: the path (empty, too long,
     missing, a folder, unreadable), the size on disk (MAX_IMAGE_BYTES), the header's dimensions
-    before any pixel is decoded (MAX_IMAGE_PIXELS), the decoding, and what it decoded to
-    (dimensions as the header said, 1, 3 or 4 channels of 8 or 16 bits or float)."""
+    before any pixel is decoded (MAX_IMAGE_PIXELS), the decoding (refused if the decoder says the
+    data is damaged, see DECODER_DAMAGE; nothing it writes reaches stderr), and what it decoded
+    to (dimensions as the header said, 1, 3 or 4 channels of 8 or 16 bits or float)."""
     path = checked_file(path, "image", MAX_IMAGE_BYTES, ImageError)
     width, height, kind, _ = image_header(path)
     image = _decoded(path, cv2.IMREAD_UNCHANGED)
