@@ -318,6 +318,52 @@ def test_decoder_messages_are_matched_as_damage_or_dropped_as_harmless():
         assert sensing.DECODER_DAMAGE.search(bad)
 
 
+def _bmp_of_width(width: int) -> bytes:
+    ok, data = cv2.imencode(".bmp", _noise())
+    assert ok
+    data = bytearray(data.tobytes())
+    data[18:22] = width.to_bytes(4, "little", signed=True)
+    return bytes(data)
+
+
+@pytest.mark.parametrize(
+    "name, content, said",
+    [
+        ("zero_width.png", png_bytes(0, 16, pixels=(16, 16)), "PNG header says width 0"),
+        ("zero_height.png", png_bytes(16, 0, pixels=(16, 16)), "PNG header says height 0"),
+        ("negative.png", png_bytes(2**32 - 64, 16, pixels=(16, 16)), "says width -64"),
+        ("negative_width.bmp", _bmp_of_width(-64), "BMP header says width -64"),
+        ("zero_width.bmp", _bmp_of_width(0), "BMP header says width 0"),
+    ],
+    ids=["png_width_0", "png_height_0", "png_width_2**32-64", "bmp_width_-64", "bmp_width_0"],
+)
+def test_a_header_of_zero_or_negative_width_or_height_is_refused_naming_it(
+    tmp_path, name, content, said
+):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(ImageError, match=f"{said}, not at least 1"):
+        sensing.load_image(path)
+
+
+def test_a_top_down_bmp_of_negative_height_still_loads(tmp_path):
+    _, data = cv2.imencode(".bmp", _noise())
+    data = bytearray(data.tobytes())
+    data[22:26] = (-48).to_bytes(4, "little", signed=True)
+    path = tmp_path / "top_down.bmp"
+    path.write_bytes(bytes(data))
+    assert sensing.load_image(path).shape == (48, 64, 3)
+
+
+def test_a_pillow_limit_is_named_by_what_it_limits_not_pillows_internals(tmp_path):
+    path = tmp_path / "text_bomb.png"
+    text = b"k\0\0" + zlib.compress(b"a" * (4 * 1024 * 1024))  # zTXt of 4 MB
+    path.write_bytes(png_bytes(16, 16, extra=((b"zTXt", text),)))
+    with pytest.raises(ImageError, match="Pillow's limit on metadata") as error:
+        sensing.load_image(path)
+    assert "ImagePlugin" not in str(error.value) and "MAX_" not in str(error.value)
+
+
 @pytest.mark.slow(PROCESS)
 def test_a_damaged_image_given_to_the_command_line_is_exactly_one_line_on_stderr(tmp_path):
     from support import run_camo

@@ -33,11 +33,40 @@ MAX_IMAGE_PIXELS = 2**27  # 16384 x 8192: a 8192 x 8192 grid's image and more, 4
 DEPTHS = (np.uint8, np.uint16, np.float32)  # what OpenCV's codecs decode to
 
 
+# Pillow's limits name its internals ("Decompressed data too large for
+# PngImagePlugin.MAX_TEXT_CHUNK"): say what they limit instead.
+_PILLOW_LIMITS = re.compile(r"\b\w+ImagePlugin\.MAX_\w+")
+
+
+def _check_raw_dimensions(path: Path) -> None:
+    """ImageError for a PNG or BMP header whose width or height is zero or negative. Pillow
+    does not say so: a PNG of width 0 is "not a known image format" to it, and a BMP of width
+    -64 one of 4294967232 pixels, "more than MAX_IMAGE_PIXELS"."""
+    try:
+        with open(path, "rb") as file:
+            head = file.read(26)
+    except OSError:
+        return  # Pillow, next, says what is wrong
+    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR" and len(head) >= 24:
+        kind, (width, height) = "PNG", struct.unpack(">ii", head[16:24])  # at most 2**31 - 1
+    elif head[:2] == b"BM" and len(head) >= 26 and struct.unpack("<I", head[14:18])[0] >= 40:
+        kind, (width, height) = "BMP", struct.unpack("<ii", head[18:26])
+        height = abs(height)  # a negative height is a top-down BMP
+    else:
+        return
+    for name, value in (("width", width), ("height", height)):
+        if value < 1:
+            raise ImageError(
+                f"image {shown(path)}: its {kind} header says {name} {value}, not at least 1"
+            )
+
+
 def image_header(path: Path) -> tuple[int, int, str, str]:
     """(width, height, format, mode) from the file's header alone (Pillow reads no pixels), or
     ImageError: not an image Pillow recognises, or one that claims more than MAX_IMAGE_PIXELS."""
     from PIL import Image  # only here: Pillow is matplotlib's, we read headers with it
 
+    _check_raw_dimensions(path)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
@@ -52,6 +81,7 @@ def image_header(path: Path) -> tuple[int, int, str, str]:
         detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if isinstance(exc, Image.UnidentifiedImageError):
             detail = "not a known image format (PNG, JPEG, BMP, TIFF, WebP, ...)"
+        detail = _PILLOW_LIMITS.sub("Pillow's limit on metadata", detail)
         raise ImageError(f"cannot read image {shown(path)}: {detail}") from None
     if width < 1 or height < 1:
         raise ImageError(f"image {shown(path)}: its header says {width}x{height} pixels")
@@ -130,9 +160,10 @@ def load_image(path: str | Path) -> np.ndarray:
 
     Checked level by level, each failure an ImageError in one line: the path (empty, too long,
     missing, a folder, unreadable), the size on disk (MAX_IMAGE_BYTES), the header's dimensions
-    before any pixel is decoded (MAX_IMAGE_PIXELS), the decoding (refused if the decoder says the
-    data is damaged, see DECODER_DAMAGE; nothing it writes reaches stderr), and what it decoded
-    to (dimensions as the header said, 1, 3 or 4 channels of 8 or 16 bits or float)."""
+    before any pixel is decoded (at least 1, MAX_IMAGE_PIXELS in all), the decoding (refused if
+    the decoder says the data is damaged, see DECODER_DAMAGE; nothing it writes reaches
+    stderr), and what it decoded to (dimensions as the header said, 1, 3 or 4 channels of 8 or
+    16 bits or float)."""
     path = checked_file(path, "image", MAX_IMAGE_BYTES, ImageError)
     width, height, kind, _ = image_header(path)
     image = _decoded(path, cv2.IMREAD_UNCHANGED)
