@@ -364,6 +364,23 @@ def test_a_pillow_limit_is_named_by_what_it_limits_not_pillows_internals(tmp_pat
     assert "ImagePlugin" not in str(error.value) and "MAX_" not in str(error.value)
 
 
+@pytest.mark.parametrize(
+    "suffix, kind", [("gif", "GIF"), ("png", "PNG"), ("webp", "WEBP"), ("tiff", "TIFF")]
+)
+def test_an_animation_or_multi_page_image_is_refused_not_read_as_its_first_frame(
+    tmp_path, suffix, kind
+):
+    from PIL import Image
+
+    frames = [Image.fromarray(np.full((16, 16), value, np.uint8)) for value in (0, 255)]
+    path = tmp_path / f"two_frames.{suffix}"
+    frames[0].save(path, save_all=True, append_images=frames[1:], duration=100)
+    with pytest.raises(ImageError, match=f"a {kind} of more than one frame"):
+        sensing.load_image(path)
+    frames[0].save(tmp_path / f"one_frame.{suffix}")
+    assert sensing.load_image(tmp_path / f"one_frame.{suffix}").shape[:2] == (16, 16)
+
+
 @pytest.mark.slow(PROCESS)
 def test_a_damaged_image_given_to_the_command_line_is_exactly_one_line_on_stderr(tmp_path):
     from support import run_camo

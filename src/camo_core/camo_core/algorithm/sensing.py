@@ -73,6 +73,8 @@ def image_header(path: Path) -> tuple[int, int, str, str]:
             with Image.open(path) as header:
                 width, height = header.size
                 kind, mode = header.format or "?", header.mode
+                # MPO (a JPEG with previews or a stereo pair's second view) counts as one.
+                animated = kind != "MPO" and bool(getattr(header, "is_animated", False))
     except Image.DecompressionBombError:
         raise ImageError(
             f"image {shown(path)}: its header claims more than {MAX_IMAGE_PIXELS} pixels"
@@ -89,6 +91,11 @@ def image_header(path: Path) -> tuple[int, int, str, str]:
         raise ImageError(
             f"image {shown(path)}: its header claims {width}x{height} pixels, more than "
             f"{MAX_IMAGE_PIXELS} are not decoded"
+        )
+    if animated:
+        raise ImageError(
+            f"image {shown(path)}: a {kind} of more than one frame (an animation or a "
+            "multi-page file); camo reads still images: save the one frame as its own file"
         )
     return width, height, kind, mode
 
@@ -160,10 +167,10 @@ def load_image(path: str | Path) -> np.ndarray:
 
     Checked level by level, each failure an ImageError in one line: the path (empty, too long,
     missing, a folder, unreadable), the size on disk (MAX_IMAGE_BYTES), the header's dimensions
-    before any pixel is decoded (at least 1, MAX_IMAGE_PIXELS in all), the decoding (refused if
-    the decoder says the data is damaged, see DECODER_DAMAGE; nothing it writes reaches
-    stderr), and what it decoded to (dimensions as the header said, 1, 3 or 4 channels of 8 or
-    16 bits or float)."""
+    before any pixel is decoded (at least 1, MAX_IMAGE_PIXELS in all) and its frames (one: an
+    animation or a multi-page file is refused), the decoding (refused if the decoder says the
+    data is damaged, see DECODER_DAMAGE; nothing it writes reaches stderr), and what it decoded
+    to (dimensions as the header said, 1, 3 or 4 channels of 8 or 16 bits or float)."""
     path = checked_file(path, "image", MAX_IMAGE_BYTES, ImageError)
     width, height, kind, _ = image_header(path)
     image = _decoded(path, cv2.IMREAD_UNCHANGED)
