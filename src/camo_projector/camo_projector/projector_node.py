@@ -46,11 +46,12 @@ PROJECTOR_PARAMETERS = (ProjectorParams, JoinParams)
 
 
 class ProjectorNode(Node):
-    def __init__(self, topics: RunTopics, **kwargs) -> None:
+    def __init__(self, topics: RunTopics, first: np.ndarray | None = None, **kwargs) -> None:
+        """`first`: the background its parameters name, when the caller has loaded it."""
         super().__init__("projector", namespace=topics.robot_namespace, **kwargs)
         values = node_parameters(self, *PROJECTOR_PARAMETERS)
         self.publisher = self.create_publisher(Image, topics.background, LATCHED)
-        self.image = load(values["image"], values["pattern"])
+        self.image = first if first is not None else load(values["image"], values["pattern"])
         self.add_on_set_parameters_callback(self._on_set)
         # A topic as well as the parameters: data is a built-in name or an image path.
         self.create_subscription(String, topics.load, self._on_load, 10)
@@ -94,12 +95,16 @@ def main(args=None) -> int:
     start_ros("projector_node", args, node_options=True)
     node = None
     try:
-        reader = Node("projector_run", **LEAN_NODE)
+        reader = Node("projector", **LEAN_NODE)  # its name in messages
         try:
+            # Its parameters and its image are checked before it waits for a run: a missing
+            # or corrupt image is one line at once, not a silent wait for a run.
+            values = node_parameters(reader, *PROJECTOR_PARAMETERS)
+            first = load(values["image"], values["pattern"])
             topics = run_from_parameter(reader)
         finally:
             reader.destroy_node()
-        node = ProjectorNode(topics)
+        node = ProjectorNode(topics, first)
         rclpy.spin(node)
     except CamoError as exc:
         print(f"projector_node: error: {exc}", file=sys.stderr)
