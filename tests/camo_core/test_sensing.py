@@ -395,3 +395,18 @@ def test_a_damaged_image_given_to_the_command_line_is_exactly_one_line_on_stderr
         assert out.returncode == 2, out.stderr
         lines = out.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("camo: error: cannot decode image"), lines
+
+
+def test_what_native_code_writes_to_fd_2_while_decoding_is_kept_whole_and_off_stderr(capfd):
+    said = b"libpng warning: iCCP: known incorrect sRGB profile\n" * 4000  # 200 kB, > a pipe
+
+    def decode():
+        for start in range(0, len(said), 4096):
+            os.write(2, said[start : start + 4096])
+        return "decoded"
+
+    result, text = sensing._captured_stderr(decode)
+    assert result == "decoded" and text == said[: sensing.MAX_DECODER_TEXT].decode()
+    assert capfd.readouterr().err == ""
+    os.write(2, b"after\n")
+    assert capfd.readouterr().err == "after\n"

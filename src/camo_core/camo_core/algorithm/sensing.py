@@ -8,7 +8,6 @@ import os
 import re
 import struct
 import sys
-import tempfile
 import threading
 import warnings
 from dataclasses import dataclass
@@ -123,8 +122,9 @@ def decoder_messages(text: str) -> list[str]:
 
 def _captured_stderr(decode):
     """decode()'s result and what native code wrote to file descriptor 2 meanwhile (libpng,
-    libjpeg and OpenCV's logging write there, around camo's one line of error). Anything
-    another thread writes to fd 2 in that window is taken too: decoding is short."""
+    libjpeg and OpenCV's logging write there, around camo's one line of error), through a
+    pipe a thread drains (no disk needed, no writer blocked on a full pipe). Anything another
+    thread writes to fd 2 in that window is taken too: decoding is short."""
     with _STDERR:
         sys.stderr.flush()
         try:
@@ -132,17 +132,33 @@ def _captured_stderr(decode):
         except OSError:  # no fd 2 (started with 2>&-): nothing to keep apart
             return decode(), ""
         try:
-            with tempfile.TemporaryFile() as sink:
-                os.dup2(sink.fileno(), 2)
-                try:
-                    result = decode()
-                finally:
-                    os.dup2(saved, 2)
-                sink.seek(0)
-                text = sink.read(MAX_DECODER_TEXT).decode("utf-8", "replace")
-        finally:
+            read_end, write_end = os.pipe()
+        except OSError:  # out of file descriptors: decode as OpenCV alone would
             os.close(saved)
-    return result, text
+            return decode(), ""
+        chunks: list[bytes] = []
+
+        def drain() -> None:
+            kept = 0
+            while block := os.read(read_end, 65536):
+                if kept < MAX_DECODER_TEXT:
+                    chunks.append(block)
+                    kept += len(block)
+            os.close(read_end)
+
+        drainer = threading.Thread(target=drain, name="decoder-stderr", daemon=True)
+        drainer.start()
+        try:
+            os.dup2(write_end, 2)
+            try:
+                result = decode()
+            finally:
+                os.dup2(saved, 2)
+        finally:
+            os.close(write_end)  # the drainer reads to its end
+            os.close(saved)
+            drainer.join()
+    return result, b"".join(chunks)[:MAX_DECODER_TEXT].decode("utf-8", "replace")
 
 
 def _decoded(path: Path, flags: int) -> np.ndarray | None:
