@@ -135,7 +135,7 @@ def test_an_option_both_fixed_and_swept_or_two_backgrounds_are_refused():
 @pytest.mark.parametrize(
     "text, said",
     [
-        ("axes: [1, 2\n", r"is not valid YAML \(line 2\)"),
+        ("axes: [1, 2\n", r"is not YAML \(line 2\)"),
         ("- a\n- b\n", "a sweep file is a mapping"),
         ("axis:\n  rho_comm: 0,0.1\n", "unknown key 'axis'"),
         ("axes: 3\n", "axes must be a mapping"),
@@ -239,8 +239,8 @@ def test_a_sweep_file_of_wrong_types_and_ranges_is_one_line_or_a_spec(tmp_path_f
     "content, said",
     [
         (b"axes:\n  1: [1, 2]\n", "axes: 1 is not an option name"),
-        (b"blocks:\n  - {null: [1]}\n", "blocks: None is not an option name"),
-        (b"\xff\xfe\x00binary", "a sweep file is UTF-8 text"),
+        (b"blocks:\n  - {null: [1]}\n", "blocks: nothing is not an option name"),
+        (b"\xff\xfe\x00binary", "is not UTF-8 text"),
         (b"1: 2\nbogus: 3\n", "unknown key 1"),
     ],
 )

@@ -6,32 +6,22 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import Any
 
-import yaml
-
 from camo_bag.container import BagError
+from camo_core.inputs import described, parse_yaml
 
 INT64_MAX = 2**63 - 1
 Check = Callable[[Any, str], Any]
-LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml's: the same, faster
 
 
 def load_yaml(text: str, where: str) -> Any:
-    """YAML text as data; BagError naming the line where it is not YAML."""
-    try:
-        return yaml.load(text, Loader=LOADER)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        at = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or type(exc).__name__
-        raise BagError(f"{where} is not YAML{at}: {problem}") from None
-    except (ValueError, RecursionError) as exc:  # e.g. a NUL byte in the text
-        raise BagError(f"{where} is not YAML ({type(exc).__name__})") from None
+    """YAML text as data, read strictly (`camo_core.inputs.parse_yaml`: no duplicate keys,
+    YAML 1.2 scalars, one document); BagError naming the line where it is not YAML."""
+    return parse_yaml(text, where, BagError)
 
 
 def shown(value: Any) -> str:
-    """A value as an error quotes it: its repr, on one line, at most 40 characters."""
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
+    """A value as an error quotes it, in a user's words (`inputs.described`): on one line."""
+    return described(value)
 
 
 def bad(where: str, wanted: str, value: Any) -> BagError:

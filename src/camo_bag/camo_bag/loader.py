@@ -35,7 +35,6 @@ from camo_bag.checks import (
     INT64_MAX,
     integer,
     listed,
-    load_yaml,
     mapping,
     optional,
     shown,
@@ -53,6 +52,7 @@ from camo_bag.container import (
     damaged,
 )
 from camo_bag.qos_yaml import check_profiles
+from camo_core.inputs import read_yaml
 
 PATH_MAX = 4096  # Linux's PATH_MAX, and NAME_MAX for one name
 NAME_MAX = 255
@@ -193,17 +193,7 @@ METADATA_FILE = mapping(
 
 def load_metadata(file: Path) -> dict:
     """metadata.yaml's bag information, checked (BagError naming the first wrong value)."""
-    try:
-        if file.stat().st_size > METADATA_MAX:
-            raise BagError(f"{file} is over {METADATA_MAX // 2**20} MiB: not bag information")
-        raw = file.read_bytes()
-    except OSError as exc:
-        raise BagError(f"cannot read {file}: {exc.strerror}") from None
-    try:
-        decoded = raw.decode()
-    except UnicodeDecodeError:
-        raise BagError(f"{file} is not UTF-8 text") from None
-    data = load_yaml(decoded, str(file))
+    data = read_yaml(file, "bag metadata", METADATA_MAX, BagError)  # strict, and not a FIFO
     info = METADATA_FILE(data, f"{file}:")["rosbag2_bagfile_information"]
     names = [t["topic_metadata"]["name"] for t in info["topics_with_message_count"]]
     twice = sorted({n for n in names if names.count(n) > 1})

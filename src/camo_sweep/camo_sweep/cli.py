@@ -11,9 +11,9 @@ import yaml
 
 from camo_core.cli.options import Parser, a_path
 from camo_core.exceptions import CamoError, UsageError, reported
-from camo_core.inputs import integer
+from camo_core.inputs import integer, read_yaml
 from camo_sweep import engines
-from camo_sweep.spec import DRIVERS, SweepSpec, build_spec, spec_from_yaml
+from camo_sweep.spec import DRIVERS, MAX_FILE_BYTES, SweepSpec, build_spec, spec_from_yaml
 from camo_sweep.sweep import plan, run_sweep
 
 SPEC_FILE = "sweep.yaml"
@@ -111,8 +111,8 @@ def check_folder(folder: Path, spec: SweepSpec) -> SweepSpec | None:
     if not saved.is_file():
         raise UsageError(f"{folder} exists and holds no {SPEC_FILE}: it is not a sweep's folder")
     try:
-        before = SweepSpec(**{k: v for k, v in yaml.safe_load(saved.read_text()).items()})
-    except (yaml.YAMLError, TypeError, AttributeError, CamoError):
+        before = SweepSpec(**read_yaml(saved, "sweep's spec", MAX_FILE_BYTES))
+    except (TypeError, CamoError):
         raise UsageError(f"{saved} is damaged; give another --out") from None
     if not spec.same_sweep(before):
         raise UsageError(

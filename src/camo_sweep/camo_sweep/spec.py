@@ -23,12 +23,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from camo_core.cli.commands import add_sim_arguments
 from camo_core.cli.options import Parser
 from camo_core.exceptions import UsageError
-from camo_core.inputs import checked_file, items, number, shown
+from camo_core.inputs import described, items, number, read_yaml, shown
 
 DRIVERS = ("sim", "ros")
 # Options of ./camo sim that are not a trial's: where it writes, the seed (a trial's own, from the
@@ -74,22 +73,22 @@ def typed(name: str, value: Any) -> Any:
     action = actions[name]
     if action.nargs == 0:  # a flag
         if not isinstance(value, bool):
-            raise UsageError(f"{name} is a flag: true or false (got {value!r})")
+            raise UsageError(f"{name} is a flag: true or false (got {described(value)})")
         return value
     if isinstance(value, list | dict | tuple) or value is None:
-        raise UsageError(f"{name}: one value, not {value!r}")
+        raise UsageError(f"{name}: one value, not {described(value)}")
     text = str(value).strip()
     # The type as the parser converts it: a Parser reads type=int/float strictly.
     convert = sim_parser()._registry_get("type", action.type, action.type) or str
     try:
         out = convert(text)
     except (TypeError, ValueError, argparse.ArgumentTypeError):
-        raise UsageError(f"{name}: {value!r} is not a valid value") from None
+        raise UsageError(f"{name}: {described(value)} is not a valid value") from None
     if action.choices is not None and out not in action.choices:
         choices = ", ".join(map(str, action.choices))
-        raise UsageError(f"{name}: {value!r} is not one of {choices}")
+        raise UsageError(f"{name}: {described(value)} is not one of {choices}")
     if isinstance(out, float) and not math.isfinite(out):
-        raise UsageError(f"{name}: {value!r} is not a finite number")
+        raise UsageError(f"{name}: {described(value)} is not a finite number")
     if name == "image":  # a.png and ./a.png are one image
         out = os.path.normpath(out)
     return out
@@ -178,11 +177,13 @@ class SweepSpec:
 
     def __post_init__(self) -> None:
         if self.driver not in DRIVERS:
-            raise UsageError(f"driver must be one of {', '.join(DRIVERS)} (got {self.driver!r})")
+            raise UsageError(
+                f"driver must be one of {', '.join(DRIVERS)} (got {described(self.driver)})"
+            )
         if isinstance(self.trials, bool) or not isinstance(self.trials, int) or self.trials < 1:
-            raise UsageError(f"trials must be a positive integer (got {self.trials!r})")
+            raise UsageError(f"trials must be a positive integer (got {described(self.trials)})")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise UsageError(f"seed must be a non-negative integer (got {self.seed!r})")
+            raise UsageError(f"seed must be a non-negative integer (got {described(self.seed)})")
         if not self.blocks or not all(self.blocks):
             raise UsageError("a sweep needs at least one axis (--axis NAME=VALUES)")
         self.options = {name: typed(name, value) for name, value in self.options.items()}
@@ -269,19 +270,7 @@ class SweepSpec:
 
 def spec_from_yaml(path: str | Path) -> dict[str, Any]:
     """A SWEEP.yaml's contents, checked for shape (values are checked by SweepSpec)."""
-    path = checked_file(path, "sweep file", MAX_FILE_BYTES, UsageError)
-    try:
-        data = yaml.safe_load(path.read_bytes().decode("utf-8"))
-    except OSError as exc:
-        raise UsageError(f"cannot read {shown(path)}: {exc.strerror}") from None
-    except UnicodeDecodeError:
-        raise UsageError(f"{shown(path)}: a sweep file is UTF-8 text") from None
-    except yaml.YAMLError as exc:
-        where = getattr(exc, "problem_mark", None)
-        at = f" (line {where.line + 1})" if where is not None else ""
-        raise UsageError(f"{shown(path)} is not valid YAML{at}") from None
-    except RecursionError:
-        raise UsageError(f"{shown(path)} nests too deeply to be a sweep file") from None
+    data = read_yaml(path, "sweep file", MAX_FILE_BYTES, UsageError)
     name = shown(path)
     if data is None:
         data = {}
@@ -290,7 +279,9 @@ def spec_from_yaml(path: str | Path) -> dict[str, Any]:
     unknown = set(data) - SPEC_KEYS
     if unknown:
         first = sorted(unknown, key=str)[0]
-        raise UsageError(f"{name}: unknown key {first!r} (keys: {', '.join(sorted(SPEC_KEYS))})")
+        raise UsageError(
+            f"{name}: unknown key {described(first)} (keys: {', '.join(sorted(SPEC_KEYS))})"
+        )
     if "axes" in data and "blocks" in data:
         raise UsageError(f"{name}: give axes or blocks, not both")
     for key in ("options", "axes", "slurm"):
@@ -310,7 +301,7 @@ def _names_only(name: str, key: str, mappings: list[dict]) -> None:
     for mapping in mappings:
         for option in mapping:
             if not isinstance(option, str):
-                raise UsageError(f"{name}: {key}: {option!r} is not an option name")
+                raise UsageError(f"{name}: {key}: {described(option)} is not an option name")
 
 
 def build_spec(

@@ -15,12 +15,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
 from camo_core.algorithm import rng
 from camo_core.algorithm.params import ParameterError
 from camo_core.exceptions import CamoError
-from camo_core.inputs import checked_file, shown
+from camo_core.inputs import checked_file, described, read_yaml, shown
 
 
 class ImageError(CamoError):
@@ -29,6 +28,9 @@ class ImageError(CamoError):
 
 MAX_IMAGE_BYTES = 512 * 1024 * 1024  # on disk: a 2**27-pixel BMP is 400 MB
 MAX_IMAGE_PIXELS = 2**27  # 16384 x 8192: a 8192 x 8192 grid's image and more, 400 MB as BGR
+CALIBRATION_MAX_BYTES = 64 * 1024  # a calibration is two lines
+MAX_GAIN = 1e6  # a gain above this maps every grey but black to white: not a calibration
+MAX_OFFSET = 1e6  # as far: an offset beyond +-255 already clips every grey
 DEPTHS = (np.uint8, np.uint16, np.float32)  # what OpenCV's codecs decode to
 
 
@@ -264,9 +266,11 @@ class Calibration:
     offset: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.gain) and self.gain > 0 and math.isfinite(self.offset)):
+        gain_ok = math.isfinite(self.gain) and 0 < self.gain <= MAX_GAIN
+        if not (gain_ok and math.isfinite(self.offset) and abs(self.offset) <= MAX_OFFSET):
             raise ParameterError(
-                f"calibration: gain must be positive and offset finite "
+                f"calibration: gain must be in (0, {MAX_GAIN:g}] and offset within "
+                f"+-{MAX_OFFSET:g} "
                 f"(got gain {self.gain}, offset {self.offset})"
             )
 
@@ -275,19 +279,33 @@ class Calibration:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> Calibration:
-        """A YAML file with `gain` and/or `offset` (numbers)."""
-        try:
-            data = yaml.safe_load(Path(path).read_text()) or {}
-        except OSError as exc:
-            raise ParameterError(f"cannot read calibration {path}: {exc.strerror}") from None
-        except (yaml.YAMLError, UnicodeDecodeError, RecursionError):
-            raise ParameterError(f"calibration {path} is not YAML text") from None
+        """A YAML file (read by `inputs.read_yaml`: a regular file of at most
+        CALIBRATION_MAX_BYTES) mapping `gain` and/or `offset` to numbers (not text, not
+        true/false): gain in (0, MAX_GAIN], offset within +-MAX_OFFSET."""
+        data = read_yaml(path, "calibration", CALIBRATION_MAX_BYTES, ParameterError)
+        name = shown(path)
+        if data is None:
+            data = {}
         if not isinstance(data, dict) or set(data) - {"gain", "offset"}:
-            raise ParameterError(f"calibration {path} may hold only `gain` and `offset`")
-        try:
-            return cls(float(data.get("gain", 1.0)), float(data.get("offset", 0.0)))
-        except (TypeError, ValueError):
-            raise ParameterError(f"calibration {path}: gain and offset must be numbers") from None
+            raise ParameterError(f"calibration {name} may hold only `gain` and `offset`")
+        values = {"gain": 1.0, "offset": 0.0}
+        for key, value in data.items():
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ParameterError(
+                    f"calibration {name}: {key} must be a number (got {described(value)})"
+                )
+            values[key] = float(value)
+        gain, offset = values["gain"], values["offset"]
+        if not (math.isfinite(gain) and 0 < gain <= MAX_GAIN):
+            raise ParameterError(
+                f"calibration {name}: gain must be in (0, {MAX_GAIN:g}] (got {described(gain)})"
+            )
+        if not (math.isfinite(offset) and abs(offset) <= MAX_OFFSET):
+            raise ParameterError(
+                f"calibration {name}: offset must be within +-{MAX_OFFSET:g} "
+                f"(got {described(offset)})"
+            )
+        return cls(gain, offset)
 
 
 def block_means(gray: np.ndarray, rows: int, cols: int) -> np.ndarray:

@@ -22,7 +22,7 @@ from typing import Any, cast
 import yaml
 
 from camo_core.exceptions import UsageError
-from camo_core.inputs import checked_file
+from camo_core.inputs import described, read_yaml
 
 PARAMETERS_KEY = "ros__parameters"
 MAX_BYTES = 16 * 1024 * 1024  # a parameters file is a few lines; anything bigger is not one
@@ -44,6 +44,10 @@ def _check_parameters(path: Path, node: str, values: object, prefix: str) -> Non
     if not isinstance(values, dict):
         raise ParamsFileError(f"{path}: {node}: {PARAMETERS_KEY} must map names to values")
     for name, value in values.items():
+        if not isinstance(name, str):
+            raise ParamsFileError(
+                f"{path}: {node}: a parameter name is text (got {described(name)})"
+            )
         full = f"{prefix}{name}"
         if isinstance(value, dict):
             _check_parameters(path, node, value, f"{full}.")
@@ -56,6 +60,8 @@ def _check_parameters(path: Path, node: str, values: object, prefix: str) -> Non
 
 def _check_nodes(path: Path, entries: dict, prefix: str) -> None:
     for key, value in entries.items():
+        if not isinstance(key, str):
+            raise ParamsFileError(f"{path}: a node name is text (got {described(key)})")
         if key == PARAMETERS_KEY:
             if not prefix:
                 raise ParamsFileError(f"{path}: {PARAMETERS_KEY} must be under a node name")
@@ -72,30 +78,16 @@ def _check_nodes(path: Path, entries: dict, prefix: str) -> None:
 def check_params_file(path: str | Path) -> list[dict]:
     """The file's documents, or the mistakes people make in a parameters file named in one
     line (ParamsFileError). Whatever else rcl refuses, it says itself when the node starts."""
-    path = checked_file(path, "parameters file", MAX_BYTES, ParamsFileError)
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except OSError as exc:
-        raise ParamsFileError(f"cannot read parameters file {path}: {exc.strerror}") from None
-    except UnicodeDecodeError:
-        raise ParamsFileError(f"{path}: a parameters file is UTF-8 text") from None
-    try:
-        documents = list(yaml.safe_load_all(text))
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" (line {mark.line + 1})" if mark is not None else ""
-        raise ParamsFileError(f"{path} is not YAML{where}") from None
-    except RecursionError:
-        raise ParamsFileError(f"{path} nests too deeply to be a parameters file") from None
-    for document in documents:
-        if document is None:
-            continue
-        if not isinstance(document, dict):
-            raise ParamsFileError(
-                f"{path}: a parameters file maps NODE: {{{PARAMETERS_KEY}: {{NAME: VALUE}}}}"
-            )
-        _check_nodes(path, document, "")
-    return [d for d in documents if d]
+    document = read_yaml(path, "parameters file", MAX_BYTES, ParamsFileError)
+    path = Path(path)  # read_yaml checked it
+    if document is None:
+        return []
+    if not isinstance(document, dict):
+        raise ParamsFileError(
+            f"{path}: a parameters file maps NODE: {{{PARAMETERS_KEY}: {{NAME: VALUE}}}}"
+        )
+    _check_nodes(path, document, "")
+    return [document] if document else []
 
 
 def _flat(values: dict, prefix: str = "") -> dict:
@@ -154,7 +146,7 @@ def _option_value(action: argparse.Action, name: str, value, path: Path):
     """A parameters-file value as the option would have parsed it, or UsageError."""
 
     def wrong(expected: str) -> UsageError:
-        return UsageError(f"{path}: {name} must be {expected} (got {value!r})")
+        return UsageError(f"{path}: {name} must be {expected} (got {described(value)})")
 
     if action.nargs == 0:  # a flag
         if not isinstance(value, bool):
