@@ -176,13 +176,15 @@ _FLOAT = re.compile(
 )
 # What YAML 1.1 (PyYAML, libyaml users) or rcl's strtol/strtod read as numbers or booleans
 # though YAML 1.2 reads them as text: refused rather than guessed.
-_AMBIGUOUS = re.compile(
-    r"^(?:[-+]?0[xXoObB][0-9a-fA-F_]*|[-+]?0[0-9_]+(?:\.[0-9_]*)?(?:[eE][-+]?[0-9]+)?"
-    r"|[-+]?[0-9][0-9_]*(?::[0-5]?[0-9])+(?:\.[0-9_]*)?"
-    r"|[-+]?[0-9.][0-9_.]*_[0-9_.]*(?:[eE][-+]?[0-9]+)?"
-    r"|y|Y|yes|Yes|YES|n|N|no|No|NO|on|On|ON|off|Off|OFF"
-    r"|[0-9]{4}-[0-9]{1,2}-[0-9]{1,2}(?:[Tt ].*)?)$"
+_AMBIGUOUS = (
+    (re.compile(r"^[-+]?0[xXoObB][0-9a-fA-F_]*$"), "a number in another base"),
+    (re.compile(r"^[-+]?0[0-9_]+(?:\.[0-9_]*)?(?:[eE][-+]?[0-9]+)?$"), "an octal number"),
+    (re.compile(r"^[-+]?[0-9][0-9_]*(?::[0-5]?[0-9])+(?:\.[0-9_]*)?$"), "a base-60 number"),
+    (re.compile(r"^[-+]?[0-9.][0-9_.]*_[0-9_.]*(?:[eE][-+]?[0-9]+)?$"), "a number"),
+    (re.compile(r"^(?:y|Y|yes|Yes|YES|n|N|no|No|NO|on|On|ON|off|Off|OFF)$"), "true or false"),
+    (re.compile(r"^[0-9]{4}-[0-9]{1,2}-[0-9]{1,2}(?:[Tt ].*)?$"), "a date"),
 )
+
 _STANDARD = "tag:yaml.org,2002:"
 
 
@@ -341,12 +343,13 @@ def _walk(node, level: int, sizes: dict, open_: set) -> tuple[int, int]:
             raise _Refused("an alias refers to a node that holds it", node.start_mark)
         if isinstance(node, yaml.ScalarNode):
             if node.style is None and node.tag == _STANDARD + "str":
-                if _AMBIGUOUS.match(node.value):
-                    raise _Refused(
-                        f"{node.value[:SHOWN]!r} reads differently in YAML 1.1 and rcl; write "
-                        "a decimal number or true/false, or quote it to mean text",
-                        node.start_mark,
-                    )
+                for pattern, other in _AMBIGUOUS:
+                    if pattern.match(node.value):
+                        raise _Refused(
+                            f"{node.value[:SHOWN]!r} is {other} to YAML 1.1 (or rcl), text to "
+                            "YAML 1.2: write a decimal number or true/false, or quote it",
+                            node.start_mark,
+                        )
                 if node.value == "<<":
                     raise _Refused("merge keys (<<) are not read", node.start_mark)
             known = (1, 1)
