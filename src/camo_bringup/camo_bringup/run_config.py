@@ -229,8 +229,8 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         raise UsageError("a cell can be only one of --own-process, --bridge and --remote-cells")
     calibration = None
     if args.calibration:
+        Calibration.from_yaml(args.calibration)  # a bad file (or path) fails here, in one line
         calibration = Path(args.calibration).resolve()
-        Calibration.from_yaml(calibration)  # a bad file fails here, in one line
     if args.foxglove is not None and not 0 <= args.foxglove <= 65535:
         raise UsageError(f"--foxglove PORT must be in 0..65535 (got {args.foxglove})")
     record = Path(args.record) if args.record else None

@@ -431,4 +431,4 @@ def read_yaml(
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise error(f"the {what} {shown(path)} is not UTF-8 text (byte {exc.start})") from None
-    return parse_yaml(text, shown(path), error)
+    return parse_yaml(text, f"the {what} {shown(path)}", error)
