@@ -354,7 +354,7 @@ def _walk(node, level: int, sizes: dict, open_: set) -> tuple[int, int]:
                     raise _Refused("merge keys (<<) are not read", node.start_mark)
             known = (1, 1)
         else:
-            if level >= MAX_DEPTH:
+            if level > MAX_DEPTH:
                 raise _Refused(f"nests deeper than {MAX_DEPTH} levels", node.start_mark)
             children = node.value
             if isinstance(node, yaml.MappingNode):
@@ -392,6 +392,8 @@ def parse_yaml(text: str, where: str, error: type[CamoError] = CamoError) -> obj
         problem = exc.problem or "not YAML"
         if "single document" in (exc.context or ""):
             problem = "it holds more than one document (---)"
+        elif "duplicate anchor" in (exc.context or ""):
+            problem = "an anchor (&name) is given twice"
         raise error(f"{where} is not YAML{at}: {problem}") from None
     except yaml.reader.ReaderError as exc:
         char = exc.character if isinstance(exc.character, str) else chr(exc.character)
