@@ -64,6 +64,52 @@ def test_a_missing_or_binary_file_is_named(tmp_path):
         check_params_file(write(tmp_path, bytes(range(256))))
 
 
+NODE = "/**:\n  ros__parameters:\n"
+
+
+@pytest.mark.parametrize(
+    ("values", "said"),
+    [
+        ("    seed: " + "9" * 5000, "(line 3): an integer of 5000 digits"),
+        ("    formation_steps: 30:00:00", "(line 3): '30:00:00' is a base-60 number"),
+        ("    rows: 4\n    rows: 5", "(line 4): the key 'rows' is given twice (lines 3 and 4)"),
+        ("    rows: 4\n---\n" + NODE + "    rows: 9", "(line 4): it holds more than one document"),
+        ("    rows: 0x4", "(line 3): '0x4' is a number in another base"),
+        ("    image: 2001-12-14", "(line 3): '2001-12-14' is a date"),
+        ("    image: !!binary AAAA", "(line 3): the tag !!binary is not read"),
+        ("    ~: 4", "/**: a parameter name is text (got nothing)"),
+    ],
+)
+def test_what_yaml_1_1_would_read_otherwise_in_a_params_file_is_one_line(tmp_path, values, said):
+    path = write(tmp_path, NODE + values + "\n")
+    with pytest.raises(ParamsFileError) as caught:
+        check_params_file(path)
+    message = str(caught.value)
+    assert message.startswith(f"the parameters file {path} is not YAML") or str(path) in message
+    assert said in message and "\n" not in message
+    with pytest.raises(ParamsFileError, match=re.escape(said)):  # robot: --ros-args --params-file
+        check_ros_args(["--ros-args", "--params-file", str(path)])
+
+
+@pytest.mark.parametrize(
+    ("value", "said"),
+    [
+        ("", "rows must be a number or text (got nothing)"),
+        ("'2001-12-14'", "rows must be an integer (got '2001-12-14')"),
+        ("[1]", "rows must be a number or text (got a list)"),
+    ],
+)
+def test_a_wrong_value_for_an_option_is_said_in_user_words(tmp_path, value, said):
+    from camo_core.cli.commands import add_sim_arguments
+    from camo_core.cli.options import Parser
+    from camo_core.cli.params_file import options_from_file
+    from camo_core.exceptions import UsageError
+
+    path = write(tmp_path, f"{NODE}    rows: {value}\n")
+    with pytest.raises(UsageError, match=re.escape(said)):
+        options_from_file(add_sim_arguments(Parser(prog="camo sim")), path, "camo_sim")
+
+
 def test_every_params_file_of_a_command_line_is_checked(tmp_path):
     good = write(tmp_path, GOOD)
     check_ros_args(["x", "--ros-args", "--params-file", str(good), "-p", "a:=1"])
@@ -211,6 +257,12 @@ def test_sim_writes_params_yaml_that_repeats_it_and_the_command_line_wins(tmp_pa
             "profile must be one of paper, droplet",
         ),
         ("/**:\n  ros__parameters:\n    rho_comm: [0.1]\n", "rho_comm must be a number or text"),
+        ("/**:\n  ros__parameters:\n    seed: " + "9" * 5000, "an integer of 5000 digits"),
+        ("/**:\n  ros__parameters:\n    rows: 4\n---\n", "more than one document"),
+        (
+            "/**:\n  ros__parameters:\n    pattern:\n",
+            "pattern must be a number or text (got nothing)",
+        ),
     ],
 )
 def test_a_wrong_parameter_in_the_file_is_one_line(tmp_path, text, said):
