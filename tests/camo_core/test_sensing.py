@@ -2,6 +2,7 @@
 
 import json
 import os
+import threading
 import zlib
 
 import cv2
@@ -193,6 +194,47 @@ def test_calibration_is_identity_by_default_and_reads_yaml(tmp_path):
     path.write_text("gain: 0\n")
     with pytest.raises(ParameterError, match=r"gain must be in \(0, 1e\+06\]"):
         Calibration.from_yaml(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "said"),
+    [
+        ('gain: "1"\n', "gain must be a number (got '1')"),
+        ("gain: true\n", "gain must be a number (got true)"),
+        ("gain: 1e44\n", "gain must be in (0, 1e+06] (got 1e+44)"),
+        ("offset: -1e300\n", "offset must be within +-1e+06"),
+        ("gain: 1:00\n", "(line 1): '1:00' is a base-60 number"),
+        ("gain: 1\noffset: 0\ngain: 5\n", "(line 3): the key 'gain' is given twice"),
+        ("gain: " + "9" * 5000 + "\n", "an integer of 5000 digits"),
+        ("gain: 2\n---\ngain: 3\n", "more than one document"),
+    ],
+)
+def test_a_calibration_takes_numbers_in_range_read_strictly(tmp_path, text, said):
+    path = tmp_path / "cal.yaml"
+    path.write_text(text)
+    with pytest.raises(ParameterError) as caught:
+        Calibration.from_yaml(path)
+    assert said in str(caught.value) and "\n" not in str(caught.value)
+    assert str(path) in str(caught.value)
+
+
+@pytest.mark.parametrize("special", ["/dev/zero", "/dev/urandom", "fifo"])
+def test_a_calibration_that_is_a_device_or_a_fifo_is_refused_not_a_hang(tmp_path, special):
+    if special == "fifo":
+        special = str(tmp_path / "cal.yaml")
+        os.mkfifo(special)
+    said: list[str] = []
+
+    def read():
+        try:
+            Calibration.from_yaml(special)
+        except ParameterError as exc:
+            said.append(str(exc))
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    reader.join(10)
+    assert said == [f"the calibration {special} is not a regular file"]
 
 
 @pytest.mark.slow(COMPUTE)

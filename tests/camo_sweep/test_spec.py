@@ -148,6 +148,37 @@ def test_a_bad_sweep_file_is_one_line(tmp_path, text, said):
         spec_from_yaml(path)
 
 
+@pytest.mark.parametrize(
+    ("text", "said"),
+    [
+        ("axes: {formation_steps: 1:5:1}\n", "(line 1): '1:5:1' is a base-60 number"),
+        ("axes:\n  rho_comm: [0, 0.1]\n  rho_comm: [0.2]\n", "the key 'rho_comm' is given twice"),
+        ("seed: " + "9" * 5000 + "\naxes: {rows: [4]}\n", "an integer of 5000 digits"),
+        ("axes: {rows: [4]}\n---\naxes: {rows: [8]}\n", "more than one document"),
+        ("options: {image: !!binary AAAA}\naxes: {rows: [4]}\n", "the tag !!binary"),
+        ("axes: {rows: 0x4}\n", "'0x4' is a number in another base"),
+    ],
+)
+def test_a_sweep_file_read_otherwise_by_yaml_1_1_is_one_line_not_a_run(tmp_path, text, said):
+    path = tmp_path / "sweep.yaml"
+    path.write_text(text)
+    with pytest.raises(UsageError) as caught:
+        build_spec(spec_from_yaml(path), [], [], None, None, None)
+    assert said in str(caught.value) and "\n" not in str(caught.value)
+    assert str(caught.value).startswith(f"the sweep file {path} is not YAML")
+
+
+@pytest.mark.slow(PROCESS)
+def test_a_base_60_axis_is_refused_by_camo_sweep_with_exit_2(tmp_path):
+    from support import sweep
+
+    path = tmp_path / "sweep.yaml"
+    path.write_text("axes: {formation_steps: 1:5:1}\n")
+    out = sweep(str(path), "--out", str(tmp_path / "out"))
+    assert out.returncode == 2 and "'1:5:1' is a base-60 number" in out.stderr, out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
+
+
 def test_a_sweep_file_and_the_command_line_combine(tmp_path):
     path = tmp_path / "sweep.yaml"
     path.write_text(
