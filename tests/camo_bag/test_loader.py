@@ -133,6 +133,34 @@ def test_metadata_that_is_not_yaml_is_refused_with_its_line(bag):
     assert "is not YAML (line" in refused(bag)
 
 
+def test_metadata_with_a_key_given_twice_is_refused_naming_the_line(bag):
+    text = (bag / "metadata.yaml").read_text()
+    lines = text.splitlines()
+    at = next(k for k, line in enumerate(lines) if line.strip().startswith("version:"))
+    lines.insert(at + 1, lines[at].replace("9", "8"))  # a second version, after the first
+    (bag / "metadata.yaml").write_text("\n".join(lines) + "\n")
+    said = refused(bag)
+    assert (
+        f"(line {at + 2}): the key 'version' is given twice (lines {at + 1} and {at + 2})" in said
+    )
+
+
+@pytest.mark.parametrize(
+    ("text", "said"),
+    [
+        ("version: 1:00\n", "'1:00' is a base-60 number"),
+        ("version: " + "9" * 5000 + "\n", "an integer of 5000 digits"),
+        ("version: 9\n---\nversion: 9\n", "more than one document"),
+        ("version: !!binary AAAA\n", "the tag !!binary is not read"),
+        ("version: 9\x00\n", "the character U+0000"),
+    ],
+)
+def test_metadata_that_yaml_1_1_reads_otherwise_is_one_line_in_words(bag, text, said):
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  " + text)
+    message = refused(bag)
+    assert said in message and "Error" not in message
+
+
 def test_metadata_that_is_not_utf8_is_refused(bag):
     (bag / "metadata.yaml").write_bytes(b"\xff\xfe\x00")
     assert "not UTF-8" in refused(bag)

@@ -121,3 +121,16 @@ def test_a_profile_with_wrong_values_anywhere_gives_a_publisher_qos_or_one_line(
         assert isinstance(load_first(text), QoSProfile)
     except BagError as exc:
         one_line(exc)
+
+
+@pytest.mark.parametrize(
+    ("text", "said"),
+    [
+        ("- depth: 5\n  depth: 6\n", "(line 2): the key 'depth' is given twice"),
+        ("- depth: 0x5\n", "'0x5' is a number in another base"),
+        ("- depth: !!binary AAAA\n", "the tag !!binary is not read"),
+        ("- depth: 5\n---\n- depth: 6\n", "more than one document"),
+    ],
+)
+def test_a_qos_profile_string_is_read_strictly(text, said):
+    assert said in refused(text)
