@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from camo_core.exceptions import CamoError
-from camo_core.inputs import MAX_DEPTH, described, parse_yaml, read_yaml
+from camo_core.inputs import MAX_DEPTH, described, dump_yaml, parse_yaml, read_yaml
 
 
 def refused(text: str) -> str:
@@ -199,3 +199,26 @@ def test_any_document_of_these_constructs_loads_as_plain_data_or_is_one_line(par
         assert must_fail, str(exc)
     else:
         assert not must_fail and plain(value)
+
+
+PLAIN_DATA = st.recursive(
+    st.none()
+    | st.booleans()
+    | st.integers(-(10**30), 10**30)
+    | st.floats(allow_nan=False)
+    | st.text(max_size=12)
+    | st.sampled_from(["1e44", "y", "1:5:1", "0x4", "on", "2001-12-14", "<<", "~", "010"]),
+    lambda inner: (
+        st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=5), inner, max_size=3)
+    ),
+    max_leaves=12,
+)
+
+
+@settings(max_examples=200, deadline=None)
+@given(data=PLAIN_DATA)
+def test_what_camo_writes_as_yaml_it_reads_back_as_the_same_data(data):
+    shared = [data, data]  # a value repeated: written out twice, not as an alias rcl refuses
+    text = dump_yaml(shared)
+    assert "*id" not in text
+    assert parse_yaml(text, "F") == shared

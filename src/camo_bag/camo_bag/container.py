@@ -16,12 +16,12 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
 import zstandard
 from mcap.exceptions import McapError
 from mcap.writer import CompressionType, Writer
 
 from camo_core.exceptions import CamoError
+from camo_core.inputs import dump_yaml, parse_yaml
 from camo_core.results.folders import new_folder_problem
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -216,9 +216,7 @@ class BagWriter:
         except OSError as exc:
             self._stopped(exc)
             return
-        info = yaml.safe_dump(
-            {"rosbag2_bagfile_information": yaml.safe_load(metadata)}, sort_keys=False
-        )
+        info = dump_yaml({"rosbag2_bagfile_information": parse_yaml(metadata, "metadata")})
         try:
             (self.folder / "metadata.yaml").write_text(info)
         except OSError as exc:
@@ -242,7 +240,8 @@ def metadata_yaml(file_name: str, topics: list[TopicInfo], start_ns: int, end_ns
                     "name": t.name,
                     "type": t.type,
                     "serialization_format": "cdr",
-                    "offered_qos_profiles": yaml.safe_load(t.qos) or [],
+                    "offered_qos_profiles": parse_yaml(t.qos, f"{t.name} offered_qos_profiles")
+                    or [],
                     "type_description_hash": t.type_hash,
                 },
                 "message_count": t.count,
@@ -263,7 +262,7 @@ def metadata_yaml(file_name: str, topics: list[TopicInfo], start_ns: int, end_ns
         "custom_data": None,
         "ros_distro": "jazzy",
     }
-    return yaml.safe_dump(info, sort_keys=False)
+    return dump_yaml(info)
 
 
 # ---- reading: loader.py, which checks every level first ------------------------------

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import yaml
 from rclpy.duration import Duration
 from rclpy.qos import (
     DurabilityPolicy,
@@ -21,6 +20,7 @@ from rclpy.qos import (
 )
 
 from camo_bag.checks import bad, boolean, integer, listed, load_yaml, mapping
+from camo_core.inputs import dump_yaml
 
 INFINITE_NS = 9223372036854775807  # RMW_DURATION_INFINITE, as rosbag2 writes it
 DEPTH_MAX = 2**31 - 1  # DDS history depths are int32
@@ -93,7 +93,7 @@ def to_dict(qos: QoSProfile) -> dict:
 
 
 def dump(profiles: list[QoSProfile]) -> str:
-    return yaml.safe_dump([to_dict(q) for q in profiles], sort_keys=False) if profiles else ""
+    return dump_yaml([to_dict(q) for q in profiles]) if profiles else ""
 
 
 def _policy(enum, value, default):

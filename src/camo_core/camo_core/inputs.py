@@ -434,3 +434,27 @@ def read_yaml(
     except UnicodeDecodeError as exc:
         raise error(f"the {what} {shown(path)} is not UTF-8 text (byte {exc.start})") from None
     return parse_yaml(text, f"the {what} {shown(path)}", error)
+
+
+class StrictDumper(yaml.SafeDumper):
+    """PyYAML's SafeDumper writing what StrictLoader reads back as the same data: text that
+    would read as something else (`1e44`, `y`, `1:00`) quoted, and no aliases (rcl refuses
+    them)."""
+
+    yaml_implicit_resolvers: ClassVar[dict] = StrictLoader.yaml_implicit_resolvers
+
+    def ignore_aliases(self, data) -> bool:
+        return True
+
+
+def _represent_str(dumper: StrictDumper, value: str):
+    quoted = value == "<<" or any(pattern.match(value) for pattern, _ in _AMBIGUOUS)
+    return dumper.represent_scalar(_STANDARD + "str", value, style="'" if quoted else None)
+
+
+StrictDumper.add_representer(str, _represent_str)
+
+
+def dump_yaml(data: object) -> str:
+    """`data` as YAML text that `parse_yaml` reads back as `data` (keys in their order)."""
+    return yaml.dump(data, Dumper=StrictDumper, sort_keys=False, allow_unicode=True)

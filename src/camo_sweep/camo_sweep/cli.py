@@ -7,11 +7,9 @@ import os
 import sys
 from pathlib import Path
 
-import yaml
-
 from camo_core.cli.options import Parser, a_path
 from camo_core.exceptions import CamoError, UsageError, reported
-from camo_core.inputs import integer, read_yaml
+from camo_core.inputs import dump_yaml, integer, read_yaml
 from camo_sweep import engines
 from camo_sweep.spec import DRIVERS, MAX_FILE_BYTES, SweepSpec, build_spec, spec_from_yaml
 from camo_sweep.sweep import plan, run_sweep
@@ -170,7 +168,7 @@ def cmd_sweep(argv: list[str]) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
         # The most replicates any run of this sweep asked for: what the table may hold.
         kept = spec.with_trials(max(spec.trials, before.trials if before else 0))
-        (args.out / SPEC_FILE).write_text(yaml.safe_dump(kept.as_dict(), sort_keys=False))
+        (args.out / SPEC_FILE).write_text(dump_yaml(kept.as_dict()))
         if isinstance(engine, engines.DaskEngine):
             if engine.client.dashboard_link and not args.quiet:
                 print(

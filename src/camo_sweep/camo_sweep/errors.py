@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from camo_core.cli.options import (
     Parser,
@@ -27,7 +26,7 @@ from camo_core.cli.options import (
     params_from,
 )
 from camo_core.exceptions import UsageError, reported
-from camo_core.inputs import items, number
+from camo_core.inputs import dump_yaml, items, number
 from camo_core.results import figures
 from camo_sweep import engines
 from camo_sweep.cli import SPEC_FILE, check_folder
@@ -187,7 +186,7 @@ def run(argv: list[str] | None) -> int:
     folder = out_dir(args)  # a folder that holds something only with --force
     check_folder(folder, spec)  # and then this analysis again, not another
     work = plan(spec, folder)  # as ./camo sweep: what cannot run fails before anything is written
-    (folder / SPEC_FILE).write_text(yaml.safe_dump(spec.as_dict(), sort_keys=False))
+    (folder / SPEC_FILE).write_text(dump_yaml(spec.as_dict()))
     engine = engines.InProcess() if args.workers == 1 else engines.local_engine(args.workers)
     try:
         if isinstance(engine, engines.DaskEngine):

@@ -19,10 +19,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, cast
 
-import yaml
-
 from camo_core.exceptions import UsageError
-from camo_core.inputs import described, read_yaml
+from camo_core.inputs import described, dump_yaml, read_yaml
 
 PARAMETERS_KEY = "ros__parameters"
 MAX_BYTES = 16 * 1024 * 1024  # a parameters file is a few lines; anything bigger is not one
@@ -215,6 +213,6 @@ def write_params_file(
     path = folder / "params.yaml"
     path.write_text(
         f"# {parser.prog}: repeat with --params-file {path}\n"
-        + yaml.safe_dump({"/**": {"ros__parameters": values}}, sort_keys=False)
+        + dump_yaml({"/**": {"ros__parameters": values}})
     )
     return path
