@@ -58,3 +58,24 @@ def test_grid_sides_take_a_list_where_0_or_nothing_means_none():
     for bad in ("x", "300", "-8"):
         with pytest.raises(argparse.ArgumentTypeError):
             grid_sides(bad)
+
+
+@pytest.mark.parametrize("module, work", [("bench", "compare"), ("soak", "soak")])
+def test_every_option_of_bench_ros_and_soak_with_a_bad_value_is_one_line(
+    module, work, tmp_path, monkeypatch, capsys
+):
+    # Only the command line is checked: the runs themselves are replaced.
+    import importlib
+
+    from support import bad_value_outcomes, parser_of_main, validated, value_options
+
+    command = importlib.import_module(f"camo_bringup.{module}")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(command, work, validated)
+    parser = parser_of_main(command.main, [], monkeypatch)
+    options = value_options(parser)
+    assert len(options) >= 5
+    problems = [
+        p for o in options for p in bad_value_outcomes(command.main, [], o, capsys, parser)
+    ]
+    assert problems == []

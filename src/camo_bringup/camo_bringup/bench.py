@@ -39,6 +39,9 @@ from camo_bringup.run_config import default_procs, split_cells
 from camo_core.algorithm.backgrounds import SIZE, forest
 from camo_core.algorithm.grid import neighbor_ids
 from camo_core.algorithm.params import CamoParams
+from camo_core.cli.options import Parser
+from camo_core.exceptions import EXIT_USAGE, CamoError
+from camo_core.inputs import integer
 from camo_msgs.msg import Vote, VoteArray
 from camo_nodes.topics.names import RunTopics, tile_name
 from camo_nodes.topics.qos import history_qos
@@ -298,7 +301,7 @@ def format_table(rows: list[dict]) -> str:
 def grid_sides(text: str) -> list[int]:
     """--sides 16,32,64 (empty or 0: none)."""
     try:
-        sides = [int(part) for part in text.split(",") if part.strip()]
+        sides = [integer(part) for part in text.split(",") if part.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"grid sides are integers, comma-separated: {text!r}"
@@ -309,9 +312,7 @@ def grid_sides(text: str) -> list[int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="camo bench ros", description=__doc__.splitlines()[0], allow_abbrev=False
-    )
+    parser = Parser(prog="camo bench ros", description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument(
         "--rate-sides",
@@ -351,12 +352,19 @@ def main(argv: list[str] | None = None) -> int:
         "--out", type=Path, default=Path("results") / time.strftime("bench-ros-%Y%m%d-%H%M%S")
     )
     parser.add_argument("--bare-worker", nargs=5, type=int, help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+        if not ((args.steps is None or 20 <= args.steps <= 100_000) and 1 <= args.repeat <= 100):
+            parser.error("--steps must be in 20..100000 and --repeat in 1..100")
+        sides = (args.record_side, args.view_side)
+        if not (1 <= args.procs <= 64 and all(0 <= side <= 256 for side in sides)):
+            parser.error("--procs must be in 1..64, --record-side and --view-side in 0..256")
+    except CamoError as exc:
+        print(f"camo bench ros: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     if args.bare_worker:
         print(json.dumps(bare_worker(*args.bare_worker)))
         return 0
-    if not ((args.steps is None or 20 <= args.steps <= 100_000) and args.repeat >= 1):
-        parser.error("--steps must be in 20..100000 and --repeat at least 1")
     domain = 180 + os.getpid() % 40
     rates = [
         compare(

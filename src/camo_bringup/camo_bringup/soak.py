@@ -20,6 +20,8 @@ import sys
 import time
 from pathlib import Path
 
+from camo_core.cli.options import Parser
+from camo_core.exceptions import EXIT_USAGE, CamoError
 from camo_core.shutdown import interrupt_on_signals
 from camo_nodes.shm import stale_files
 
@@ -159,9 +161,7 @@ def format_report(report: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="camo bench soak", description=__doc__.splitlines()[0], allow_abbrev=False
-    )
+    parser = Parser(prog="camo bench soak", description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=50, help="consecutive runs (default 50)")
     parser.add_argument("--side", type=int, default=4, help="grid side of each run (default 4)")
     parser.add_argument("--procs", type=int, default=2, help="worker processes (default 2)")
@@ -173,11 +173,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--out", type=Path, default=Path("results") / time.strftime("soak-%Y%m%d-%H%M%S")
     )
-    args = parser.parse_args(argv)
-    if not (1 <= args.runs <= 10_000 and 1 <= args.side <= 64 and 1 <= args.procs <= 64):
-        parser.error("--runs must be in 1..10000, --side in 1..64 and --procs in 1..64")
-    if not (10 <= args.steps <= 100_000 and 0 <= args.settle <= 60):
-        parser.error("--steps must be in 10..100000 and --settle in 0..60")
+    try:
+        args = parser.parse_args(argv)
+        if not (1 <= args.runs <= 10_000 and 1 <= args.side <= 64 and 1 <= args.procs <= 64):
+            parser.error("--runs must be in 1..10000, --side in 1..64 and --procs in 1..64")
+        if not (10 <= args.steps <= 100_000 and 0 <= args.settle <= 60):
+            parser.error("--steps must be in 10..100000 and --settle in 0..60")
+    except CamoError as exc:
+        print(f"camo bench soak: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     interrupt_on_signals()
     try:
         report = soak(args)
