@@ -193,7 +193,7 @@ def test_a_table_part_that_is_not_a_sweeps_is_named_in_one_line(tmp_path):
         (["--axis", "rho_comm=0,2"], "rho_comm must be a number in [0, 1]"),
         (["--axis", "image=missing.png"], "cannot read image missing.png: not found"),
         (["--axis", "rho_comm=0.1", "--scheduler", "tcp://127.0.0.1:notaport"], "cannot reach"),
-        (["--axis", "rho_comm=0.1", "--batch-s", "inf"], "--batch-s must be a number"),
+        (["--axis", "rho_comm=0.1", "--batch-s", "inf"], "--batch-s: invalid float value"),
         (["--axis", "rho_comm=0.1", "--slurm"], "needs SLURM's sbatch"),
     ],
 )
