@@ -76,7 +76,7 @@ def test_a_message_for_a_later_step_is_kept_until_its_step():
     protocol = robot(CamoParams(rows=1, cols=2), 0, 0)
     into_consensus(protocol, [1])
     protocol.deliver(vote(1, 1), 0.1)  # early: step 1's vote before step 0's
-    assert protocol.step == 0 and (0, "vote", 1, 1) in protocol.inbox
+    assert protocol.step == 0 and protocol.holds(0, "vote", 1, 1)
     out = protocol.deliver(vote(1, 0), 0.2)
     # Step 0 is taken, then step 1 at once with the vote that waited for it.
     assert protocol.step == 2 and [m.step for m in out.send] == [1, 2]
@@ -227,7 +227,7 @@ def test_messages_from_strangers_and_other_kinds_slots_are_ignored():
     protocol.start(0.0)
     protocol.deliver(Message("vote", 8, 0, 0, ((1.0, 0.0, 0.0), 3)), 0.0)  # a diagonal: slot 5
     protocol.deliver(Message("color", 8, 0, 0, 3.0), 0.0)  # colours come from slots 0-3 only
-    assert (0, "color", 0, 5) not in protocol.inbox and (0, "vote", 0, 5) in protocol.inbox
+    assert not protocol.holds(0, "color", 0, 5) and protocol.holds(0, "vote", 0, 5)
 
 
 @pytest.mark.parametrize(

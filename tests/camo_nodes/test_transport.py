@@ -8,7 +8,7 @@ import rclpy
 from support import ros_context
 
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.robot_io import Message
+from camo_core.algorithm.robot_io import NOTHING, Message, Output
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.transport import MAX_STATUS_ROWS, STATUS_PERIOD, Statuses, Transport
 
@@ -47,11 +47,12 @@ def test_a_pump_stops_at_its_budget_and_the_next_ones_go_on_in_order():
         transport = Transport(node, params, RunTopics("pump_test"), [(0, 15)])
         heard: list[int] = []
 
-        def slow_robot(message: Message, now: float) -> None:
+        def slow_robot(slot: int, key: tuple, value, now: float) -> Output:
             time.sleep(0.0005)
-            heard.append(message.step)
+            heard.append(key[2])
+            return NOTHING
 
-        transport.add(1, [(0, "vote")], slow_robot)
+        transport.add(1, [(0, "vote", 3)], slow_robot, emit=None)
         for step in range(400):  # 0.2 s of work
             transport._enqueue(Message("vote", 0, 0, step, ((1.0, 0.0, 0.0), 1)))
         started = time.monotonic()

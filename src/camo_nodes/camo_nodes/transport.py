@@ -35,6 +35,7 @@ import time
 from collections import defaultdict, deque
 from collections.abc import Callable, Iterable
 
+from builtin_interfaces.msg import Time
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -43,7 +44,15 @@ from rclpy.serialization import deserialize_message
 from camo_core.algorithm.layout import slot_ids
 from camo_core.algorithm.liveness import Liveness
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.robot_io import PHASE_OF, Message, Report, kinds_of, messages_per_round
+from camo_core.algorithm.robot_io import (
+    NOTHING,
+    PHASE_OF,
+    Message,
+    Output,
+    Report,
+    kinds_of,
+    messages_per_round,
+)
 from camo_core.algorithm.run_setup import RunSetup
 from camo_core.algorithm.status_rows import StatusRows
 from camo_core.algorithm.validation import message_problem, phase_problem
@@ -101,7 +110,10 @@ EDGE_TAKE = 4
 # host loop's next turn, after its timers, heartbeat and stop flag have had theirs.
 PUMP_BUDGET = 0.02
 NOT_RECEIVED = Relay.NOT_RECEIVED
-Receiver = Callable[[Message, float], None]  # a robot's: (message, now)
+# A robot's protocol as a transport hands it a message: (slot, (round, kind, step), value, now).
+Receive = Callable[[int, tuple[int, str, int], object, float], Output]
+Emit = Callable[[Output, float], None]  # what a robot does with its protocol's output at `now`
+Target = tuple[Receive, int, Emit]  # a robot hearing a sender: its receive, the slot, its emit
 Tile = tuple[int, int]  # first and last robot id, inclusive
 
 
@@ -140,7 +152,9 @@ def from_ros(kind: str, msg) -> Message:
     elif kind == "energy":
         value = (msg.energy, msg.degree)
     elif kind == "vote":
-        value = ((*msg.p, *msg.histogram), msg.degree)
+        # Python floats, not numpy scalars: a robot computes with what it hears, and numpy
+        # scalars would spread through the swarm's arithmetic at several times the cost.
+        value = ((*msg.p.tolist(), *msg.histogram), msg.degree)
     elif kind == "relay":
         value = tuple(None if v == NOT_RECEIVED else int(v) for v in msg.states)
     else:
@@ -217,18 +231,21 @@ class Batch:
         self.array.header.frame_id = "camo"
         self.pool: list = []
         self.count = 0
+        self.stamp = Time()
 
     def add(self, message: Message) -> bool:
-        """Pack one message; True if the batch is now full."""
+        """Pack one message; True if the batch is now full. Its stamp is the time the array's
+        first message was packed (an array holds what its robots sent within one turn)."""
+        if not self.count:
+            sec, nanosec = divmod(time.time_ns(), 1_000_000_000)
+            self.stamp = Time(sec=sec, nanosec=nanosec)
         if self.count == len(self.pool):
             element = MESSAGE_TYPES[self.kind](phase=PHASE_OF[self.kind])
             element.header.frame_id = "camo"
             self.pool.append(element)
         element = self.pool[self.count]
         fill(element, message)
-        element.header.stamp.sec, element.header.stamp.nanosec = divmod(
-            time.time_ns(), 1_000_000_000
-        )
+        element.header.stamp = self.stamp
         self.count += 1
         return self.count >= MAX_BATCH
 
@@ -272,14 +289,14 @@ class Transport:
         )
         self.statuses = Statuses(status_pub, node.get_name())
         self.status_pub = status_pub
-        self.receivers: dict[tuple[int, str], list[Receiver]] = defaultdict(list)
+        self.targets: dict[tuple[int, str], list[Target]] = defaultdict(list)
         self.needed: set[int] = set()  # neighbours hosted elsewhere
         self.remote: set[tuple[int, int]] = set()  # tiles subscribed to
         self.rejected = Rejections(node.get_logger())
         self.trusted = Hosts(params.count, self.rejected, setup)
         self._seen: dict[tuple[str, int, int, int], object] = {}  # each message taken, once
         # Messages to hand over, each with the robots that hear it.
-        self._queue: deque[tuple[list[Receiver], Message]] = deque()
+        self._queue: deque[tuple[list[Target], Message]] = deque()
         self._generation = 0  # queued messages left of the generation being handed over
         self._announced_rejections = 0
         self.polled = PolledTopics(f"{node.get_name()}_edges", node.get_namespace(), node.context)
@@ -341,10 +358,13 @@ class Transport:
         self.offline = robots
         self.heartbeat.offline = tuple(sorted(robots))
 
-    def add(self, robot: int, listens_to: Iterable[tuple[int, str]], receive: Receiver) -> None:
-        """A hosted robot, and what it hears from whom (`listens_to`: (sender, kind))."""
-        for sender, kind in listens_to:
-            self.receivers[(sender, kind)].append(receive)
+    def add(
+        self, robot: int, hears: Iterable[tuple[int, str, int]], receive: Receive, emit: Emit
+    ) -> None:
+        """A hosted robot: what it hears from whom (`hears`: (sender, kind, slot)), how it is
+        handed a message (`receive`) and what it does with the answer (`emit`, unless NOTHING)."""
+        for sender, kind, slot in hears:
+            self.targets[(sender, kind)].append((receive, slot, emit))
             if sender not in self.hosted:
                 self.needed.add(sender)
 
@@ -410,12 +430,15 @@ class Transport:
 
     def send(self, message: Message) -> None:
         """To this process's robots at once; to the world at the next `flush()`."""
-        batch = self.batches[(message.sender, message.kind)]
+        key = (message.sender, message.kind)
+        batch = self.batches[key]
         if not batch.count:
             (self._unsent_edges if batch.edge else self._unsent).append(batch)
         if batch.add(message):
             batch.flush()
-        self._enqueue(message)  # handed over by the next pump: the host loop's
+        targets = self.targets.get(key)
+        if targets:  # handed over by the next pump: the host loop's
+            self._queue.append((targets, message))
 
     def flush(self) -> None:
         """Publish what was sent since the last flush: one array per topic (the host's loop calls
@@ -451,9 +474,9 @@ class Transport:
 
     def _enqueue(self, message: Message) -> None:
         """For every hosted robot that listens to the message's sender, at the next pump."""
-        receivers = self.receivers.get((message.sender, message.kind))
-        if receivers:
-            self._queue.append((receivers, message))
+        targets = self.targets.get((message.sender, message.kind))
+        if targets:
+            self._queue.append((targets, message))
 
     def pump(self, budget: float = PUMP_BUDGET) -> None:
         """Hand queued messages to their robots, in generations: first what came in, then what
@@ -469,10 +492,13 @@ class Transport:
             if not self._generation:
                 self._flush_edges()
                 self._generation = len(queue)
-            receivers, message = queue.popleft()
+            targets, message = queue.popleft()
             self._generation -= 1
-            for receive in receivers:
-                receive(message, now)
+            key, value = (message.round, message.kind, message.step), message.value
+            for receive, slot, emit in targets:
+                out = receive(slot, key, value, now)
+                if out is not NOTHING:  # most messages only wait for their step
+                    emit(out, now)
             handed += 1
             if not handed % 16:  # the clock a few times per batch of messages, not per robot
                 now = time.monotonic()

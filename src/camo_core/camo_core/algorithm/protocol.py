@@ -29,7 +29,8 @@ nothing, or a Droplet's colour sensor and LED).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
+from types import MappingProxyType
 from typing import Any
 
 from camo_core.algorithm.params import CamoParams
@@ -57,6 +58,7 @@ from camo_core.algorithm.robot_io import (
 TICK = 0.05  # s between the host's ticks
 STALL = 0.5  # s: a tick this late means the robot's own process stalled
 RECHECK = 0.25  # s between asks, past a deadline, whether the late neighbours are still alive
+NO_SLOTS: Mapping[Any, int] = MappingProxyType({})  # nothing delivered, nobody heard
 
 
 class StepProtocol:
@@ -84,15 +86,16 @@ class StepProtocol:
         self.traces = Traces()
         self._awaiting: set[int] | None = None  # slots still awaited for _awaiting_key's step
         self._awaiting_key: tuple[int, str, int] | None = None
+        self._expected_slots: dict[tuple[str, int, bool], tuple[int, ...]] = {}
         self.core = RobotCore(params, row, col)
         self.sensor = sensor
         self.display = display or NoDisplay()
         self.step_timeout = step_timeout
         self.discovery_timeout = discovery_timeout
         self.slot_of = {n: s for s, n in enumerate(self.core.neighbors) if n is not None}
-        # Delivered and not yet used, by (round, kind, step, slot): early messages wait for their
-        # step.
-        self.inbox: dict[tuple[int, str, int, int], Any] = {}
+        # Delivered and not yet used: by (round, kind, step), each slot's value. Early messages
+        # wait for their step; a step's messages leave together when it is taken.
+        self.inbox: dict[tuple[int, str, int], dict[int, Any]] = {}
         self.silent: set[int] = set()
         self.deadlines = 0  # step deadlines let pass in this round
         self.round = 0
@@ -106,6 +109,11 @@ class StepProtocol:
         self.energy_step: int | None = None  # --threshold auto: the averaging step, once described
         self.kinds = kinds_of(params)
         self.listen = listen_slots(params, self.core.near, len(self.core.neighbors))
+        # Per kind, the slot of each neighbour heard for it (a delivery's one lookup).
+        self.heard_from = {
+            kind: {n: s for n, s in self.slot_of.items() if s < slots}
+            for kind, slots in self.listen.items()
+        }
         # --orientation any: the formation step whose states were taken and relayed, and them.
         self.relayed: tuple[int, list] | None = None
         self._out = Output()
@@ -118,13 +126,16 @@ class StepProtocol:
     def done(self) -> bool:
         return self.phase == DONE
 
+    def hears(self) -> Iterable[tuple[int, str, int]]:
+        """(neighbour id, kind, slot) of every message this robot needs."""
+        for kind in self.kinds:
+            for neighbor, slot in self.heard_from[kind].items():
+                yield neighbor, kind, slot
+
     def listens_to(self) -> Iterable[tuple[int, str]]:
         """(neighbour id, kind) of every message this robot needs."""
-        for slot, neighbor in enumerate(self.core.neighbors):
-            if neighbor is not None:
-                for kind in self.kinds:
-                    if slot < self.listen[kind]:
-                        yield neighbor, kind
+        for neighbor, kind, _ in self.hears():
+            yield neighbor, kind
 
     # ---- events ---------------------------------------------------------------------
 
@@ -136,24 +147,38 @@ class StepProtocol:
         return self._advance(now)
 
     def deliver(self, message: Message, now: float) -> Output:
-        slot = self.slot_of.get(message.sender)
-        if slot is None or slot >= self.listen.get(message.kind, 0):
+        slot = self.heard_from.get(message.kind, NO_SLOTS).get(message.sender)
+        if slot is None:
             return NOTHING  # not a neighbour this robot listens to for that kind
-        if slot in self.silent:
+        return self.receive(slot, (message.round, message.kind, message.step), message.value, now)
+
+    def receive(self, slot: int, key: tuple[int, str, int], value: Any, now: float) -> Output:
+        """`deliver` for a transport that knows the slot the message comes from (`heard_from`)
+        and its (round, kind, step) `key`: what a process's transport works out once per
+        message, not once per robot that hears it."""
+        if self.silent and slot in self.silent:
             self.silent.discard(slot)  # it speaks again: wait for it again
             self._awaiting = None
-        if message.round >= self.round:
-            key = (message.round, message.kind, message.step)
-            self.inbox[(*key, slot)] = message.value
-            if self._awaiting is not None:
+        if key[0] >= self.round:
+            box = self.inbox.get(key)
+            if box is None:
+                self.inbox[key] = {slot: value}
+            else:
+                box[slot] = value
+            awaiting = self._awaiting
+            if awaiting is not None:
                 # The robot waits for these slots' messages of this step, and nothing else:
                 # a message that does not complete them changes nothing (one set operation,
                 # not a look at every slot, per message: robots get many).
                 if key == self._awaiting_key:
-                    self._awaiting.discard(slot)
-                if self._awaiting:
+                    awaiting.discard(slot)
+                if awaiting:
                     return NOTHING
         return self._advance(now) if self.started else NOTHING
+
+    def holds(self, round_: int, kind: str, step: int, slot: int) -> bool:
+        """Whether a message delivered for that step and slot waits to be taken."""
+        return slot in self.inbox.get((round_, kind, step), NO_SLOTS)
 
     def background(self, now: float) -> Output:
         """The projected background changed (the sensor holds the image)."""
@@ -221,6 +246,7 @@ class StepProtocol:
             return False
         hellos = self._take("hello", 0, self.listen["hello"])
         self.core.discover([h is not None for h in hellos])
+        self._expected_slots.clear()  # who is known has changed
         self._next(SENSING, 0, now)
         return True
 
@@ -334,18 +360,33 @@ class StepProtocol:
         Computed once per step; deliveries, deadlines and silent neighbours keep it up to date."""
         key = (self.round, kind, step)
         if self._awaiting is None or self._awaiting_key != key:
-            core = self.core
-            arriving = core.arrivals(STREAM[kind], step)
             self._awaiting_key = key
-            self._awaiting = {
-                s
-                for s in range(slots)
-                if arriving[s]
-                and (core.known[s] or not known_only)
-                and s not in self.silent
-                and (*key, s) not in self.inbox
-            }
+            expected = self._expected(kind, step, slots, known_only)
+            box = self.inbox.get(key)
+            if box is None and not self.silent:
+                self._awaiting = set(expected)
+            else:
+                box = box or NO_SLOTS
+                silent = self.silent
+                self._awaiting = {s for s in expected if s not in silent and s not in box}
         return self._awaiting
+
+    def _expected(self, kind: str, step: int, slots: int, known_only: bool) -> tuple[int, ...]:
+        """Slots below `slots` whose message for `step` survives the link (and, `known_only`,
+        whose robot was discovered). Without loss the same every step: kept per phase."""
+        core = self.core
+        lossless = self.params.rho_comm <= 0.0
+        cache_key = (kind, slots, known_only)
+        if lossless:
+            cached = self._expected_slots.get(cache_key)
+            if cached is not None:
+                return cached
+        arriving = core.arrivals(STREAM[kind], step)
+        known = core.known
+        expected = tuple(s for s in range(slots) if arriving[s] and (not known_only or known[s]))
+        if lossless:
+            self._expected_slots[cache_key] = expected
+        return expected
 
     def _ready(self, pending: set[int], timeout: float, now: float, ticking: bool) -> bool:
         if not pending:
@@ -371,7 +412,10 @@ class StepProtocol:
         return robot
 
     def _take(self, kind: str, step: int, slots: int) -> list:
-        return [self.inbox.pop((self.round, kind, step, s), None) for s in range(slots)]
+        box = self.inbox.pop((self.round, kind, step), None)
+        if box is None:
+            return [None] * slots
+        return [box.get(s) for s in range(slots)]
 
     def _next(self, phase: int, step: int, now: float) -> None:
         self.phase, self.step = phase, step
@@ -388,6 +432,7 @@ class StepProtocol:
         self.newer_background = False
         self.sensor.next_round()
         self.core = RobotCore(self.params, self.core.row, self.core.col)
+        self._expected_slots.clear()
         self.energy_step = None
         self.relayed = None
         self.deadlines = 0

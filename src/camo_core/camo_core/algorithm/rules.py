@@ -116,6 +116,8 @@ def consensus_step(
     slot order, then the self term last; a lost message's weight stays home.
     """
     size = len(p_own)
+    if size == 3:
+        return _consensus_step3(p_own, degree, received)
     acc = [0.0] * size
     weight_sum = 0.0
     for message in received:  # slots 0-7 on the grid; a layout's near neighbours in id order
@@ -128,6 +130,25 @@ def consensus_step(
         weight_sum = weight_sum + w
     keep = 1.0 - weight_sum
     return tuple(acc[k] + keep * p_own[k] for k in range(size))
+
+
+def _consensus_step3(
+    p_own: Sequence[float], degree: int, received: Sequence[tuple[Sequence[float], int] | None]
+) -> tuple[float, float, float]:
+    """consensus_step for the paper's 3-vector, written out: the same operations in the same
+    order (so the same bits), without the per-component loop, which is most of a robot's step."""
+    a0 = a1 = a2 = weight_sum = 0.0
+    for message in received:
+        if message is None:
+            continue
+        p_other, degree_other = message
+        w = 1.0 / (1.0 + (degree_other if degree_other > degree else degree))
+        a0 = a0 + w * p_other[0]
+        a1 = a1 + w * p_other[1]
+        a2 = a2 + w * p_other[2]
+        weight_sum = weight_sum + w
+    keep = 1.0 - weight_sum
+    return a0 + keep * p_own[0], a1 + keep * p_own[1], a2 + keep * p_own[2]
 
 
 def energy_step(energy: float, degree: int, received: Sequence[tuple[float, int] | None]) -> float:

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
+from itertools import chain
+from operator import attrgetter
 from typing import Any
 
 import numpy as np
@@ -40,6 +42,9 @@ LISTS: dict[str, tuple[str, Any, int]] = {
     "state_trace": ("state_trace_count", np.int64, 1),
     "palette": ("palette_count", np.int64, 1),
 }
+
+
+_SCALAR_FIELDS = attrgetter(*SCALARS)
 
 
 class RowsError(ValueError):
@@ -79,19 +84,29 @@ class StatusRows:
     def from_reports(cls, reports: Sequence, cols: int | None = None) -> StatusRows:
         """From reports with RobotStatus's fields (fields an older camo's lack read as empty);
         `cols`: the grid's, to check a report's row and column against its sender's."""
+        try:  # a process's own reports have every field: one C call a report takes them all
+            rows = [_SCALAR_FIELDS(r) for r in reports]
+        except AttributeError:
+            rows = [tuple(getattr(r, name, 0) for name in SCALARS) for r in reports]
+        by_column = zip(*rows, strict=True) if rows else ((),) * len(SCALARS)
         columns: dict[str, Any] = {
-            name: np.array([getattr(r, name, 0) for r in reports], dtype)
-            for name, dtype in SCALARS.items()
+            name: np.array(column, dtype)
+            for (name, dtype), column in zip(SCALARS.items(), by_column, strict=True)
         }
-        columns["p"] = np.array([list(r.p) for r in reports], np.float64).reshape(-1, 3)
+        p = np.fromiter(chain.from_iterable(r.p for r in reports), np.float64)
+        columns["p"] = p.reshape(-1, 3)
         ragged = np.zeros(len(reports), bool)
         for name, (count, dtype, width) in LISTS.items():
-            values = [list(getattr(r, name, ())) for r in reports]
+            values = [getattr(r, name, ()) for r in reports]
+            lengths = np.fromiter(map(len, values), np.int64, len(values))
             # A trace that is not a whole number of steps is dropped, and its row refused.
-            ragged |= np.array([len(v) % width != 0 for v in values], bool)
-            values = [v if len(v) % width == 0 else [] for v in values]
-            columns[count] = np.array([len(v) // width for v in values], np.int64)
-            flat = np.array([x for v in values for x in v], dtype)
+            uneven = lengths % width != 0
+            if uneven.any():
+                values = [() if bad else v for v, bad in zip(values, uneven, strict=True)]
+                lengths[uneven] = 0
+                ragged |= uneven
+            columns[count] = lengths // width
+            flat = np.fromiter(chain.from_iterable(values), dtype)
             columns[name] = flat.reshape(-1, width) if width > 1 else flat
         columns["ragged"] = ragged
         if cols is None:
