@@ -32,7 +32,7 @@ is what a robot asks before it gives up on a late neighbour.
 from __future__ import annotations
 
 import time
-from collections import defaultdict, deque
+from collections import defaultdict
 from collections.abc import Callable, Iterable
 
 from builtin_interfaces.msg import Time
@@ -43,6 +43,7 @@ from rclpy.serialization import deserialize_message
 
 from camo_core.algorithm.layout import slot_ids
 from camo_core.algorithm.liveness import Liveness
+from camo_core.algorithm.mailbox import Mailbox
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import (
     NOTHING,
@@ -110,10 +111,8 @@ EDGE_TAKE = 4
 # host loop's next turn, after its timers, heartbeat and stop flag have had theirs.
 PUMP_BUDGET = 0.02
 NOT_RECEIVED = Relay.NOT_RECEIVED
-# A robot's protocol as a transport hands it a message: (slot, (round, kind, step), value, now).
-Receive = Callable[[int, tuple[int, str, int], object, float], Output]
+Wake = Callable[[float], Output]  # a robot's protocol, told at `now` that messages came for it
 Emit = Callable[[Output, float], None]  # what a robot does with its protocol's output at `now`
-Target = tuple[Receive, int, Emit]  # a robot hearing a sender: its receive, the slot, its emit
 Tile = tuple[int, int]  # first and last robot id, inclusive
 
 
@@ -135,7 +134,8 @@ def fill(msg, message: Message) -> None:
         msg.energy, msg.degree = message.value
     elif kind == "vote":
         p, msg.degree = message.value
-        msg.p[0], msg.p[1], msg.p[2] = p[0], p[1], p[2]
+        array = msg.p
+        array[0], array[1], array[2] = p[0], p[1], p[2]
         if len(p) > 3:  # --levels: the grey histogram averaged with p
             msg.histogram = p[3:]
     elif kind == "relay":
@@ -289,15 +289,20 @@ class Transport:
         )
         self.statuses = Statuses(status_pub, node.get_name())
         self.status_pub = status_pub
-        self.targets: dict[tuple[int, str], list[Target]] = defaultdict(list)
+        # Each message is kept once, in the mailbox the hosted robots share, and wakes the
+        # robots that hear its sender (by robot id; `_robots`: their wake and emit).
+        self.mailbox = Mailbox(readers=len(self.hosted))
+        self.targets: dict[tuple[int, str], list[int]] = defaultdict(list)
+        self._robots: dict[int, tuple[Wake, Emit]] = {}
         self.needed: set[int] = set()  # neighbours hosted elsewhere
         self.remote: set[tuple[int, int]] = set()  # tiles subscribed to
         self.rejected = Rejections(node.get_logger())
         self.trusted = Hosts(params.count, self.rejected, setup)
         self._seen: dict[tuple[str, int, int, int], object] = {}  # each message taken, once
-        # Messages to hand over, each with the robots that hear it.
-        self._queue: deque[tuple[list[Target], Message]] = deque()
-        self._generation = 0  # queued messages left of the generation being handed over
+        # Robots to wake: those that heard something since the generation being woken began,
+        # and what is left of that generation.
+        self._woken: set[int] = set()
+        self._generation: list[int] = []
         self._announced_rejections = 0
         self.polled = PolledTopics(f"{node.get_name()}_edges", node.get_namespace(), node.context)
         self.host_pub = node.create_publisher(Host, topics.hosts, LATCHED)
@@ -359,12 +364,14 @@ class Transport:
         self.heartbeat.offline = tuple(sorted(robots))
 
     def add(
-        self, robot: int, hears: Iterable[tuple[int, str, int]], receive: Receive, emit: Emit
+        self, robot: int, hears: Iterable[tuple[int, str, int]], wake: Wake, emit: Emit
     ) -> None:
-        """A hosted robot: what it hears from whom (`hears`: (sender, kind, slot)), how it is
-        handed a message (`receive`) and what it does with the answer (`emit`, unless NOTHING)."""
-        for sender, kind, slot in hears:
-            self.targets[(sender, kind)].append((receive, slot, emit))
+        """A hosted robot (reading this transport's `mailbox`): what it hears from whom (`hears`:
+        (sender, kind, slot)), how it is told messages came (`wake`) and what it does with the
+        answer (`emit`, unless NOTHING)."""
+        self._robots[robot] = (wake, emit)
+        for sender, kind, _ in hears:
+            self.targets[(sender, kind)].append(robot)
             if sender not in self.hosted:
                 self.needed.add(sender)
 
@@ -424,7 +431,7 @@ class Transport:
             self.rejected.refuse(problem, gid, f"robot {sender}")
             return
         self._seen[key] = message.value
-        self._enqueue(message)
+        self._put(message)
 
     # ---- out ----------------------------------------------------------------------
 
@@ -436,9 +443,7 @@ class Transport:
             (self._unsent_edges if batch.edge else self._unsent).append(batch)
         if batch.add(message):
             batch.flush()
-        targets = self.targets.get(key)
-        if targets:  # handed over by the next pump: the host loop's
-            self._queue.append((targets, message))
+        self._put(message)  # its hearers are woken by the next pump: the host loop's
 
     def flush(self) -> None:
         """Publish what was sent since the last flush: one array per topic (the host's loop calls
@@ -469,38 +474,38 @@ class Transport:
 
     @property
     def busy(self) -> bool:
-        """Work is left for the next turn: messages queued for robots or waiting in a reader."""
-        return bool(self._queue) or self.polled.more
+        """Work is left for the next turn: robots to wake or messages waiting in a reader."""
+        return bool(self._woken or self._generation) or self.polled.more
 
-    def _enqueue(self, message: Message) -> None:
-        """For every hosted robot that listens to the message's sender, at the next pump."""
+    def _put(self, message: Message) -> None:
+        """Into the mailbox, once; the hosted robots that listen to its sender, to be woken."""
         targets = self.targets.get((message.sender, message.kind))
         if targets:
-            self._queue.append((targets, message))
+            key = (message.round, message.kind, message.step)
+            self.mailbox.put(key, message.sender, message.value)
+            self._woken.update(targets)
 
     def pump(self, budget: float = PUMP_BUDGET) -> None:
-        """Hand queued messages to their robots, in generations: first what came in, then what
-        the robots sent on it, and so on; for `budget` seconds at most (the rest stays queued,
-        in order). Between generations the edge topics are flushed, so that another process's
-        robots get what they wait for before this process goes on with robots they do not
-        hear."""
-        queue = self._queue
+        """Wake the robots that heard something, in generations: first those woken by what came
+        in, then those woken by what they sent, and so on; for `budget` seconds at most (the
+        rest wait for the next turn). Between generations the edge topics are flushed, so that
+        another process's robots get what they wait for before this process goes on with robots
+        they do not hear."""
+        robots, generation = self._robots, self._generation
         now = time.monotonic()
         end = now + budget
-        handed = 0
-        while queue:
-            if not self._generation:
+        woken = 0
+        while generation or self._woken:
+            if not generation:
                 self._flush_edges()
-                self._generation = len(queue)
-            targets, message = queue.popleft()
-            self._generation -= 1
-            key, value = (message.round, message.kind, message.step), message.value
-            for receive, slot, emit in targets:
-                out = receive(slot, key, value, now)
-                if out is not NOTHING:  # most messages only wait for their step
-                    emit(out, now)
-            handed += 1
-            if not handed % 16:  # the clock a few times per batch of messages, not per robot
+                generation.extend(self._woken)
+                self._woken.clear()
+            wake, emit = robots[generation.pop()]
+            out = wake(now)
+            if out is not NOTHING:  # most wakes find a message still missing
+                emit(out, now)
+            woken += 1
+            if not woken % 16:  # the clock a few times per batch of robots, not per robot
                 now = time.monotonic()
                 if now >= end:
                     break

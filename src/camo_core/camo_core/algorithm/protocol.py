@@ -33,6 +33,7 @@ from collections.abc import Callable, Iterable, Mapping
 from types import MappingProxyType
 from typing import Any
 
+from camo_core.algorithm.mailbox import Key, Mailbox
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot import RobotCore
 from camo_core.algorithm.robot_io import (
@@ -58,7 +59,7 @@ from camo_core.algorithm.robot_io import (
 TICK = 0.05  # s between the host's ticks
 STALL = 0.5  # s: a tick this late means the robot's own process stalled
 RECHECK = 0.25  # s between asks, past a deadline, whether the late neighbours are still alive
-NO_SLOTS: Mapping[Any, int] = MappingProxyType({})  # nothing delivered, nobody heard
+NO_SLOTS: Mapping[Any, int] = MappingProxyType({})  # nobody heard for a kind
 
 
 class StepProtocol:
@@ -73,7 +74,11 @@ class StepProtocol:
         discovery_timeout: float = 300.0,
         known_alive: Callable[[int], bool] | None = None,
         report_period: float = 0.0,
+        mailbox: Mailbox | None = None,
     ) -> None:
+        """`mailbox`: where the robot's messages wait, shared with the other robots of its
+        process (which then wakes it: `wake`); its own when messages are handed to it one by
+        one (`deliver`)."""
         self.params = params
         # A neighbour the transport knows to be alive (hosted by this process, or by one whose
         # heartbeats say it lives: liveness.py) is waited for past the deadline: it is slow, or
@@ -84,19 +89,22 @@ class StepProtocol:
         self.report_period = report_period
         self.last_report = -math.inf
         self.traces = Traces()
-        self._awaiting: set[int] | None = None  # slots still awaited for _awaiting_key's step
-        self._awaiting_key: tuple[int, str, int] | None = None
-        self._expected_slots: dict[tuple[str, int, bool], tuple[int, ...]] = {}
+        # The neighbours (ids) whose messages for _awaiting_key's step were still to come when
+        # the robot last looked (None: look again at once).
+        self._awaiting: tuple[int, ...] | None = None
+        self._awaiting_key: Key | None = None
+        self._expected_ids: dict[tuple[str, int, bool], tuple[int, ...]] = {}
         self.core = RobotCore(params, row, col)
         self.sensor = sensor
         self.display = display or NoDisplay()
         self.step_timeout = step_timeout
         self.discovery_timeout = discovery_timeout
         self.slot_of = {n: s for s, n in enumerate(self.core.neighbors) if n is not None}
-        # Delivered and not yet used: by (round, kind, step), each slot's value. Early messages
-        # wait for their step; a step's messages leave together when it is taken.
-        self.inbox: dict[tuple[int, str, int], dict[int, Any]] = {}
+        # Delivered and not yet used, by step and sender: early messages wait for their step.
+        self.mailbox = mailbox or Mailbox()
         self.silent: set[int] = set()
+        # What each silent slot's robot had said when it fell silent (`Mailbox.spoke`).
+        self._silent_since: dict[int, int] = {}
         self.deadlines = 0  # step deadlines let pass in this round
         self.round = 0
         self.phase = DISCOVERY
@@ -147,38 +155,43 @@ class StepProtocol:
         return self._advance(now)
 
     def deliver(self, message: Message, now: float) -> Output:
+        """A neighbour's message, handed to this robot alone (into its own mailbox)."""
         slot = self.heard_from.get(message.kind, NO_SLOTS).get(message.sender)
         if slot is None:
             return NOTHING  # not a neighbour this robot listens to for that kind
-        return self.receive(slot, (message.round, message.kind, message.step), message.value, now)
+        key = (message.round, message.kind, message.step)
+        self.mailbox.put(key, message.sender, message.value)
+        return self.wake(now)
 
-    def receive(self, slot: int, key: tuple[int, str, int], value: Any, now: float) -> Output:
-        """`deliver` for a transport that knows the slot the message comes from (`heard_from`)
-        and its (round, kind, step) `key`: what a process's transport works out once per
-        message, not once per robot that hears it."""
-        if self.silent and slot in self.silent:
-            self.silent.discard(slot)  # it speaks again: wait for it again
-            self._awaiting = None
-        if key[0] >= self.round:
-            box = self.inbox.get(key)
-            if box is None:
-                self.inbox[key] = {slot: value}
-            else:
-                box[slot] = value
-            awaiting = self._awaiting
-            if awaiting is not None:
-                # The robot waits for these slots' messages of this step, and nothing else:
-                # a message that does not complete them changes nothing (one set operation,
-                # not a look at every slot, per message: robots get many).
-                if key == self._awaiting_key:
-                    awaiting.discard(slot)
-                if awaiting:
+    def wake(self, now: float) -> Output:
+        """Messages came that this robot may be waiting for (its mailbox holds them): step if
+        its step's messages are in. Cheap when they are not: a robot is woken by each
+        neighbour's message, and steps on the last one it waits for."""
+        if not self.started:
+            return NOTHING
+        if self.silent:
+            self._heard_silent()
+        awaiting = self._awaiting
+        if awaiting:
+            box = self.mailbox.box(self._awaiting_key)
+            for robot in awaiting:
+                if robot not in box:
                     return NOTHING
-        return self._advance(now) if self.started else NOTHING
+        return self._advance(now)
+
+    def _heard_silent(self) -> None:
+        """A silent neighbour that has spoken since it fell silent is waited for again."""
+        spoke = self.mailbox.spoke
+        neighbors = self.core.neighbors
+        for slot, said in list(self._silent_since.items()):
+            if spoke.get(neighbors[slot], 0) != said:
+                self.silent.discard(slot)
+                del self._silent_since[slot]
+                self._awaiting = None
 
     def holds(self, round_: int, kind: str, step: int, slot: int) -> bool:
         """Whether a message delivered for that step and slot waits to be taken."""
-        return slot in self.inbox.get((round_, kind, step), NO_SLOTS)
+        return self.core.neighbors[slot] in self.mailbox.box((round_, kind, step))
 
     def background(self, now: float) -> Output:
         """The projected background changed (the sensor holds the image)."""
@@ -246,7 +259,7 @@ class StepProtocol:
             return False
         hellos = self._take("hello", 0, self.listen["hello"])
         self.core.discover([h is not None for h in hellos])
-        self._expected_slots.clear()  # who is known has changed
+        self._expected_ids.clear()  # who is known has changed
         self._next(SENSING, 0, now)
         return True
 
@@ -355,55 +368,62 @@ class StepProtocol:
         core.form(step, self.relayed[1], self._take("relay", step, 8))
         return True
 
-    def _waiting_for(self, kind: str, step: int, slots: int, known_only: bool = True) -> set[int]:
-        """Slots whose message for `step` is still to come: expected, not dropped, not silent.
-        Computed once per step; deliveries, deadlines and silent neighbours keep it up to date."""
+    def _waiting_for(self, kind: str, step: int, slots: int, known_only: bool = True) -> list[int]:
+        """Neighbours (ids) whose message for `step` is still to come: expected, not dropped, not
+        silent, not in the mailbox. What it finds is what `wake` checks before looking again,
+        and where it looks first the next time."""
         key = (self.round, kind, step)
-        if self._awaiting is None or self._awaiting_key != key:
-            self._awaiting_key = key
-            expected = self._expected(kind, step, slots, known_only)
-            box = self.inbox.get(key)
-            if box is None and not self.silent:
-                self._awaiting = set(expected)
-            else:
-                box = box or NO_SLOTS
-                silent = self.silent
-                self._awaiting = {s for s in expected if s not in silent and s not in box}
-        return self._awaiting
+        box = self.mailbox.box(key)
+        if self._awaiting is not None and self._awaiting_key == key:
+            pending = [n for n in self._awaiting if n not in box]
+        else:
+            pending = [n for n in self._expected(kind, step, slots, known_only) if n not in box]
+            if self.silent and pending:
+                slot_of, silent = self.slot_of, self.silent
+                pending = [n for n in pending if slot_of[n] not in silent]
+        self._awaiting_key = key
+        self._awaiting = tuple(pending) if pending else None
+        return pending
 
     def _expected(self, kind: str, step: int, slots: int, known_only: bool) -> tuple[int, ...]:
-        """Slots below `slots` whose message for `step` survives the link (and, `known_only`,
-        whose robot was discovered). Without loss the same every step: kept per phase."""
+        """Neighbours in slots below `slots` whose message for `step` survives the link (and,
+        `known_only`, that were discovered). Without loss the same every step: kept per phase."""
         core = self.core
         lossless = self.params.rho_comm <= 0.0
         cache_key = (kind, slots, known_only)
         if lossless:
-            cached = self._expected_slots.get(cache_key)
+            cached = self._expected_ids.get(cache_key)
             if cached is not None:
                 return cached
         arriving = core.arrivals(STREAM[kind], step)
-        known = core.known
-        expected = tuple(s for s in range(slots) if arriving[s] and (not known_only or known[s]))
+        known, neighbors = core.known, core.neighbors
+        expected = tuple(
+            neighbors[s] for s in range(slots) if arriving[s] and (not known_only or known[s])
+        )
         if lossless:
-            self._expected_slots[cache_key] = expected
+            self._expected_ids[cache_key] = expected
         return expected
 
-    def _ready(self, pending: set[int], timeout: float, now: float, ticking: bool) -> bool:
+    def _ready(self, pending: list[int], timeout: float, now: float, ticking: bool) -> bool:
+        """Whether the step may be taken, with these neighbours' messages still missing."""
         if not pending:
             return True
         # Only the tick lets a deadline pass: it has first discounted a stall of this process, and
         # a message handled before the tick after a stall would otherwise find the deadline gone.
         if not ticking or now - self.wait_started < timeout:
             return False
-        given_up = sorted(s for s in pending if not self.known_alive(self._neighbor(s)))
+        given_up = sorted(self.slot_of[n] for n in pending if not self.known_alive(n))
         if given_up:
-            self.silent.update(given_up)
-            pending.difference_update(given_up)
+            spoke = self.mailbox.spoke
+            for s in given_up:
+                self.silent.add(s)
+                self._silent_since[s] = spoke.get(self._neighbor(s), 0)
+            self._awaiting = None
             self.deadlines += 1
             self._out.warnings.append(
                 f"step deadline passed; neighbours in slots {given_up} are silent"
             )
-        return not pending
+        return len(given_up) == len(pending)
 
     def _neighbor(self, slot: int) -> int:
         """The robot in `slot`: one awaited or silent always has one (arrivals says so)."""
@@ -412,10 +432,10 @@ class StepProtocol:
         return robot
 
     def _take(self, kind: str, step: int, slots: int) -> list:
-        box = self.inbox.pop((self.round, kind, step), None)
-        if box is None:
-            return [None] * slots
-        return [box.get(s) for s in range(slots)]
+        """The step's messages by slot (None: none came), taken out of the mailbox."""
+        box = self.mailbox.take((self.round, kind, step))
+        neighbors = self.core.neighbors
+        return [box.get(neighbors[s]) for s in range(slots)]
 
     def _next(self, phase: int, step: int, now: float) -> None:
         self.phase, self.step = phase, step
@@ -432,11 +452,10 @@ class StepProtocol:
         self.newer_background = False
         self.sensor.next_round()
         self.core = RobotCore(self.params, self.core.row, self.core.col)
-        self._expected_slots.clear()
+        self._expected_ids.clear()
         self.energy_step = None
         self.relayed = None
         self.deadlines = 0
-        self.inbox = {key: value for key, value in self.inbox.items() if key[0] >= self.round}
         self._next(DISCOVERY, 0, now)
         self._send("hello", 0, (self.core.row, self.core.col))
 

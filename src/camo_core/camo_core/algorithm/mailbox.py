@@ -1,0 +1,51 @@
+"""Where delivered messages wait for their step: one robot's, or shared by a process's robots.
+
+A robot takes a step's messages all at once, when every neighbour it waits for
+has sent (protocol.py). A process hosting thousands of robots keeps each message
+once, by sender, in one mailbox its robots read from, and wakes the robots that
+hear the sender, instead of handing every message to every robot that hears it:
+a vote heard by eight robots costs one insertion and a few set operations, not
+eight calls (docs/swarm.md). A robot driven message by message (`deliver`, the
+tests' in-memory buses) has a mailbox of its own.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any
+
+Key = tuple[int, str, int]  # (round, kind, step)
+EMPTY: Mapping[Any, Any] = MappingProxyType({})
+
+
+class Mailbox:
+    """Messages by (round, kind, step), then by sender. `readers`: the robots that take each
+    step's messages; a step's messages are forgotten once all of them have taken it, and a
+    message that comes after that (a late one nobody waits for any more) is not kept."""
+
+    def __init__(self, readers: int = 1) -> None:
+        self.readers = readers
+        self.boxes: dict[Key, dict[int, Any]] = {}
+        self.spoke: dict[int, int] = {}  # messages put, per sender: a silent one speaks again
+        self._taken: dict[Key, int] = {}  # readers that took each step (a few keys a round)
+
+    def put(self, key: Key, sender: int, value: Any) -> None:
+        self.spoke[sender] = self.spoke.get(sender, 0) + 1
+        box = self.boxes.get(key)
+        if box is not None:
+            box[sender] = value
+        elif self._taken.get(key, 0) < self.readers:
+            self.boxes[key] = {sender: value}
+
+    def box(self, key: Key) -> Mapping[int, Any]:
+        """What has come for this step so far, by sender."""
+        return self.boxes.get(key, EMPTY)
+
+    def take(self, key: Key) -> Mapping[int, Any]:
+        """This step's messages, for one reader."""
+        taken = self._taken.get(key, 0) + 1
+        self._taken[key] = taken
+        if taken >= self.readers:
+            return self.boxes.pop(key, EMPTY)
+        return self.boxes.get(key, EMPTY)
