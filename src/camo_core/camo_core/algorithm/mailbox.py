@@ -38,11 +38,13 @@ class Mailbox:
         elif self._taken.get(key, 0) < self.readers:
             self.boxes[key] = {sender: value}
 
-    def box(self, key: Key) -> Mapping[int, Any]:
+    # A step's messages by sender; read with any key (a robot looks up None for a slot
+    # without a neighbour, and finds nothing).
+    def box(self, key: Key) -> Mapping[Any, Any]:
         """What has come for this step so far, by sender."""
         return self.boxes.get(key, EMPTY)
 
-    def take(self, key: Key) -> Mapping[int, Any]:
+    def take(self, key: Key) -> Mapping[Any, Any]:
         """This step's messages, for one reader."""
         taken = self._taken.get(key, 0) + 1
         self._taken[key] = taken

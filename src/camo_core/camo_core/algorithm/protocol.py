@@ -92,7 +92,7 @@ class StepProtocol:
         # The neighbours (ids) whose messages for _awaiting_key's step were still to come when
         # the robot last looked (None: look again at once).
         self._awaiting: tuple[int, ...] | None = None
-        self._awaiting_key: Key | None = None
+        self._awaiting_key: Key = (-1, "", -1)
         self._expected_ids: dict[tuple[str, int, bool], tuple[int, ...]] = {}
         self.core = RobotCore(params, row, col)
         self.sensor = sensor
@@ -182,9 +182,8 @@ class StepProtocol:
     def _heard_silent(self) -> None:
         """A silent neighbour that has spoken since it fell silent is waited for again."""
         spoke = self.mailbox.spoke
-        neighbors = self.core.neighbors
         for slot, said in list(self._silent_since.items()):
-            if spoke.get(neighbors[slot], 0) != said:
+            if spoke.get(self._neighbor(slot), 0) != said:
                 self.silent.discard(slot)
                 del self._silent_since[slot]
                 self._awaiting = None
@@ -398,7 +397,9 @@ class StepProtocol:
         arriving = core.arrivals(STREAM[kind], step)
         known, neighbors = core.known, core.neighbors
         expected = tuple(
-            neighbors[s] for s in range(slots) if arriving[s] and (not known_only or known[s])
+            n
+            for s, n in enumerate(neighbors[:slots])
+            if n is not None and arriving[s] and (not known_only or known[s])
         )
         if lossless:
             self._expected_ids[cache_key] = expected
