@@ -90,7 +90,11 @@ class RobotCore:
         return cached
 
     def _filter(self, stream: int, step: int, delivered: Sequence, slots: range) -> list:
+        """What was delivered from known neighbours whose message survived the link (a slot
+        without a neighbour delivers nothing)."""
         arriving = self.arrivals(stream, step)
+        if self._all_known and arriving is self._everyone:
+            return [delivered[s] for s in slots]
         return [
             delivered[s] if delivered[s] is not None and self.known[s] and arriving[s] else None
             for s in slots
@@ -108,6 +112,10 @@ class RobotCore:
         """The consensus degree and the known-slot mask, once known changes (read every step)."""
         self.degree = sum(self.known[s] for s in range(self.near))
         self.known_mask = sum(1 << s for s, known in enumerate(self.known) if known)
+        # Every neighbour known: with a lossless link a step's messages need no filtering.
+        self._all_known = all(
+            k or n is None for k, n in zip(self.known, self.neighbors, strict=True)
+        )
 
     # ---- phase 1: sensing and the local vote ----------------------------------
 
