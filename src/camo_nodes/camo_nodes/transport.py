@@ -125,23 +125,23 @@ def stamp(msg) -> None:
 def fill(msg, message: Message) -> None:
     """Write a protocol message into a (reused) camo_msgs message of its kind."""
     msg.sender_id, msg.round, msg.step = message.sender, message.round, message.step
-    kind = message.kind
-    if kind == "hello":
-        msg.row, msg.col = message.value
-    elif kind == "color":
-        msg.value = message.value
-    elif kind == "energy":
-        msg.energy, msg.degree = message.value
-    elif kind == "vote":
+    kind = message.kind  # the kinds a robot sends every step first
+    if kind == "vote":
         p, msg.degree = message.value
         array = msg.p
         array[0], array[1], array[2] = p[0], p[1], p[2]
         if len(p) > 3:  # --levels: the grey histogram averaged with p
             msg.histogram = p[3:]
-    elif kind == "relay":
-        msg.states = [NOT_RECEIVED if v is None else v for v in message.value]
-    else:
+    elif kind == "state":
         msg.state = message.value
+    elif kind == "hello":
+        msg.row, msg.col = message.value
+    elif kind == "color":
+        msg.value = message.value
+    elif kind == "energy":
+        msg.energy, msg.degree = message.value
+    else:
+        msg.states = [NOT_RECEIVED if v is None else v for v in message.value]
 
 
 def from_ros(kind: str, msg) -> Message:
@@ -231,21 +231,20 @@ class Batch:
         self.array.header.frame_id = "camo"
         self.pool: list = []
         self.count = 0
+        # Every element's stamp: the time the array's first message was packed (an array holds
+        # what its robots sent within one turn), set in place once per array.
         self.stamp = Time()
 
     def add(self, message: Message) -> bool:
-        """Pack one message; True if the batch is now full. Its stamp is the time the array's
-        first message was packed (an array holds what its robots sent within one turn)."""
+        """Pack one message; True if the batch is now full."""
         if not self.count:
-            sec, nanosec = divmod(time.time_ns(), 1_000_000_000)
-            self.stamp = Time(sec=sec, nanosec=nanosec)
+            self.stamp.sec, self.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
         if self.count == len(self.pool):
             element = MESSAGE_TYPES[self.kind](phase=PHASE_OF[self.kind])
             element.header.frame_id = "camo"
+            element.header.stamp = self.stamp
             self.pool.append(element)
-        element = self.pool[self.count]
-        fill(element, message)
-        element.header.stamp = self.stamp
+        fill(self.pool[self.count], message)
         self.count += 1
         return self.count >= MAX_BATCH
 
@@ -431,7 +430,7 @@ class Transport:
             self.rejected.refuse(problem, gid, f"robot {sender}")
             return
         self._seen[key] = message.value
-        self._put(message)
+        self._put(message, (sender, kind))
 
     # ---- out ----------------------------------------------------------------------
 
@@ -443,7 +442,7 @@ class Transport:
             (self._unsent_edges if batch.edge else self._unsent).append(batch)
         if batch.add(message):
             batch.flush()
-        self._put(message)  # its hearers are woken by the next pump: the host loop's
+        self._put(message, key)  # its hearers are woken by the next pump: the host loop's
 
     def flush(self) -> None:
         """Publish what was sent since the last flush: one array per topic (the host's loop calls
@@ -477,9 +476,9 @@ class Transport:
         """Work is left for the next turn: robots to wake or messages waiting in a reader."""
         return bool(self._woken or self._generation) or self.polled.more
 
-    def _put(self, message: Message) -> None:
+    def _put(self, message: Message, sender_kind: tuple[int, str]) -> None:
         """Into the mailbox, once; the hosted robots that listen to its sender, to be woken."""
-        targets = self.targets.get((message.sender, message.kind))
+        targets = self.targets.get(sender_kind)
         if targets:
             key = (message.round, message.kind, message.step)
             self.mailbox.put(key, message.sender, message.value)
