@@ -67,8 +67,9 @@ GC_THRESHOLD = 20_000  # allocations between young-generation collections (Pytho
 
 
 class Host:
-    """Robots are duck-typed: start(), tick(now), background(now), their `protocol` (due(),
-    stalled()), and a Node to spin when `spin_robots` (robots with services of their own).
+    """Robots are duck-typed: start(), tick(now), background(now), report_now(now), their
+    `protocol` (due(), stalled()), and a Node to spin when `spin_robots` (robots with services
+    of their own).
     `hardware`: indices of robots with a real sensor or display (ticked every TICK while they
     wait for it, and said offline in the heartbeat when it is)."""
 
@@ -207,6 +208,11 @@ class Host:
         except KeyboardInterrupt:
             pass
         finally:
+            # Stopped mid-round (Ctrl-C, the run's end): each robot reports what it did since
+            # its last report, which went out up to a second ago, before the last statuses go.
+            now = time.monotonic()
+            for robot in self.robots:
+                robot.report_now(now)
             transport.close()
             if destroy:
                 # Executor first, then nodes: the EventsExecutor must let go of the nodes'

@@ -89,6 +89,9 @@ class RobotNode(Node):
         now = self.clock()
         self._emit(self.protocol.start(now), now)
 
+    def report_now(self, now: float) -> None:
+        self._emit(self.protocol.report_now(now), now)
+
     def tick(self, now: float) -> None:
         self._emit(self.protocol.tick(now), now)
 

@@ -199,6 +199,13 @@ class StepProtocol:
         self.background_up = True
         return self._advance(now) if self.started else self._flush()
 
+    def report_now(self, now: float) -> Output:
+        """A report at once, with every p and state not reported yet: a process that stops
+        keeps what its robots did since their last (spaced) report."""
+        if self.started:
+            self._report(now, forced=True)
+        return self._flush()
+
     def stalled(self, seconds: float) -> None:
         """The robot's process could not listen for `seconds` (busy or descheduled): that time
         is not the neighbours' fault, and their messages may still be queued. Its host calls

@@ -187,8 +187,9 @@ def initial_state(sensed: float) -> int:
 
 def fill_states(received: Sequence[int | None]) -> list[int]:
     """Mirror rules for missing slots 0-11; fills read only values that arrived."""
-    if None not in received:
-        return list(received[:12])  # every slot arrived (most robots, most steps)
+    arrived = [v for v in received[:12] if v is not None]
+    if len(arrived) == 12:
+        return arrived  # every slot arrived (most robots, most steps)
     filled: list[int] = []
     for slot in range(12):
         value = received[slot]
