@@ -283,3 +283,13 @@ def test_reports_spaced_in_time_still_carry_every_step_and_rebuild_the_same_reco
     for name in ("p_trace", "state_trace", "initial", "state", "selected", "sensed"):
         assert np.array_equal(getattr(every, name), getattr(spaced, name), equal_nan=True), name
     assert not np.isnan(spaced.p_trace).any() and (spaced.state_trace >= 0).all()
+
+
+def test_a_robot_stopped_between_spaced_reports_reports_every_step_it_took_since():
+    protocol = robot(CamoParams(rows=1, cols=2), 0, 0, report_period=10.0)
+    into_consensus(protocol, [1])
+    for step in range(3):
+        assert not protocol.deliver(vote(1, step), 0.1 * (step + 1)).reports  # within the period
+    report = protocol.report_now(0.5).reports[-1]
+    assert report.step == 3 and report.p_from == 1 and len(report.p_trace) == 3 * 3
+    assert not protocol.report_now(0.6).reports[-1].p_trace  # nothing new since
