@@ -32,7 +32,7 @@ from camo_core.algorithm.ticks import Ticks
 from camo_nodes.topics.images import ImageEncodingError, image_from_msg
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.topics.qos import LATCHED_READER
-from camo_nodes.topics.startup import LEAN_NODE
+from camo_nodes.topics.startup import LEAN_NODE, Participants
 from camo_nodes.transport import Transport
 from camo_nodes.trust import BackgroundCheck
 
@@ -71,7 +71,8 @@ class Host:
     `protocol` (due(), stalled()), and a Node to spin when `spin_robots` (robots with services
     of their own).
     `hardware`: indices of robots with a real sensor or display (ticked every TICK while they
-    wait for it, and said offline in the heartbeat when it is)."""
+    wait for it, and said offline in the heartbeat when it is). `participants`: the DDS
+    participants the robot nodes were created in, ended after them."""
 
     def __init__(
         self,
@@ -81,12 +82,14 @@ class Host:
         robots: list,
         spin_robots: bool,
         hardware: tuple[int, ...] = (),
+        participants: Participants | None = None,
     ) -> None:
         self.node = node
         self.transport = transport
         self.projection = projection
         self.robots = robots
         self.hardware = hardware
+        self.participants = participants
         self.ticks = Ticks([robot.protocol for robot in robots])
         for index, robot in enumerate(robots):
             robot.stepped = partial(self.ticks.add, index)
@@ -222,4 +225,6 @@ class Host:
                     executor.remove_node(node)
                 for node in [*nodes, *(r for r in self.robots if r not in nodes)]:
                     node.destroy_node()
+                if self.participants is not None:
+                    self.participants.shutdown()
         return 0

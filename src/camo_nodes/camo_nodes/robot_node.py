@@ -40,7 +40,14 @@ from camo_nodes.topics.parameters import (
     parameters_help,
 )
 from camo_nodes.topics.runs import run_ended, run_from_parameter
-from camo_nodes.topics.startup import LEAN_NODE, node_help, start_ros, wants_help
+from camo_nodes.topics.startup import (
+    GROUPED_NODE,
+    LEAN_NODE,
+    Participants,
+    node_help,
+    start_ros,
+    wants_help,
+)
 from camo_nodes.transport import Transport
 
 
@@ -201,12 +208,15 @@ def host_robots(
     """This process's robots (tiles of robot ids), ready to run: a projected-image sensor
     unless `sensors` names another (a Droplet's); `lean` robots have no services of their own.
     `setup`: the run's, as its launcher published it (which tiles and backgrounds it has);
-    `created(count)`: told every 1024 robot nodes created (thousands take a while)."""
+    `created(count)`: told every 1024 robot nodes created (thousands take a while). Lean robot
+    nodes are spread over DDS participants (`Participants`): one participant's node creation
+    grows with the square of its nodes."""
     node = host_node(topics)
     protocol = protocol.for_swarm(params.count)
     transport = Transport(node, params, topics, tiles, setup, protocol.step_timeout)
     projection = Projection(params.rows, params.cols, params.profile, projected_on(params))
     robots, hardware = [], []
+    participants = Participants(node.context)
     for cell in sorted(transport.hosted):
         row, col = divmod(cell, params.cols)
         sensor = (sensors or {}).get(cell) or ProjectedSensor(projection, row, col)
@@ -225,10 +235,11 @@ def host_robots(
             max(REPORT_PERIOD, len(transport.hosted) / REPORTS_PER_PROCESS),
             transport.mailbox,
         )
-        robots.append(RobotNode(steps, transport, **(LEAN_NODE if lean else {})))
+        node_kwargs = {**LEAN_NODE, **GROUPED_NODE, "context": participants.next()} if lean else {}
+        robots.append(RobotNode(steps, transport, **node_kwargs))
         if created is not None and len(robots) % 1024 == 0:
             created(len(robots))
-    return Host(node, transport, projection, robots, not lean, tuple(hardware))
+    return Host(node, transport, projection, robots, not lean, tuple(hardware), participants)
 
 
 def main(args=None) -> int:

@@ -16,8 +16,10 @@ import sys
 from pathlib import Path
 
 import rclpy
+from rclpy.context import Context
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 
 from camo_core.cli.options import Parser
 from camo_core.cli.params_file import check_ros_args
@@ -74,6 +76,51 @@ LEAN_NODE = {
     "enable_rosout": False,
     "parameter_overrides": [Parameter("start_type_description_service", value=False)],
 }
+
+
+GROUPED_NODE = {"use_global_arguments": False}
+
+# Lean nodes per DDS participant when a process creates thousands. rmw_fastrtps publishes a
+# participant's whole node list each time one of its nodes is created, so creating n nodes in
+# one participant costs time that grows with n^2: alone, 8192 lean robot nodes took 4.3 s in one
+# participant here, 2.1 s in four of 2048 and 1.8 s in eight of 1024, but every participant
+# costs discovery and memory too (docs/swarm.md).
+NODES_PER_PARTICIPANT = 2048
+
+
+class Participants:
+    """The contexts (a DDS participant each) a process creates many lean nodes in: the first
+    `per` in `first` (the process's own), then `per` more in each further one, with the first's
+    domain. Nodes spread so take `GROUPED_NODE` too: the command line's
+    remappings and parameters, which only the first context has, would otherwise apply to
+    some of them and not others. `shutdown()` ends the further ones once their nodes are
+    destroyed."""
+
+    def __init__(self, first: Context, per: int = NODES_PER_PARTICIPANT) -> None:
+        self.per = per
+        self.created = 0
+        self.contexts = [first]
+
+    def next(self) -> Context:
+        """The context for the next node."""
+        if self.created and self.created % self.per == 0:
+            context = Context()
+            domain = self.contexts[0].get_domain_id()
+            # No command-line arguments (nodes given `GROUPED_NODE` take none in any context),
+            # and the process's signal handlers stay the first context's.
+            rclpy.init(
+                args=[],
+                context=context,
+                domain_id=domain,
+                signal_handler_options=SignalHandlerOptions.NO,
+            )
+            self.contexts.append(context)
+        self.created += 1
+        return self.contexts[-1]
+
+    def shutdown(self) -> None:
+        for context in self.contexts[1:]:
+            context.try_shutdown()
 
 
 def wants_help(argv: list[str] | None) -> bool:
