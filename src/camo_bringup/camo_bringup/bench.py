@@ -194,8 +194,8 @@ def swarm_run(
 
 
 def large_run(side: int, domain: int, out: Path) -> dict:
-    """One whole run of a large swarm with the launcher's defaults (processes of at most 4096
-    robots), on the forest scaled to the grid when the grid outgrows it."""
+    """One whole run of a large swarm with the launcher's defaults (processes of at most
+    ROBOTS_PER_PROCESS robots), on the forest scaled to the grid when the grid outgrows it."""
     out.mkdir(parents=True, exist_ok=True)
     image = out / f"forest_{side}.png"
     size = max(SIZE, side)
