@@ -49,7 +49,7 @@ class SharedBus:
         ]
         self.hearers: dict[tuple[int, str], list[int]] = {}
         for p in self.robots:
-            for sender, kind, _ in p.hears():
+            for sender, kind in p.listens_to():
                 self.hearers.setdefault((sender, kind), []).append(p.id)
         self.sent: list = []
         self.woken: set[int] = set()

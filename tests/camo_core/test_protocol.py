@@ -293,3 +293,11 @@ def test_a_robot_stopped_between_spaced_reports_reports_every_step_it_took_since
     report = protocol.report_now(0.5).reports[-1]
     assert report.step == 3 and report.p_from == 1 and len(report.p_trace) == 3 * 3
     assert not protocol.report_now(0.6).reports[-1].p_trace  # nothing new since
+
+
+def test_a_robot_done_reports_nothing_more_when_its_process_stops():
+    params = CamoParams(rows=2, cols=2, consensus_steps=3, formation_steps=2)
+    bus = Bus(params, np.full((2, 2), 100.0), seed=1)
+    bus.run()
+    assert all(p.done for p in bus.robots.values())
+    assert [p.report_now(99.0).reports for p in bus.robots.values()] == [[]] * params.count

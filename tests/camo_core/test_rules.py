@@ -1,6 +1,8 @@
 """Hand-worked cases of the per-robot rules, one rule at a time."""
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from camo_core.algorithm import rules
 from camo_core.algorithm.params import CamoParams
@@ -56,6 +58,20 @@ def test_metropolis_step_by_hand():
     )
     assert p == pytest.approx((1 - 0.25 - 1 / 3, 0.25, 1 / 3))
     assert sum(p) == pytest.approx(1.0)
+
+
+unit = st.floats(0.0, 1.0)
+vote3 = st.tuples(st.tuples(unit, unit, unit), st.integers(0, 8))
+
+
+@given(st.tuples(unit, unit, unit), st.integers(0, 8), st.lists(st.none() | vote3, max_size=8))
+def test_the_written_out_3_vector_step_has_the_bits_of_the_general_loop(p, degree, received):
+    """The paper's 3-vector takes a written-out path; each component of the general loop is
+    computed alone, so a 4-vector's first three are what the loop gives the 3-vector."""
+    general = rules.consensus_step(
+        (*p, 0.5), degree, [m and ((*m[0], 0.25), m[1]) for m in received]
+    )
+    assert rules.consensus_step(p, degree, received) == general[:3]
 
 
 def test_lost_message_keeps_its_weight_at_home():

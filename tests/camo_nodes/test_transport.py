@@ -4,6 +4,7 @@ pump hands messages over for a bounded time per turn, in order, the rest on late
 import time
 from types import SimpleNamespace
 
+import pytest
 import rclpy
 from support import ros_context
 
@@ -56,7 +57,7 @@ def test_a_pump_stops_at_its_budget_and_the_next_ones_wake_every_robot_once():
             return wake
 
         for robot in range(1, 400):  # every robot hears robot 0: 0.2 s of waking
-            transport.add(robot, [(0, "vote", 3)], slow_robot(robot), emit=None)
+            transport.add(robot, [(0, "vote")], slow_robot(robot), emit=None)
         transport.send(Message("vote", 0, 0, 0, ((1.0, 0.0, 0.0), 1)))
         assert transport.mailbox.box((0, "vote", 0)) == {0: ((1.0, 0.0, 0.0), 1)}
         started = time.monotonic()
@@ -66,5 +67,22 @@ def test_a_pump_stops_at_its_budget_and_the_next_ones_wake_every_robot_once():
         while transport.busy:
             transport.pump(budget=0.02)
         assert sorted(woken) == list(range(1, 400))  # each once, however many turns it took
+        transport.close()
+        node.destroy_node()
+
+
+def test_a_robot_the_process_does_not_host_or_one_left_out_is_refused():
+    with ros_context() as context:
+        node = rclpy.create_node("hosted_test", context=context)
+        transport = Transport(node, CamoParams(rows=2, cols=2), RunTopics("hosted_test"), [(0, 2)])
+        with pytest.raises(ValueError, match="robot 3 is not hosted"):
+            transport.add(3, [], lambda now: NOTHING, emit=None)
+        for robot in (0, 1):
+            transport.add(robot, [], lambda now: NOTHING, emit=None)
+        # Robot 2 never added: the shared mailbox would keep every step it never takes.
+        with pytest.raises(ValueError, match="1 hosted robots were not added"):
+            transport.check_hosted()
+        transport.add(2, [], lambda now: NOTHING, emit=None)
+        transport.check_hosted()
         transport.close()
         node.destroy_node()

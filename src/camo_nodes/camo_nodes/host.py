@@ -90,6 +90,7 @@ class Host:
         self.robots = robots
         self.hardware = hardware
         self.participants = participants
+        transport.check_hosted()
         self.ticks = Ticks([robot.protocol for robot in robots])
         for index, robot in enumerate(robots):
             robot.stepped = partial(self.ticks.add, index)

@@ -79,7 +79,7 @@ class RobotNode(Node):
         self.stepped: Callable[[float], None] = lambda now: None
         # The transport keeps the robot's messages in the mailbox its robots share, wakes the
         # protocol when one came for it, and hands what the protocol answers to this node.
-        transport.add(core.id, protocol.hears(), protocol.wake, self._emit)
+        transport.add(core.id, protocol.listens_to(), protocol.wake, self._emit)
 
     def create_publisher(self, msg_type, topic, *args, **kwargs):
         if topic == "/parameter_events" and self._lean:

@@ -362,17 +362,24 @@ class Transport:
         self.offline = robots
         self.heartbeat.offline = tuple(sorted(robots))
 
-    def add(
-        self, robot: int, hears: Iterable[tuple[int, str, int]], wake: Wake, emit: Emit
-    ) -> None:
+    def add(self, robot: int, hears: Iterable[tuple[int, str]], wake: Wake, emit: Emit) -> None:
         """A hosted robot (reading this transport's `mailbox`): what it hears from whom (`hears`:
-        (sender, kind, slot)), how it is told messages came (`wake`) and what it does with the
-        answer (`emit`, unless NOTHING)."""
+        (sender, kind)), how it is told messages came (`wake`) and what it does with the answer
+        (`emit`, unless NOTHING)."""
+        if robot not in self.hosted:
+            raise ValueError(f"robot {robot} is not hosted by this process")
         self._robots[robot] = (wake, emit)
-        for sender, kind, _ in hears:
+        for sender, kind in hears:
             self.targets[(sender, kind)].append(robot)
             if sender not in self.hosted:
                 self.needed.add(sender)
+
+    def check_hosted(self) -> None:
+        """Every hosted robot was added: the mailbox forgets a step's messages once each of them
+        (its `readers`) took the step, and one never added would keep every step in memory."""
+        missing = len(self.hosted) - len(self._robots)
+        if missing:
+            raise ValueError(f"{missing} hosted robots were not added to the transport")
 
     def announce(self) -> None:
         """Say which tiles this process hosts, and what it has refused (latched)."""

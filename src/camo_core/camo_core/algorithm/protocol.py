@@ -29,8 +29,7 @@ nothing, or a Droplet's colour sensor and LED).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Mapping
-from types import MappingProxyType
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from camo_core.algorithm.mailbox import Key, Mailbox
@@ -59,7 +58,7 @@ from camo_core.algorithm.robot_io import (
 TICK = 0.05  # s between the host's ticks
 STALL = 0.5  # s: a tick this late means the robot's own process stalled
 RECHECK = 0.25  # s between asks, past a deadline, whether the late neighbours are still alive
-NO_SLOTS: Mapping[Any, int] = MappingProxyType({})  # nobody heard for a kind
+NOBODY: frozenset[int] = frozenset()  # heard for a kind the robot does not listen to
 
 
 class StepProtocol:
@@ -117,9 +116,9 @@ class StepProtocol:
         self.energy_step: int | None = None  # --threshold auto: the averaging step, once described
         self.kinds = kinds_of(params)
         self.listen = listen_slots(params, self.core.near, len(self.core.neighbors))
-        # Per kind, the slot of each neighbour heard for it (a delivery's one lookup).
+        # Per kind, the neighbours heard for it (what a delivery is checked against).
         self.heard_from = {
-            kind: {n: s for n, s in self.slot_of.items() if s < slots}
+            kind: frozenset(n for n, s in self.slot_of.items() if s < slots)
             for kind, slots in self.listen.items()
         }
         # --orientation any: the formation step whose states were taken and relayed, and them.
@@ -134,16 +133,11 @@ class StepProtocol:
     def done(self) -> bool:
         return self.phase == DONE
 
-    def hears(self) -> Iterable[tuple[int, str, int]]:
-        """(neighbour id, kind, slot) of every message this robot needs."""
-        for kind in self.kinds:
-            for neighbor, slot in self.heard_from[kind].items():
-                yield neighbor, kind, slot
-
     def listens_to(self) -> Iterable[tuple[int, str]]:
         """(neighbour id, kind) of every message this robot needs."""
-        for neighbor, kind, _ in self.hears():
-            yield neighbor, kind
+        for kind in self.kinds:
+            for neighbor in self.heard_from[kind]:
+                yield neighbor, kind
 
     # ---- events ---------------------------------------------------------------------
 
@@ -156,8 +150,7 @@ class StepProtocol:
 
     def deliver(self, message: Message, now: float) -> Output:
         """A neighbour's message, handed to this robot alone (into its own mailbox)."""
-        slot = self.heard_from.get(message.kind, NO_SLOTS).get(message.sender)
-        if slot is None:
+        if message.sender not in self.heard_from.get(message.kind, NOBODY):
             return NOTHING  # not a neighbour this robot listens to for that kind
         key = (message.round, message.kind, message.step)
         self.mailbox.put(key, message.sender, message.value)
@@ -201,8 +194,9 @@ class StepProtocol:
 
     def report_now(self, now: float) -> Output:
         """A report at once, with every p and state not reported yet: a process that stops
-        keeps what its robots did since their last (spaced) report."""
-        if self.started:
+        keeps what its robots did since their last (spaced) report. A robot done said so in
+        its last report (every phase change is reported): nothing to add."""
+        if self.started and self.phase != DONE:
             self._report(now, forced=True)
         return self._flush()
 
