@@ -20,19 +20,13 @@ from dataclasses import dataclass, field
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import messages_per_round
 from camo_core.algorithm.run_setup import contiguous
+from camo_nodes.topics.robot_messages import MESSAGE_TYPES
 
 MAX_STEP = 1_000_000  # before the run's parameters are known: no step of a run is beyond this
 # The robots' message types, and the kind of message each carries. A tile topic carries arrays
 # of them (one DDS message for what a tile's robots sent since the last write); bags recorded
 # before that hold one robot message per bag message.
-SINGLE_KINDS = {
-    "camo_msgs/msg/Hello": "hello",
-    "camo_msgs/msg/Color": "color",
-    "camo_msgs/msg/Energy": "energy",
-    "camo_msgs/msg/Vote": "vote",
-    "camo_msgs/msg/State": "state",
-    "camo_msgs/msg/Relay": "relay",
-}
+SINGLE_KINDS = {f"camo_msgs/msg/{cls.__name__}": kind for kind, cls in MESSAGE_TYPES.items()}
 ARRAY_KINDS = {f"{name}Array": kind for name, kind in SINGLE_KINDS.items()}
 ROBOT_KINDS = {**SINGLE_KINDS, **ARRAY_KINDS}
 

@@ -57,47 +57,15 @@ from camo_core.algorithm.robot_io import (
 from camo_core.algorithm.run_setup import RunSetup
 from camo_core.algorithm.status_rows import StatusRows
 from camo_core.algorithm.validation import message_problem, phase_problem
-from camo_msgs.msg import (
-    Color,
-    ColorArray,
-    Energy,
-    EnergyArray,
-    Heartbeat,
-    Hello,
-    HelloArray,
-    Host,
-    Relay,
-    RelayArray,
-    State,
-    StateArray,
-    StatusArray,
-    Vote,
-    VoteArray,
-)
+from camo_msgs.msg import Heartbeat, Host, StatusArray
 from camo_nodes.heartbeat import HeartbeatThread
 from camo_nodes.polled import PolledTopics
 from camo_nodes.rcl_take import PREFIX, publisher_gid
 from camo_nodes.topics.names import RunTopics, tile_name
 from camo_nodes.topics.qos import HEARTBEAT_READER, LATCHED, LATCHED_READER, history_qos
+from camo_nodes.topics.robot_messages import ARRAY_TYPES, MESSAGE_TYPES, fill, from_ros, stamp
 from camo_nodes.trust import Conflict, Hosts, Rejections
 
-MESSAGE_TYPES = {
-    "hello": Hello,
-    "color": Color,
-    "energy": Energy,
-    "vote": Vote,
-    "state": State,
-    "relay": Relay,
-}
-# On the wire: a tile topic of a kind carries arrays of its messages.
-ARRAY_TYPES = {
-    "hello": HelloArray,
-    "color": ColorArray,
-    "energy": EnergyArray,
-    "vote": VoteArray,
-    "state": StateArray,
-    "relay": RelayArray,
-}
 # Robot messages in one array at most: a process's pump can send several steps of thousands of
 # robots, and a DDS message past Fast DDS's shared-memory segment (512 KB) is slow.
 MAX_BATCH = 256
@@ -110,56 +78,9 @@ EDGE_TAKE = 4
 # Seconds a pump hands messages to robots per call at most: the rest is handed over on the
 # host loop's next turn, after its timers, heartbeat and stop flag have had theirs.
 PUMP_BUDGET = 0.02
-NOT_RECEIVED = Relay.NOT_RECEIVED
 Wake = Callable[[float], Output]  # a robot's protocol, told at `now` that messages came for it
 Emit = Callable[[Output, float], None]  # what a robot does with its protocol's output at `now`
 Tile = tuple[int, int]  # first and last robot id, inclusive
-
-
-def stamp(msg) -> None:
-    now = time.time_ns()
-    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(now, 1_000_000_000)
-    msg.header.frame_id = "camo"
-
-
-def fill(msg, message: Message) -> None:
-    """Write a protocol message into a (reused) camo_msgs message of its kind."""
-    msg.sender_id, msg.round, msg.step = message.sender, message.round, message.step
-    kind = message.kind  # the kinds a robot sends every step first
-    if kind == "vote":
-        p, msg.degree = message.value
-        array = msg.p
-        array[0], array[1], array[2] = p[0], p[1], p[2]
-        if len(p) > 3:  # --levels: the grey histogram averaged with p
-            msg.histogram = p[3:]
-    elif kind == "state":
-        msg.state = message.value
-    elif kind == "hello":
-        msg.row, msg.col = message.value
-    elif kind == "color":
-        msg.value = message.value
-    elif kind == "energy":
-        msg.energy, msg.degree = message.value
-    else:
-        msg.states = [NOT_RECEIVED if v is None else v for v in message.value]
-
-
-def from_ros(kind: str, msg) -> Message:
-    if kind == "hello":
-        value = (msg.row, msg.col)
-    elif kind == "color":
-        value = msg.value
-    elif kind == "energy":
-        value = (msg.energy, msg.degree)
-    elif kind == "vote":
-        # Python floats, not numpy scalars: a robot computes with what it hears, and numpy
-        # scalars would spread through the swarm's arithmetic at several times the cost.
-        value = ((*msg.p.tolist(), *msg.histogram), msg.degree)
-    elif kind == "relay":
-        value = tuple(None if v == NOT_RECEIVED else int(v) for v in msg.states)
-    else:
-        value = msg.state
-    return Message(kind, msg.sender_id, msg.round, msg.step, value)
 
 
 def messages_per_robot(params: CamoParams, kind: str) -> int:
