@@ -299,7 +299,7 @@ def _by_the_grammar(text: str, special: bool) -> float | None:
 @given(text=NUMBER_TEXT, special=st.booleans())
 @settings(max_examples=400, deadline=None)
 def test_a_number_parses_by_the_documented_grammar_or_is_a_one_line_error(text, special):
-    from camo_core.inputs import NumberError, integer, number
+    from camo_core.inputs.numeric import NumberError, integer, number
 
     want = _by_the_grammar(text, special)
     try:
@@ -319,7 +319,7 @@ def test_a_number_parses_by_the_documented_grammar_or_is_a_one_line_error(text, 
 
 
 def test_a_list_with_an_empty_item_is_refused_not_shortened():
-    from camo_core.inputs import NumberError, items
+    from camo_core.inputs.numeric import NumberError, items
 
     assert items("0, 1 ,2", "--x") == ["0", "1", "2"]
     for text in ("0,,1", "0,1,", ",0", ""):

@@ -7,15 +7,16 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from camo_bag.container import BagError
-from camo_core.inputs import described, parse_yaml
+from camo_core.inputs.strict_yaml import described, parse_yaml
 
 INT64_MAX = 2**63 - 1
 Check = Callable[[Any, str], Any]
 
 
 def load_yaml(text: str, where: str) -> Any:
-    """YAML text as data, read strictly (`camo_core.inputs.parse_yaml`: no duplicate keys,
-    YAML 1.2 scalars, one document); BagError naming the line where it is not YAML."""
+    """YAML text as data, read strictly (`camo_core.inputs.strict_yaml.parse_yaml`: no
+    duplicate keys, YAML 1.2 scalars, one document); BagError naming the line where it is not
+    YAML."""
     return parse_yaml(text, where, BagError)
 
 

@@ -21,7 +21,7 @@ from mcap.exceptions import McapError
 from mcap.writer import CompressionType, Writer
 
 from camo_core.exceptions import CamoError
-from camo_core.inputs import dump_yaml, parse_yaml
+from camo_core.inputs.strict_yaml import dump_yaml, parse_yaml
 from camo_core.results.folders import new_folder_problem
 
 MAGIC = b"\x89MCAP0\r\n"

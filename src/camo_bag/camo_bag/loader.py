@@ -52,10 +52,9 @@ from camo_bag.container import (
     damaged,
 )
 from camo_bag.qos_yaml import check_profiles
-from camo_core.inputs import read_yaml
+from camo_core.inputs.files import checked_path
+from camo_core.inputs.strict_yaml import read_yaml
 
-PATH_MAX = 4096  # Linux's PATH_MAX, and NAME_MAX for one name
-NAME_MAX = 255
 METADATA = "metadata.yaml"
 METADATA_MAX = 64 * 1024 * 1024  # a metadata.yaml larger than this is not one camo wrote
 
@@ -70,11 +69,7 @@ def bag_path(path: str | Path) -> Path:
         raise BagError("no bag given (the path is empty)")
     if not raw.isprintable():
         raise BagError(f"{shown(raw)} is not a usable path: it holds a control character")
-    if len(raw.encode(errors="surrogateescape")) > PATH_MAX or any(
-        len(part.encode(errors="surrogateescape")) > NAME_MAX for part in Path(raw).parts
-    ):
-        raise BagError(f"{raw[:60]}...: path too long")
-    path = Path(raw)
+    path = checked_path(raw, "bag", BagError)  # too long for the system
     try:
         if not path.exists():
             raise BagError(f"{path}: no such bag")

@@ -20,7 +20,7 @@ from rclpy.qos import (
 )
 
 from camo_bag.checks import bad, boolean, integer, listed, load_yaml, mapping
-from camo_core.inputs import dump_yaml
+from camo_core.inputs.strict_yaml import dump_yaml
 
 INFINITE_NS = 9223372036854775807  # RMW_DURATION_INFINITE, as rosbag2 writes it
 DEPTH_MAX = 2**31 - 1  # DDS history depths are int32

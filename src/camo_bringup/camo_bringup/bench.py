@@ -41,7 +41,7 @@ from camo_core.algorithm.grid import neighbor_ids
 from camo_core.algorithm.params import CamoParams
 from camo_core.cli.options import Parser
 from camo_core.exceptions import EXIT_USAGE, CamoError
-from camo_core.inputs import integer
+from camo_core.inputs.numeric import integer
 from camo_msgs.msg import Vote, VoteArray
 from camo_nodes.topics.names import RunTopics, tile_name
 from camo_nodes.topics.qos import history_qos

@@ -30,7 +30,8 @@ from camo_core.cli.options import (
     parse_ranges,
 )
 from camo_core.exceptions import UsageError
-from camo_core.inputs import checked_path, integer, items, shown
+from camo_core.inputs.files import checked_path, shown
+from camo_core.inputs.numeric import integer, items
 from camo_core.results.folders import new_folder_problem
 from camo_nodes.topics.names import RunTopics, check_run_id, new_run_id
 from camo_nodes.topics.parameters import ros_arguments

@@ -34,7 +34,7 @@ from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import block_means, load_image
 from camo_core.cli.options import Parser, a_path, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
-from camo_core.inputs import integer, items
+from camo_core.inputs.numeric import integer, items
 from camo_core.shutdown import interrupt_on_signals
 
 MAX_FAULT_S = 3600.0  # s: the longest delay or disconnect an emulated fault lasts

@@ -25,7 +25,7 @@ from pathlib import Path
 import rclpy
 
 from camo_core.exceptions import EXIT_USAGE
-from camo_core.inputs import shown
+from camo_core.inputs.files import shown
 
 RMW_GID_STORAGE_SIZE = 16
 RCL_RET_OK = 0

@@ -9,7 +9,8 @@ from pathlib import Path
 
 from camo_core.cli.options import Parser, a_path
 from camo_core.exceptions import CamoError, UsageError, reported
-from camo_core.inputs import dump_yaml, integer, read_yaml
+from camo_core.inputs.numeric import integer
+from camo_core.inputs.strict_yaml import dump_yaml, read_yaml
 from camo_sweep import engines
 from camo_sweep.spec import DRIVERS, MAX_FILE_BYTES, SweepSpec, build_spec, spec_from_yaml
 from camo_sweep.sweep import plan, run_sweep

@@ -26,7 +26,8 @@ from camo_core.cli.options import (
     params_from,
 )
 from camo_core.exceptions import UsageError, reported
-from camo_core.inputs import dump_yaml, items, number
+from camo_core.inputs.numeric import items, number
+from camo_core.inputs.strict_yaml import dump_yaml
 from camo_core.results import figures
 from camo_sweep import engines
 from camo_sweep.cli import SPEC_FILE, check_folder

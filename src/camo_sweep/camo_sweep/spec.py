@@ -27,7 +27,9 @@ import numpy as np
 from camo_core.cli.commands import add_sim_arguments
 from camo_core.cli.options import Parser
 from camo_core.exceptions import UsageError
-from camo_core.inputs import described, items, number, read_yaml, shown
+from camo_core.inputs.files import shown
+from camo_core.inputs.numeric import items, number
+from camo_core.inputs.strict_yaml import described, read_yaml
 
 DRIVERS = ("sim", "ros")
 # Options of ./camo sim that are not a trial's: where it writes, the seed (a trial's own, from the

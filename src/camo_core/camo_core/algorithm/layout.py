@@ -25,7 +25,8 @@ from camo_core.algorithm.grid import neighbor_ids
 from camo_core.algorithm.params import MAX_COORDINATE, CamoParams
 from camo_core.algorithm.sensing import to_gray
 from camo_core.exceptions import CamoError
-from camo_core.inputs import checked_file, number, shown
+from camo_core.inputs.files import checked_file, shown
+from camo_core.inputs.numeric import number
 
 NEAR = 1.5
 FAR = 2.3
@@ -127,7 +128,7 @@ def layout_of(spec: str, rows: int, cols: int, seed: int) -> Layout:
 
 
 def read_positions(path: str | Path) -> np.ndarray:
-    """x,y per line (spacings), numbers as camo_core.inputs.number reads them. The file is
+    """x,y per line (spacings), numbers as camo_core.inputs.numeric.number reads them. The file is
     UTF-8, with or without a byte-order mark. Its first line is a header, and skipped, only if
     none of its fields is a number (`x,y`): a line with a number in it is data, and a data
     line that does not parse is an error, never taken for a header."""

@@ -19,7 +19,8 @@ import numpy as np
 from camo_core.algorithm import rng
 from camo_core.algorithm.params import ParameterError
 from camo_core.exceptions import CamoError
-from camo_core.inputs import checked_file, described, read_yaml, shown
+from camo_core.inputs.files import checked_file, shown
+from camo_core.inputs.strict_yaml import described, read_yaml
 
 
 class ImageError(CamoError):
@@ -279,7 +280,7 @@ class Calibration:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> Calibration:
-        """A YAML file (read by `inputs.read_yaml`: a regular file of at most
+        """A YAML file (read by `inputs.strict_yaml.read_yaml`: a regular file of at most
         CALIBRATION_MAX_BYTES) mapping `gain` and/or `offset` to numbers (not text, not
         true/false): gain in (0, MAX_GAIN], offset within +-MAX_OFFSET."""
         data = read_yaml(path, "calibration", CALIBRATION_MAX_BYTES, ParameterError)

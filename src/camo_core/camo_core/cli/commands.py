@@ -30,7 +30,7 @@ from camo_core.cli.options import (
 from camo_core.cli.params_file import write_params_file
 from camo_core.cli.progress import ProgressBar
 from camo_core.exceptions import UsageError, reported
-from camo_core.inputs import integer, items, number
+from camo_core.inputs.numeric import integer, items, number
 from camo_core.results import figures
 from camo_core.results.animation import Snapshots, write_animation
 from camo_core.results.output import run_title

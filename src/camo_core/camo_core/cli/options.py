@@ -16,7 +16,8 @@ from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import load_image, with_contrast
 from camo_core.exceptions import UsageError
-from camo_core.inputs import checked_path, integer, number
+from camo_core.inputs.files import checked_path
+from camo_core.inputs.numeric import integer, number
 from camo_core.results.folders import output_folder
 from camo_core.schema import Declared, with_role
 
@@ -77,12 +78,13 @@ class Parser(argparse.ArgumentParser):
 
 
 def strict_int(text: str) -> int:
-    """`type=int` of a Parser: camo_core.inputs.integer (argparse says "invalid int value")."""
+    """`type=int` of a Parser: camo_core.inputs.numeric.integer (argparse says "invalid int
+    value")."""
     return integer(text)
 
 
 def strict_float(text: str) -> float:
-    """`type=float` of a Parser: camo_core.inputs.number, finite."""
+    """`type=float` of a Parser: camo_core.inputs.numeric.number, finite."""
     return number(text)
 
 

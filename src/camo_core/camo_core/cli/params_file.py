@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, cast
 
 from camo_core.exceptions import UsageError
-from camo_core.inputs import described, dump_yaml, read_yaml
+from camo_core.inputs.strict_yaml import described, dump_yaml, read_yaml
 
 PARAMETERS_KEY = "ros__parameters"
 MAX_BYTES = 16 * 1024 * 1024  # a parameters file is a few lines; anything bigger is not one

@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 
 from camo_core.exceptions import UsageError
-from camo_core.inputs import checked_path, shown
+from camo_core.inputs.files import checked_path, shown
 
 
 def new_folder_problem(path: Path, what: str = "folder") -> str | None:

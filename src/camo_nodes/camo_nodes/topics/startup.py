@@ -24,7 +24,8 @@ from rclpy.signals import SignalHandlerOptions
 from camo_core.cli.options import Parser
 from camo_core.cli.params_file import check_ros_args
 from camo_core.exceptions import EXIT_USAGE, UsageError
-from camo_core.inputs import INTEGER, shown
+from camo_core.inputs.files import shown
+from camo_core.inputs.numeric import INTEGER
 from camo_core.shutdown import stacks_on_faults
 
 from ..shm import remove_stale

@@ -1,5 +1,6 @@
-"""The one strict YAML reading of outside input (`camo_core.inputs.parse_yaml`, `read_yaml`):
-YAML 1.2 scalars, one document, no key twice; anything else one line naming the line."""
+"""The one strict YAML reading of outside input (`camo_core.inputs.strict_yaml.parse_yaml`,
+`read_yaml`): YAML 1.2 scalars, one document, no key twice; anything else one line naming the
+line."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from camo_core.exceptions import CamoError
-from camo_core.inputs import MAX_DEPTH, described, dump_yaml, parse_yaml, read_yaml
+from camo_core.inputs.strict_yaml import MAX_DEPTH, described, dump_yaml, parse_yaml, read_yaml
 
 
 def refused(text: str) -> str:
