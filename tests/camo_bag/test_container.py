@@ -135,6 +135,20 @@ def test_truncated_and_foreign_files_get_one_line_errors(recorded, tmp_path):
     assert out.returncode == 2 and "not an MCAP file" in out.stderr
 
 
+@pytest.mark.slow(SWARM)
+def test_bag_info_of_a_bag_whose_messages_are_damaged_says_so_and_fails(recorded, tmp_path):
+    bag, _ = recorded
+    data = bytearray((bag / "bag_0.mcap").read_bytes())
+    data[len(data) // 3] ^= 0xFF  # inside a chunk: the summary still reads, the messages not
+    damaged = tmp_path / "damaged"
+    damaged.mkdir()
+    (damaged / "damaged_0.mcap").write_bytes(bytes(data))
+    out = bag_tool("cli", "info", str(damaged))
+    assert out.returncode == 2, out.stdout
+    assert "Duration:" in out.stdout  # what the summary says is still shown
+    assert len(out.stderr.strip().splitlines()) == 1 and "corrupt" in out.stderr, out.stderr
+
+
 def test_repair_keeps_every_complete_chunk_of_a_cut_file(tmp_path):
     from rclpy.serialization import serialize_message
     from std_msgs.msg import String

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from camo_bag.completeness import examine
-from camo_bag.container import BagError, format_info
+from camo_bag.container import BagDamaged, BagError, format_info
 from camo_bag.loader import Bag, open_bag, repair
 from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError
@@ -31,9 +31,12 @@ def build_parser() -> Parser:
 
 
 def run_verdict(bag: Bag) -> str:
-    """What `bag info` says of the run a bag holds: complete, or what it lacks."""
+    """What `bag info` says of the run a bag holds: complete, or what it lacks (BagDamaged if
+    its messages cannot be read)."""
     try:
         ledger = examine(bag)
+    except BagDamaged:
+        raise
     except BagError as exc:
         return f"Run:               none ({exc})"
     gaps = ledger.gaps()
@@ -51,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         if args.command == "info":
             bag = open_bag(args.bag)
-            print(format_info(bag.summary))
+            print(format_info(bag.summary))  # from the bag's summary: even of damaged messages
             print(run_verdict(bag))
             if bag.note():
                 print(f"camo bag: warning: {bag.note()}", file=sys.stderr)

@@ -53,10 +53,14 @@ DAMAGE = (
 )
 
 
+class BagDamaged(BagError):
+    """A bag whose bytes do not parse where they should (a wrong CRC, a corrupt record)."""
+
+
 def damaged(path: str | Path, exc: BaseException, what: str = "is corrupt") -> BagError:
     """A one-line error for a bag whose bytes did not parse."""
     reason = str(exc).strip().splitlines()[0][:120] if str(exc).strip() else ""
-    return BagError(f"{path} {what} ({type(exc).__name__}{': ' + reason if reason else ''})")
+    return BagDamaged(f"{path} {what} ({type(exc).__name__}{': ' + reason if reason else ''})")
 
 
 @dataclass
