@@ -36,6 +36,9 @@ from camo_core.shutdown import StopFlag
 from camo_nodes.monitor_node import MonitorNode
 from camo_nodes.shm import remove_stale
 
+TEARDOWN_LIMIT = 60.0  # s; stopping, writing and the result take 25 s at most
+EXIT_RECORDING = 3  # the run finished, its recording failed (a full disk): the bag is cut short
+
 
 def run_round(session: Session, index: int, group: ProcessGroup) -> float:
     """Spin until every live robot has finished round `index`; when they had all voted."""
@@ -207,10 +210,6 @@ def run(config: RunConfig) -> int:
         )
         code = EXIT_RECORDING
     return code
-
-
-TEARDOWN_LIMIT = 60.0  # s; stopping, writing and the result take 25 s at most
-EXIT_RECORDING = 3  # the run finished, its recording failed (a full disk): the bag is cut short
 
 
 def watchdog(folder: Path):
