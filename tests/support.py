@@ -143,6 +143,19 @@ def camo_run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
     return run_whole(argv, timeout)
 
 
+def start_run(*args: str, domain_id: int | str | None = None) -> subprocess.Popen:
+    """`./camo run` in the background, in `domain_id` or a domain of its own; its stdout and
+    stderr piped as text (`wait_for_line`, `finished`)."""
+    domain_id = domain() if domain_id is None else domain_id
+    return subprocess.Popen(
+        [sys.executable, "-m", "camo_bringup.launcher", *args, "--domain-id", str(domain_id)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
 def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 120.0) -> list[str]:
     """Read a process's stderr up to the first line holding `text`; the lines read so far."""
     seen: list[str] = []

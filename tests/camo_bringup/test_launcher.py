@@ -25,6 +25,7 @@ from support import (
     finished,
     ros_context,
     run_camo,
+    start_run,
     validated,
     value_options,
     wait_for_line,
@@ -165,25 +166,7 @@ def test_two_runs_on_different_domains_do_not_disturb_each_other(tmp_path):
     runs = []
     for _k, pattern in enumerate(("forest", "desert")):
         runs.append(
-            subprocess.Popen(
-                [
-                    sys.executable,
-                    "-m",
-                    "camo_bringup.launcher",
-                    "--pattern",
-                    pattern,
-                    "--procs",
-                    "1",
-                    "--domain-id",
-                    str(domain()),
-                    "--out",
-                    str(tmp_path / pattern),
-                ],
-                cwd=ROOT,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
-                text=True,
-            )
+            start_run("--pattern", pattern, "--procs", "1", "--out", str(tmp_path / pattern))
         )
     for proc in runs:
         _, err = finished(proc, 240)
@@ -197,34 +180,10 @@ def test_two_runs_on_different_domains_do_not_disturb_each_other(tmp_path):
 @pytest.mark.slow(SWARM)
 def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     out_dir = tmp_path / "run"
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "camo_bringup.launcher",
-            "--pattern",
-            "forest",
-            "--procs",
-            "1",
-            "--own-process",
-            "2,3",
-            "--own-process",
-            "5,6",
-            "--step-timeout",
-            "2",
-            "--discovery-timeout",
-            "20",
-            "--consensus-steps",
-            "1500",
-            "--domain-id",
-            str(domain()),
-            "--out",
-            str(out_dir),
-        ],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    proc = start_run(
+        *["--pattern", "forest", "--procs", "1", "--own-process", "2,3", "--own-process", "5,6"],
+        *["--step-timeout", "2", "--discovery-timeout", "20", "--consensus-steps", "1500"],
+        *["--out", str(out_dir)],
     )
     seen = wait_for_line(proc, "consensus 64")  # every robot has voted and is in consensus
     processes = json.loads((out_dir / "processes.json").read_text())
@@ -247,26 +206,8 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
 @pytest.mark.slow(SWARM)
 def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
     out_dir = tmp_path / "run"
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "camo_bringup.launcher",
-            "--pattern",
-            "forest",
-            "--procs",
-            "2",
-            "--consensus-steps",
-            "5000",
-            "--domain-id",
-            str(domain()),
-            "--out",
-            str(out_dir),
-        ],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    proc = start_run(
+        "--pattern", "forest", "--procs", "2", "--consensus-steps", "5000", "--out", str(out_dir)
     )
     wait_for_line(proc, "consensus 64")
     time.sleep(1.0)
@@ -338,14 +279,10 @@ def test_two_runs_in_one_domain_each_equal_the_simulator(tmp_path):
     domain_id = str(domain())
     runs = {}
     for pattern in ("forest", "desert"):
-        runs[pattern] = subprocess.Popen(
-            [sys.executable, "-m", "camo_bringup.launcher", "--pattern", pattern, "--rows", "6"]
-            + ["--cols", "6", "--procs", "1", "--domain-id", domain_id]
-            + ["--out", str(tmp_path / pattern)],
-            cwd=ROOT,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
+        runs[pattern] = start_run(
+            *["--pattern", pattern, "--rows", "6", "--cols", "6", "--procs", "1"],
+            *["--out", str(tmp_path / pattern)],
+            domain_id=domain_id,
         )
     for proc in runs.values():
         _, err = finished(proc, 240)
@@ -371,14 +308,10 @@ def test_two_runs_in_one_domain_each_equal_the_simulator(tmp_path):
 @pytest.mark.slow(SWARM)
 def test_a_run_id_in_use_is_refused_in_one_line(tmp_path):
     domain_id = str(domain())
-    first = subprocess.Popen(
-        [sys.executable, "-m", "camo_bringup.launcher", "--rows", "3", "--cols", "3"]
-        + ["--consensus-steps", "100000", "--run-id", "taken", "--domain-id", domain_id]
-        + ["--procs", "1", "--out", str(tmp_path / "first")],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    first = start_run(
+        *["--rows", "3", "--cols", "3", "--consensus-steps", "100000", "--run-id", "taken"],
+        *["--procs", "1", "--out", str(tmp_path / "first")],
+        domain_id=domain_id,
     )
     try:
         wait_for_line(first, "consensus 9")
@@ -620,14 +553,9 @@ def test_nothing_the_launcher_started_outlives_its_sigkill(tmp_path):
     """Workers, a robot of its own process, the projector and the recorder all exit within
     10 s of the launcher's SIGKILL, and the bag they leave is readable and named incomplete."""
     out_dir = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "camo_bringup.launcher", "--pattern", "forest", "--procs", "2"]
-        + ["--own-process", "2,3", "--consensus-steps", "5000", "--domain-id", str(domain())]
-        + ["--record", str(tmp_path / "bag"), "--out", str(out_dir)],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    proc = start_run(
+        *["--pattern", "forest", "--procs", "2", "--own-process", "2,3"],
+        *["--consensus-steps", "5000", "--record", str(tmp_path / "bag"), "--out", str(out_dir)],
     )
     wait_for_line(proc, "consensus 64")
     started = children_of(proc.pid)
@@ -650,14 +578,16 @@ def test_a_robot_stopped_for_seconds_is_waited_for_not_marked_dead(tmp_path):
     deadline is longer), nobody reports it silent, and the run equals the simulator."""
     options = ["--pattern", "forest", "--seed", "3", "--consensus-steps", "3000"]
     out_dir = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "camo_bringup.launcher", *options, "--procs", "1"]
-        + ["--own-process", "4,4", "--step-timeout", "20", "--domain-id", str(domain())]
-        + ["--out", str(out_dir)],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    proc = start_run(
+        *options,
+        "--procs",
+        "1",
+        "--own-process",
+        "4,4",
+        "--step-timeout",
+        "20",
+        "--out",
+        str(out_dir),
     )
     wait_for_line(proc, "consensus 64")
     processes = json.loads((out_dir / "processes.json").read_text())
@@ -964,14 +894,9 @@ def test_a_swarm_whose_discovery_was_deferred_equals_the_simulator(tmp_path):
 @pytest.mark.slow(SWARM)
 def test_ctrl_c_stops_thousands_of_robots_within_seconds_and_keeps_what_they_reported(tmp_path):
     out_dir = tmp_path / "run"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "camo_bringup.launcher", "--rows", "64", "--cols", "64"]
-        + ["--procs", "2", "--consensus-steps", "5000", "--domain-id", str(domain())]
-        + ["--out", str(out_dir)],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    proc = start_run(
+        *["--rows", "64", "--cols", "64", "--procs", "2", "--consensus-steps", "5000"],
+        *["--out", str(out_dir)],
     )
     wait_for_line(proc, "consensus 4096")
     # A few steps: as they stop, robots report what they did since their last report.
