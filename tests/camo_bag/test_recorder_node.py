@@ -16,6 +16,7 @@ from support import (
     domain,
     finished,
     robot_messages_in,
+    start_run,
     wait_for_line,
 )
 
@@ -75,30 +76,20 @@ def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers
     # The recorder waits for run k to appear, and records it from its start.
     # 2x2 robots do thousands of steps a second: a long run is still going when the recorder is
     # killed.
-    swarm = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "camo_bringup.launcher",
-            "--rows",
-            "2",
-            "--cols",
-            "2",
-            "--consensus-steps",
-            "40000",
-            "--procs",
-            "1",
-            "--domain-id",
-            str(domain_id),
-            "--run-id",
-            "k",
-            "--out",
-            str(tmp_path / "run"),
-        ],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    swarm = start_run(
+        "--rows",
+        "2",
+        "--cols",
+        "2",
+        "--consensus-steps",
+        "40000",
+        "--procs",
+        "1",
+        "--run-id",
+        "k",
+        "--out",
+        str(tmp_path / "run"),
+        domain_id=domain_id,
     )
     try:
         wait_for_line(swarm, "consensus 4")
@@ -178,34 +169,23 @@ def test_a_recorder_started_before_a_run_records_all_of_it_and_stops_at_its_end(
 def test_ctrl_c_during_a_recorded_run_leaves_a_complete_indexed_bag(tmp_path):
     from camo_bag.loader import read_summary
 
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "camo_bringup.launcher",
-            "--pattern",
-            "forest",
-            "--procs",
-            "1",
-            "--rows",
-            "4",
-            "--cols",
-            "4",
-            "--consensus-steps",
-            "5000",
-            "--domain-id",
-            str(domain()),
-            "--run-id",
-            "ctrlc",
-            "--out",
-            str(tmp_path / "run"),
-            "--record",
-            str(tmp_path / "bag"),
-        ],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    proc = start_run(
+        "--pattern",
+        "forest",
+        "--procs",
+        "1",
+        "--rows",
+        "4",
+        "--cols",
+        "4",
+        "--consensus-steps",
+        "5000",
+        "--run-id",
+        "ctrlc",
+        "--out",
+        str(tmp_path / "run"),
+        "--record",
+        str(tmp_path / "bag"),
     )
     wait_for_line(proc, "consensus 16")
     seen = recorded_so_far(tmp_path / "bag", "/vote", 2, proc)

@@ -16,6 +16,7 @@ from support import (
     bag_tool,
     domain,
     finished,
+    start_run,
 )
 
 
@@ -23,24 +24,14 @@ from support import (
 def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded, tmp_path):
     bag, live = recorded
     domain_id = domain()
-    swarm = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "camo_bringup.launcher",
-            *BAG_OPTIONS,
-            "--run-id",
-            "again",  # the last --run-id counts: a run of its own, driven by the bag
-            "--no-projector",
-            "--domain-id",
-            str(domain_id),
-            "--out",
-            str(tmp_path / "again"),
-        ],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    swarm = start_run(
+        *BAG_OPTIONS,
+        "--run-id",
+        "again",  # the last --run-id counts: a run of its own, driven by the bag
+        "--no-projector",
+        "--out",
+        str(tmp_path / "again"),
+        domain_id=domain_id,
     )
     replay = bag_tool(
         "replay",

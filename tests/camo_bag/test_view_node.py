@@ -4,14 +4,20 @@
 from __future__ import annotations
 
 import json
-import os
 import socket
 import subprocess
-import sys
 
 import pytest
 from support import FOXGLOVE_CLIENT as CLIENT
-from support import ROOT, SWARM, assert_like_sim, domain, finished, run_camo, wait_for_line
+from support import (
+    ROOT,
+    SWARM,
+    assert_like_sim,
+    finished,
+    run_camo,
+    start_run,
+    wait_for_line,
+)
 
 OPTIONS = ["--pattern", "forest", "--rows", "6", "--cols", "6", "--consensus-steps", "3000"]
 
@@ -25,13 +31,8 @@ def free_port() -> int:
 @pytest.mark.slow(SWARM)
 def test_foxglove_client_lists_subscribes_and_decodes_a_live_run(tmp_path, foxglove_client):
     port = free_port()
-    run = subprocess.Popen(
-        [sys.executable, "-m", "camo_bringup.launcher", *OPTIONS, "--procs", "2"]
-        + ["--foxglove", str(port), "--domain-id", str(domain()), "--out", str(tmp_path / "run")],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    run = start_run(
+        *OPTIONS, "--procs", "2", "--foxglove", str(port), "--out", str(tmp_path / "run")
     )
     try:
         wait_for_line(run, f"ws://127.0.0.1:{port}")
@@ -84,15 +85,8 @@ def test_a_port_in_use_is_one_line(tmp_path):
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         port = taken.getsockname()[1]
-        env = {**os.environ, "ROS_DOMAIN_ID": str(domain())}
-        run = subprocess.Popen(
-            [sys.executable, "-m", "camo_bringup.launcher", *OPTIONS, "--procs", "1"]
-            + ["--foxglove", str(port), "--out", str(tmp_path / "run")],
-            cwd=ROOT,
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
+        run = start_run(
+            *OPTIONS, "--procs", "1", "--foxglove", str(port), "--out", str(tmp_path / "run")
         )
         _, err = finished(run, 240)
     assert run.returncode != 0

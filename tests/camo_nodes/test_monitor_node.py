@@ -1,11 +1,9 @@
 """The monitor: the swarm's pattern image, one record per round, offline hardware."""
 
-import subprocess
-import sys
 import time
 
 import pytest
-from support import ROOT, SWARM, domain, finished, ros_context
+from support import SWARM, domain, finished, ros_context, start_run
 
 
 @pytest.mark.slow(SWARM)
@@ -15,32 +13,22 @@ def test_monitor_publishes_the_swarm_pattern_as_an_image(tmp_path):
 
     domain_id = domain()
     # A long consensus, stopped with Ctrl-C once the picture is complete.
-    proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "camo_bringup.launcher",
-            "--pattern",
-            "forest",
-            "--rows",
-            "5",
-            "--cols",
-            "7",
-            "--procs",
-            "1",
-            "--consensus-steps",
-            "100000",
-            "--domain-id",
-            str(domain_id),
-            "--run-id",
-            "pattern",
-            "--out",
-            str(tmp_path),
-        ],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    proc = start_run(
+        "--pattern",
+        "forest",
+        "--rows",
+        "5",
+        "--cols",
+        "7",
+        "--procs",
+        "1",
+        "--consensus-steps",
+        "100000",
+        "--run-id",
+        "pattern",
+        "--out",
+        str(tmp_path),
+        domain_id=domain_id,
     )
     images = []
     try:

@@ -6,7 +6,7 @@ import subprocess
 import sys
 
 import pytest
-from support import ROOT, SWARM, assert_like_sim, domain, finished, run_camo
+from support import SWARM, assert_like_sim, domain, finished, run_camo, start_run
 
 
 def test_robot_with_cell_outside_grid_exits_with_one_line():
@@ -54,14 +54,11 @@ def test_robots_started_alone_and_a_remote_worker_join_a_run_and_equal_the_simul
     options = ["--pattern", "desert", "--rows", "2", "--cols", "3", "--seed", "4"]
     options += ["--rho-comm", "0.2"]
     # The launcher starts no robot: row 0 is a worker's, row 1 three robots alone.
-    launcher = subprocess.Popen(
-        [sys.executable, "-m", "camo_bringup.launcher", *options, "--remote-cells", "0-2"]
-        + ["--remote-cells", "3-5", "--run-id", "alone", "--out", str(tmp_path / "run")],
-        env=env,
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    launcher = start_run(
+        *options,
+        *["--remote-cells", "0-2", "--remote-cells", "3-5", "--run-id", "alone"],
+        *["--out", str(tmp_path / "run")],
+        domain_id=env["ROS_DOMAIN_ID"],
     )
     robots = []
     for col in range(3):

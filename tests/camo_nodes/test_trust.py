@@ -8,7 +8,16 @@ import subprocess
 import sys
 
 import pytest
-from support import ROOT, SWARM, assert_like_sim, domain, finished, run_camo, wait_for_line
+from support import (
+    ROOT,
+    SWARM,
+    assert_like_sim,
+    domain,
+    finished,
+    run_camo,
+    start_run,
+    wait_for_line,
+)
 
 from camo_core.algorithm.run_setup import RunSetup
 from camo_msgs.msg import Host
@@ -30,14 +39,10 @@ SETUP = {
 @pytest.mark.slow(SWARM)
 def test_a_run_under_attack_equals_the_simulator_and_reports_what_it_refused(tmp_path):
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain())}
-    run = subprocess.Popen(
-        [sys.executable, "-m", "camo_bringup.launcher", *OPTIONS, "--procs", "2"]
-        + ["--run-id", "attacked", "--out", str(tmp_path / "run")],
-        cwd=ROOT,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    run = start_run(
+        *OPTIONS,
+        *["--procs", "2", "--run-id", "attacked", "--out", str(tmp_path / "run")],
+        domain_id=env["ROS_DOMAIN_ID"],
     )
     wait_for_line(run, "topics under")
     attacker = subprocess.Popen(
