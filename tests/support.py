@@ -143,6 +143,18 @@ def camo_run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
     return run_whole(argv, timeout)
 
 
+def ros_node(module: str, *ros_args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    """A node's console module (`camo_nodes.robot_node`, ...) run with these ROS arguments in a
+    domain of its own, where no run is: what it says before it would wait for one."""
+    return subprocess.run(
+        [sys.executable, "-m", module, "--ros-args", *ros_args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
+    )
+
+
 def start_run(*args: str, domain_id: int | str | None = None) -> subprocess.Popen:
     """`./camo run` in the background, in `domain_id` or a domain of its own; its stdout and
     stderr piped as text (`wait_for_line`, `finished`)."""

@@ -17,6 +17,7 @@ from support import (
     camo_run,
     domain,
     finished,
+    ros_node,
     run_camo,
 )
 
@@ -131,13 +132,7 @@ def test_monitor_mode_turns_a_transcript_into_status_messages():
 
 
 def bridge(*ros_args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "camo_droplet.bridge_node", "--ros-args", *ros_args],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
-    )
+    return ros_node("camo_droplet.bridge_node", *ros_args)
 
 
 @pytest.mark.slow(COMPUTE)

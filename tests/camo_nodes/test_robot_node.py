@@ -6,7 +6,7 @@ import subprocess
 import sys
 
 import pytest
-from support import SWARM, assert_like_sim, domain, finished, run_camo, start_run
+from support import SWARM, assert_like_sim, domain, finished, ros_node, run_camo, start_run
 
 
 def test_robot_with_cell_outside_grid_exits_with_one_line():
@@ -97,13 +97,7 @@ def test_robots_started_alone_and_a_remote_worker_join_a_run_and_equal_the_simul
 
 
 def robot_node(*ros_args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "camo_nodes.robot_node", "--ros-args", *ros_args],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
-    )
+    return ros_node("camo_nodes.robot_node", *ros_args)
 
 
 @pytest.mark.slow(SWARM)

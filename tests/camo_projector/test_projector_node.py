@@ -1,22 +1,14 @@
 """The projector started alone: its image is checked before it waits for a run."""
 
-import os
 import subprocess
-import sys
 
 import pytest
-from support import PROCESS, domain, png_bytes
+from support import PROCESS, png_bytes, ros_node
 
 
 def projector(*ros_args: str) -> subprocess.CompletedProcess:
     # No run in its domain: a projector that waited for one would outlast the timeout.
-    return subprocess.run(
-        [sys.executable, "-m", "camo_projector.projector_node", "--ros-args", *ros_args],
-        capture_output=True,
-        text=True,
-        timeout=30,
-        env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
-    )
+    return ros_node("camo_projector.projector_node", *ros_args, timeout=30)
 
 
 @pytest.mark.slow(PROCESS)
