@@ -17,10 +17,10 @@ import cv2
 import numpy as np
 
 from camo_core.algorithm import rng
-from camo_core.algorithm.params import ParameterError
 from camo_core.exceptions import CamoError
 from camo_core.inputs.files import checked_file, shown
 from camo_core.inputs.strict_yaml import described, read_yaml
+from camo_core.schema import ParameterError
 
 
 class ImageError(CamoError):
