@@ -35,25 +35,27 @@ from std_msgs.msg import String
 from camo_core.algorithm.status_rows import StatusRows
 from camo_msgs.msg import (
     Color,
-    ColorArray,
+    Colors,
     Heartbeat,
     Hello,
-    HelloArray,
+    Hellos,
     Host,
     RobotStatus,
     State,
-    StateArray,
+    States,
     StatusArray,
     Vote,
-    VoteArray,
+    Votes,
 )
+from camo_nodes.topics.robot_messages import VALUE_COLUMNS
 
-ARRAYS = {HelloArray: Hello, ColorArray: Color, VoteArray: Vote, StateArray: State}
+COLUMNS = {Hellos: ("hello", Hello), Colors: ("color", Color), Votes: ("vote", Vote)}
+COLUMNS[States] = ("state", State)
 TYPES = {
-    "camo_msgs/msg/HelloArray": HelloArray,
-    "camo_msgs/msg/ColorArray": ColorArray,
-    "camo_msgs/msg/VoteArray": VoteArray,
-    "camo_msgs/msg/StateArray": StateArray,
+    "camo_msgs/msg/Hellos": Hellos,
+    "camo_msgs/msg/Colors": Colors,
+    "camo_msgs/msg/Votes": Votes,
+    "camo_msgs/msg/States": States,
     "camo_msgs/msg/StatusArray": StatusArray,
     "camo_msgs/msg/Heartbeat": Heartbeat,
     "camo_msgs/msg/Host": Host,
@@ -66,8 +68,17 @@ KINDS = ("hello", "color", "vote", "state")
 
 def forged(cls, k: int, count: int, cols: int):  # noqa: PLR0911 - one forgery a case
     """The k-th forgery of a message type: NaN, out of range, or plausible and wrong."""
-    if cls in ARRAYS:  # what a tile topic carries: several forged robot messages at once
-        return cls(messages=[forged(ARRAYS[cls], k * 3 + j, count, cols) for j in range(3)])
+    if cls in COLUMNS:  # what a tile topic carries: several forged robot messages at once
+        kind, single = COLUMNS[cls]
+        rows = [forged(single, k * 3 + j, count, cols) for j in range(3)]
+        msg = cls(phase=rows[0].phase, sender_id=[r.sender_id for r in rows])
+        msg.round = [r.round for r in rows]
+        # Every fourth one ragged: a column short of an entry.
+        msg.step = [r.step for r in rows][: 2 if k % 4 == 3 else 3]
+        for name, _ in VALUE_COLUMNS[kind]:
+            values = [getattr(r, name) for r in rows]
+            setattr(msg, name, [x for v in values for x in v] if name == "p" else values)
+        return msg
     robot, step, bad = k % count, k % 30, k % 3
     if cls is Hello:
         return Hello(sender_id=robot, row=robot // cols, col=robot % cols, phase=0)
@@ -142,7 +153,7 @@ def main() -> int:
     guessed[f"/{run}/swarm/heartbeat"] = Heartbeat
     for tile in tiles:
         for part in ("edge", "core"):
-            for kind, cls in zip(KINDS, ARRAYS, strict=True):
+            for kind, cls in zip(KINDS, COLUMNS, strict=True):
                 guessed[f"/{run}/camo/tile_{tile.replace('-', '_')}/{part}/{kind}"] = cls
     for name, cls in guessed.items():
         publishers[name] = (node.create_publisher(cls, name, qos), cls)

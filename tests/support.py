@@ -13,6 +13,7 @@ import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import psutil
@@ -251,9 +252,33 @@ def bag_tool(module: str, *args: str, timeout: float = 120) -> subprocess.Comple
     return run_whole([sys.executable, "-m", f"camo_bag.{module}", *args], timeout)
 
 
-def robot_messages_in(bag, suffix: str) -> list:
+def unpacked(msg, kind: str) -> list[SimpleNamespace]:
+    """The robot messages in a decoded columns message of `kind` (`camo_msgs/Votes`, ...; by
+    rclpy, mcap_ros2 or rosbags), one per robot: sender_id, step, round, phase and the kind's
+    value fields (a value spread over several entries, as a vote's p, as a list)."""
+    from camo_nodes.topics.robot_messages import VALUE_COLUMNS
+
+    n = len(msg.sender_id)
+    rows = [
+        SimpleNamespace(
+            sender_id=int(msg.sender_id[k]),
+            step=int(msg.step[k]),
+            round=int(msg.round[k]),
+            phase=msg.phase,
+        )
+        for k in range(n)
+    ]
+    for name, _ in VALUE_COLUMNS[kind]:
+        column = list(getattr(msg, name))
+        width = len(column) // n if n else 0
+        for k, row in enumerate(rows):
+            setattr(row, name, column[k] if width == 1 else column[k * width : (k + 1) * width])
+    return rows
+
+
+def robot_messages_in(bag, suffix: str) -> list[SimpleNamespace]:
     """Every robot message a bag holds on the topics ending in `suffix` ("/vote"), unpacked from
-    their arrays."""
+    their columns."""
     from rclpy.serialization import deserialize_message
 
     from camo_bag.loader import read_messages, read_summary
@@ -262,9 +287,9 @@ def robot_messages_in(bag, suffix: str) -> list:
     types = {t.name: message_class(t.type) for t in read_summary(bag).topics}
     topics = [name for name in types if name.endswith(suffix)]
     return [
-        msg
+        row
         for m in read_messages(bag, topics)
-        for msg in deserialize_message(m.data, types[m.topic]).messages
+        for row in unpacked(deserialize_message(m.data, types[m.topic]), m.topic.rsplit("/")[-1])
     ]
 
 

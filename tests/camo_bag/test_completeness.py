@@ -12,6 +12,7 @@ from support import BAG_COLS, BAG_ROWS, BAG_RUN, SWARM, bag_tool
 from camo_bag.completeness import examine, message_fields
 from camo_bag.container import BagWriter, TopicInfo
 from camo_bag.loader import read_messages, read_summary
+from camo_core.algorithm.robot_io import PHASE_OF
 
 
 def copy_bag(source, target, drop=lambda topic, data: False, edit=None) -> None:
@@ -33,45 +34,73 @@ def copy_bag(source, target, drop=lambda topic, data: False, edit=None) -> None:
 
 
 def without_votes_of(robots: set[int]):
-    """An `edit` for copy_bag: vote arrays without those robots' votes."""
+    """An `edit` for copy_bag: vote columns without those robots' votes."""
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from camo_msgs.msg import VoteArray
+    from camo_msgs.msg import Votes
+    from camo_nodes.topics.robot_messages import Columns, unpack
 
     def edit(topic, data):
         if not topic.endswith("/vote"):
             return [data]
-        array = deserialize_message(data, VoteArray)
-        array.messages = [v for v in array.messages if v.sender_id not in robots]
-        return [serialize_message(array)] if array.messages else []
+        kept = Columns("vote")
+        for message in unpack("vote", deserialize_message(data, Votes)):
+            if message.sender not in robots:
+                kept.add(message)
+        return [serialize_message(kept.take())] if len(kept) else []
 
     return edit
 
 
-def older_layout(source, target) -> None:
-    """The bag as camo recorded it before arrays: one robot message per bag message, typed
-    camo_msgs/msg/Vote (and so on)."""
+def single(message):
+    """One robot's message as older camo sent it (`camo_msgs/Vote`, ...)."""
+    from camo_nodes.topics.robot_messages import MESSAGE_TYPES
+
+    msg = MESSAGE_TYPES[message.kind](sender_id=message.sender, round=message.round)
+    msg.step, msg.phase, value = message.step, PHASE_OF[message.kind], message.value
+    if message.kind == "vote":
+        msg.p, msg.histogram, msg.degree = value[0][:3], value[0][3:], value[1]
+    elif message.kind == "hello":
+        msg.row, msg.col = value
+    elif message.kind == "color":
+        msg.value = value
+    else:
+        msg.state = value
+    return msg
+
+
+def older_layout(source, target, arrays: bool) -> None:
+    """The bag as older camo recorded it: its robot messages in arrays (`camo_msgs/VoteArray`
+    of `camo_msgs/Vote`s, and so on) or, `arrays` false, one per bag message."""
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from camo_bag.ledger import ARRAY_KINDS
+    from camo_bag.ledger import COLUMN_KINDS
     from camo_bag.msgdefs import message_class, message_definition
+    from camo_nodes.topics.robot_messages import ARRAY_TYPES, MESSAGE_TYPES, unpack
 
     summary = read_summary(source)
     writer = BagWriter(target, library="test")
-    arrays = {}
+    columns = {}
     for topic in summary.topics:
-        type_name = topic.type
-        if type_name in ARRAY_KINDS:
-            arrays[topic.name] = message_class(type_name)
-            type_name = type_name.removesuffix("Array")
-        definition = message_definition(type_name) if topic.name in arrays else topic.definition
+        type_name, definition = topic.type, topic.definition
+        if type_name in COLUMN_KINDS:
+            kind = COLUMN_KINDS[type_name]
+            columns[topic.name] = (kind, message_class(type_name))
+            cls = (ARRAY_TYPES if arrays else MESSAGE_TYPES)[kind]
+            type_name = f"camo_msgs/msg/{cls.__name__}"
+            definition = message_definition(type_name)
         writer.add_topic(TopicInfo(topic.name, type_name, topic.qos, ""), definition)
     for message in read_messages(source):
-        cls = arrays.get(message.topic)
-        singles = [message.data] if cls is None else [
-            serialize_message(m) for m in deserialize_message(message.data, cls).messages
-        ]  # fmt: skip
-        for data in singles:
+        if message.topic not in columns:
+            written = [message.data]
+        else:
+            kind, cls = columns[message.topic]
+            singles = [single(m) for m in unpack(kind, deserialize_message(message.data, cls))]
+            if arrays:
+                written = [serialize_message(ARRAY_TYPES[kind](messages=singles))]
+            else:
+                written = [serialize_message(m) for m in singles]
+        for data in written:
             writer.write(message.topic, data, message.log_time, message.publish_time)
     writer.close()
 
@@ -119,12 +148,14 @@ def test_a_bag_that_lost_robots_votes_is_incomplete_and_render_refuses_it(record
     copy_bag(bag, tmp_path / "cut", edit=without_votes_of(lost))
     gaps = examine(tmp_path / "cut").gaps()
     assert gaps == ["round 0: 4 robots lack votes: 3-5, 11"]
-    # The same in a bag of the older layout, whose fields are read from the CDR bytes.
-    older_layout(bag, tmp_path / "older")
-    assert examine(tmp_path / "older").gaps() == []
-    again = bag_tool("render", str(tmp_path / "older"), "--out", str(tmp_path / "older_r"))
-    assert again.returncode == 0, again.stderr
-    assert strict_json(tmp_path / "older_r" / "summary.json")["final"] == live["final"]
+    # Bags of older camo: arrays of robot messages, and one robot message a bag message (whose
+    # fields are read from the CDR bytes).
+    for name, arrays in (("arrays", True), ("older", False)):
+        older_layout(bag, tmp_path / name, arrays)
+        assert examine(tmp_path / name).gaps() == []
+        again = bag_tool("render", str(tmp_path / name), "--out", str(tmp_path / f"{name}_r"))
+        assert again.returncode == 0, again.stderr
+        assert strict_json(tmp_path / f"{name}_r" / "summary.json")["final"] == live["final"]
     copy_bag(
         tmp_path / "older",
         tmp_path / "older_cut",

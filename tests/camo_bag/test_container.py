@@ -13,6 +13,7 @@ from support import (
     SWARM,
     bag_tool,
     tile_range,
+    unpacked,
 )
 
 
@@ -36,10 +37,10 @@ def test_bag_is_a_rosbag2_folder_with_an_indexed_ros2_mcap(recorded):
     assert summary.chunk_indexes and all(c.compression == "zstd" for c in summary.chunk_indexes)
     assert {s.encoding for s in summary.schemas.values()} == {"ros2msg"}
     votes = next(
-        s for s in summary.schemas.values() if s.name == "camo_msgs/msg/VoteArray"
+        s for s in summary.schemas.values() if s.name == "camo_msgs/msg/Votes"
     ).data.decode()
-    assert votes.startswith("# Several robots' votes, sent together")
-    assert "\n" + "=" * 80 + "\nMSG: camo_msgs/Vote\n# Phase 2 (consensus)" in votes
+    assert votes.startswith("# Phase 2 (consensus): the senders' pattern votes p")
+    assert "\nfloat64[] p\n" in votes
     assert "\n" + "=" * 80 + "\nMSG: std_msgs/Header\n" in votes
     assert "\nMSG: builtin_interfaces/Time\n" in votes
     for channel in summary.channels.values():
@@ -63,7 +64,7 @@ def test_mcap_ros2_decoder_reads_every_robot_message(recorded):
             stream, decoder_factories=[DecoderFactory()]
         ).iter_decoded_messages():
             if channel.topic.endswith("/vote"):
-                for vote in msg.messages:
+                for vote in unpacked(msg, "vote"):
                     assert vote.sender_id in tile_range(channel.topic)  # a tile's robots only
                     assert abs(sum(vote.p) - 1.0) < 1e-9 and vote.phase == 2  # as Vote.msg says
                     votes.setdefault(vote.sender_id, []).append(vote.step)
@@ -90,13 +91,14 @@ def test_rosbags_anyreader_reads_the_bag_folder(recorded):
         tiles = sorted(t for t in types if "/tile_" in t)
         # Two processes, two tiles of 15 robots: edge and core topics of four kinds each.
         assert {t.split("/")[3] for t in tiles} == {"tile_0_14", "tile_15_29"} and len(tiles) == 16
-        assert all(types[t] == f"camo_msgs/msg/{t.rsplit('/', 1)[1].title()}Array" for t in tiles)
+        names = {"hello": "Hellos", "color": "Colors", "vote": "Votes", "state": "States"}
+        assert all(types[t] == f"camo_msgs/msg/{names[t.rsplit('/', 1)[1]]}" for t in tiles)
         sent: dict[tuple[int, str], int] = {}
         sensed = {}
         robots = [c for c in reader.connections if "/tile_" in c.topic]
         for connection, _, raw in reader.messages(connections=robots):
             kind = connection.topic.rsplit("/", 1)[1]
-            for msg in reader.deserialize(raw, connection.msgtype).messages:
+            for msg in unpacked(reader.deserialize(raw, connection.msgtype), kind):
                 sent[(msg.sender_id, kind)] = sent.get((msg.sender_id, kind), 0) + 1
                 if kind == "color":
                     sensed[msg.sender_id] = msg.value

@@ -17,6 +17,7 @@ from support import (
     finished,
     robot_messages_in,
     start_run,
+    unpacked,
     wait_for_line,
 )
 
@@ -112,7 +113,7 @@ def test_recorder_killed_with_sigkill_mid_run_leaves_chunks_that_repair_recovers
         votes = [c for c in reader.connections if c.topic.endswith("/vote")]
         assert votes, "no vote topic recovered"
         for connection, _, raw in reader.messages(connections=votes):
-            for msg in reader.deserialize(raw, connection.msgtype).messages:
+            for msg in unpacked(reader.deserialize(raw, connection.msgtype), "vote"):
                 steps.setdefault(msg.sender_id, []).append(msg.step)
     # Each finished chunk holds what arrived before it: a robot's votes from step 0 on, without
     # gaps (the recorder may lag a fast swarm, so not every robot need have reached a finished

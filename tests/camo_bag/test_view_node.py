@@ -56,7 +56,7 @@ def test_foxglove_client_lists_subscribes_and_decodes_a_live_run(tmp_path, foxgl
     )
     (background,) = [t for t in channels if t.endswith("/camo/background")]
     assert channels[background]["schemaName"] == "sensor_msgs/msg/Image"
-    assert any(c["schemaName"] == "camo_msgs/msg/VoteArray" for c in channels.values())
+    assert any(c["schemaName"] == "camo_msgs/msg/Votes" for c in channels.values())
     decoded = {topic.split("/", 2)[2]: value for topic, value in seen["decoded"].items()}
     image = decoded["camo/background"]
     assert image["encoding"] in ("mono8", "bgr8") and image["width"] > 0
@@ -67,10 +67,10 @@ def test_foxglove_client_lists_subscribes_and_decodes_a_live_run(tmp_path, foxgl
         and status["p"]["length"] == 3 * status["sender_id"]["length"]
     )
     assert json.loads(decoded["swarm/params"]["data"])["params"]["rows"] == 6
-    arrays = [v for topic, v in decoded.items() if topic.endswith("/edge/vote")]
-    votes = [array["messages"]["first"] for array in arrays]
-    assert votes and all(vote["p"] == {"length": 3} and vote["phase"] == 2 for vote in votes)
-    assert all(0 <= vote["sender_id"] < 36 for vote in votes)
+    votes = [v for topic, v in decoded.items() if topic.endswith("/edge/vote")]  # as columns
+    assert votes and all(v["phase"] == 2 and v["sender_id"]["length"] >= 1 for v in votes)
+    assert all(v["p"]["length"] == 3 * v["sender_id"]["length"] for v in votes)
+    assert all(v["step"] == v["round"] == v["degree"] == v["sender_id"] for v in votes)
     # Watching changed nothing: the run is the simulator's.
     assert run.returncode == 0, err[-2000:]
     assert "camo view: forwarded" in err

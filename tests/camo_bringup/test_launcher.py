@@ -782,11 +782,11 @@ def test_the_swarm_with_threshold_auto_equals_the_simulator_and_its_bag_holds_th
 def test_the_swarm_with_orientation_any_threshold_auto_and_levels_equals_the_simulator(tmp_path):
     import cv2
     from rclpy.serialization import deserialize_message
-    from support import bag_tool
+    from support import bag_tool, unpacked
 
     from camo_bag.loader import read_messages
     from camo_core.algorithm.backgrounds import stripes
-    from camo_msgs.msg import RelayArray
+    from camo_msgs.msg import Relays
 
     image = tmp_path / "stripes.png"
     cv2.imwrite(str(image), stripes(30, period=64))
@@ -804,16 +804,16 @@ def test_the_swarm_with_orientation_any_threshold_auto_and_levels_equals_the_sim
     assert "pattern: stripes at" in run.stdout
     info = bag_tool("cli", "info", str(tmp_path / "bag"))
     relays = [x for x in info.stdout.splitlines() if "/relay " in x]
-    assert relays and all("camo_msgs/msg/RelayArray" in x for x in relays)
+    assert relays and all("camo_msgs/msg/Relays" in x for x in relays)
     bag = tmp_path / "bag"
     rendered = bag_tool("render", str(bag), "--out", str(tmp_path / "rendered"))
     assert rendered.returncode == 0, rendered.stderr
     assert_like_sim(tmp_path / "rendered", tmp_path / "sim")
-    # The bag holds every relay (16 x 16 robots, 10 steps each), packed in arrays, and replay
-    # publishes those arrays again, typed from the bag.
+    # The bag holds every relay (16 x 16 robots, 10 steps each), packed as columns, and replay
+    # publishes those messages again, typed from the bag.
     topics = [next(w for w in x.split() if w.endswith("/relay")) for x in relays]
-    arrays = [deserialize_message(m.data, RelayArray) for m in read_messages(bag, topics)]
-    sent = {(r.sender_id, r.step) for array in arrays for r in array.messages}
+    arrays = [deserialize_message(m.data, Relays) for m in read_messages(bag, topics)]
+    sent = {(r.sender_id, r.step) for array in arrays for r in unpacked(array, "relay")}
     assert sent == {(robot, step) for robot in range(16 * 16) for step in range(10)}
     assert len(arrays) < len(sent) / 4  # several robots' relays in one DDS message
     replay = bag_tool("replay", str(bag), "--rate", "50", "--topics", *topics,

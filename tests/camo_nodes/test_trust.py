@@ -68,6 +68,7 @@ def test_a_run_under_attack_equals_the_simulator_and_reports_what_it_refused(tmp
     assert refused["total"] > 0 and sum(refused["by_reason"].values()) == refused["total"]
     assert "received messages refused" in out
     assert "not from the process hosting its sender" in refused["by_reason"]
+    assert "columns of different lengths" in refused["by_reason"]  # refused whole, counted once
     assert "a background that is not the run's next one" in refused["by_reason"]
 
 

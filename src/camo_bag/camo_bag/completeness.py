@@ -20,7 +20,7 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from camo_bag.container import BagError, BagMessage, BagSummary, damaged
-from camo_bag.ledger import ARRAY_KINDS, SINGLE_KINDS, Ledger
+from camo_bag.ledger import ARRAY_KINDS, COLUMN_KINDS, SINGLE_KINDS, Ledger
 from camo_bag.loader import Bag, open_bag
 from camo_bag.msgdefs import full_name, message_class, message_definition
 from camo_core.algorithm.protocol import DONE
@@ -29,7 +29,10 @@ from camo_core.algorithm.status_rows import rows_of_message
 from camo_core.exceptions import CamoError
 from camo_msgs.msg import RobotStatus, StatusArray
 from camo_nodes.topics.names import PARAMS_SUFFIX
+from camo_nodes.topics.robot_messages import senders_rounds_steps
 from camo_nodes.topics.runs import result_from
+
+MANY_KINDS = {**COLUMN_KINDS, **ARRAY_KINDS}  # types of many robot messages a bag message
 
 
 def message_fields(kind: str, data: bytes) -> tuple[int, int, int]:
@@ -114,8 +117,10 @@ class Topics:
     background: str
     result: str
     run: str
-    kinds: dict[str, str]  # robot message topics of the older layout: their kind
-    arrays: dict[str, tuple[str, type]]  # robot message array topics: kind, class
+    kinds: dict[str, str]  # topics of one robot message a bag message (oldest camo): their kind
+    arrays: dict[
+        str, tuple[str, type]
+    ]  # topics of many robot messages (columns, arrays): kind, class
     decode_status: object
 
 
@@ -127,8 +132,8 @@ def ledger_one(ledger: Ledger, topics: Topics, message: BagMessage) -> None:
         ledger_message(ledger, kind, *message_fields(kind, data))
     elif topic in topics.arrays:
         kind, cls = topics.arrays[topic]
-        for msg in deserialize_message(data, cls).messages:
-            ledger_message(ledger, kind, msg.sender_id, msg.round, msg.step)
+        for sender, round_index, step in senders_rounds_steps(deserialize_message(data, cls)):
+            ledger_message(ledger, kind, sender, round_index, step)
     elif topic == topics.status:
         for robot, index in done_reports(topics.decode_status(data)):
             ledger.reported_done(robot, index)
@@ -158,9 +163,9 @@ def examine(path: str | Path | Bag) -> Ledger:
         if full_name(t.type) in SINGLE_KINDS
     }
     arrays = {
-        t.name: (ARRAY_KINDS[full_name(t.type)], message_class(t.type))
+        t.name: (MANY_KINDS[full_name(t.type)], message_class(t.type))
         for t in summary.topics
-        if full_name(t.type) in ARRAY_KINDS
+        if full_name(t.type) in MANY_KINDS
     }
     decode_status = status_decoder(summary, status)
     ledger = Ledger()

@@ -20,20 +20,22 @@ from dataclasses import dataclass, field
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import messages_per_round
 from camo_core.algorithm.run_setup import contiguous
-from camo_nodes.topics.robot_messages import MESSAGE_TYPES
+from camo_nodes.topics.robot_messages import ARRAY_TYPES, COLUMN_TYPES, MESSAGE_TYPES
 
 MAX_STEP = 1_000_000  # before the run's parameters are known: no step of a run is beyond this
-# The robots' message types, and the kind of message each carries. A tile topic carries arrays
-# of them (one DDS message for what a tile's robots sent since the last write); bags recorded
-# before that hold one robot message per bag message.
-SINGLE_KINDS = {f"camo_msgs/msg/{cls.__name__}": kind for kind, cls in MESSAGE_TYPES.items()}
-ARRAY_KINDS = {f"{name}Array": kind for name, kind in SINGLE_KINDS.items()}
-ROBOT_KINDS = {**SINGLE_KINDS, **ARRAY_KINDS}
 
 
-def robot_messages(type_name: str, msg) -> list:
-    """The robot messages in one decoded bag message of a robot type."""
-    return msg.messages if type_name in ARRAY_KINDS else [msg]
+def _kinds(types: dict) -> dict[str, str]:
+    return {f"camo_msgs/msg/{cls.__name__}": kind for kind, cls in types.items()}
+
+
+# The robots' message types, and the kind of message each carries. A tile topic carries a
+# tile's messages as columns (one DDS message for what its robots sent since the last write);
+# bags of older camo hold arrays of robot messages, or one robot message per bag message.
+COLUMN_KINDS = _kinds(COLUMN_TYPES)
+ARRAY_KINDS = _kinds(ARRAY_TYPES)
+SINGLE_KINDS = _kinds(MESSAGE_TYPES)
+ROBOT_KINDS = {**COLUMN_KINDS, **ARRAY_KINDS, **SINGLE_KINDS}
 
 
 @dataclass

@@ -39,13 +39,14 @@ from camo_bag import msgdefs, qos_yaml
 from camo_bag.completeness import done_reports
 from camo_bag.container import BagWriter, TopicInfo
 from camo_bag.graph_topics import new_topics, taking_qos
-from camo_bag.ledger import ROBOT_KINDS, Ledger, robot_messages
+from camo_bag.ledger import ROBOT_KINDS, Ledger
 from camo_core.cli.options import Parser, seconds
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.results.folders import new_folder_problem
 from camo_core.shutdown import StopFlag
 from camo_nodes.topics.names import RunTopics, check_run_id
 from camo_nodes.topics.qos import LATCHED
+from camo_nodes.topics.robot_messages import RaggedColumns, senders_rounds_steps
 from camo_nodes.topics.runs import result_from, run_ended, setup_from, wait_for_run
 from camo_nodes.topics.startup import LEAN_NODE, add_network_options, network_env, start_ros
 
@@ -171,8 +172,15 @@ class RecorderNode(Node):
         else:
             type_name = msgdefs.full_name(self.bag.topics[topic].type)
             kind = ROBOT_KINDS[type_name]
-            for robot_msg in robot_messages(type_name, msg):
-                ledger.message(kind, robot_msg.sender_id, robot_msg.round, robot_msg.step)
+            try:
+                messages = senders_rounds_steps(msg)
+            except RaggedColumns:  # recorded as it came; a stranger's, or damaged: not counted
+                self.get_logger().warning(
+                    f"{topic}: columns of different lengths", throttle_duration_sec=10.0
+                )
+                return
+            for sender, round_index, step in messages:
+                ledger.message(kind, sender, round_index, step)
 
     def finished(self) -> bool:
         """The run's result is recorded, and all it says the bag must hold."""

@@ -9,8 +9,8 @@ Each step every robot publishes a `camo_msgs/Vote` as a DDS message of its own
 once every remote vote of that step that its robots need has arrived. No robot
 nodes, no protocol, no statuses, no monitor. The swarm packs its messages
 (`transport.py`); so the long-run rate is also measured against a *packed*
-bare exchange, whose processes publish each step one `camo_msgs/VoteArray`
-per tile topic, as the swarm's do at best.
+bare exchange, whose processes publish each step one `camo_msgs/Votes` per
+tile topic, packed as the swarm packs them, as the swarm's do at best.
 
 Figures: set-up (launch until every robot has voted; bare: until the
 processes are matched), steps per second (every robot voting to every robot
@@ -39,12 +39,14 @@ from camo_bringup.run_config import default_procs, split_cells
 from camo_core.algorithm.backgrounds import SIZE, forest
 from camo_core.algorithm.grid import neighbor_ids
 from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.robot_io import Message
 from camo_core.cli.options import Parser
 from camo_core.exceptions import EXIT_USAGE, CamoError
 from camo_core.inputs.numeric import integer
-from camo_msgs.msg import Vote, VoteArray
+from camo_msgs.msg import Vote, Votes
 from camo_nodes.topics.names import RunTopics, tile_name
 from camo_nodes.topics.qos import history_qos
+from camo_nodes.topics.robot_messages import Columns
 from camo_nodes.topics.startup import LEAN_NODE, start_ros
 from camo_nodes.transport import edge_of, listener_qos
 
@@ -53,7 +55,7 @@ PACKED_RUN = "bench_packed"
 
 
 def bare_worker(side: int, steps: int, block: int, procs: int, packed: int = 0) -> dict:
-    """One process of the bare exchange (block `block` of `procs`; `packed`: a VoteArray per
+    """One process of the bare exchange (block `block` of `procs`; `packed`: one Votes per
     topic and step); its timings."""
     started = time.monotonic()
     params = CamoParams(rows=side, cols=side, consensus_steps=steps)
@@ -69,7 +71,7 @@ def bare_worker(side: int, steps: int, block: int, procs: int, packed: int = 0) 
         if n is not None and n not in hosted
     }
     topics = RunTopics(PACKED_RUN if packed else BARE_RUN)
-    wire = VoteArray if packed else Vote
+    wire = Votes if packed else Vote
     start_ros("camo bench ros", [], signal_handler_options=SignalHandlerOptions.NO)  # same footing
     node = rclpy.create_node(f"bare_{block}", **LEAN_NODE)
     qos = history_qos(len(mine) * (steps + 4))
@@ -84,9 +86,10 @@ def bare_worker(side: int, steps: int, block: int, procs: int, packed: int = 0) 
         if msg.sender_id in needed:
             got[msg.step] = got.get(msg.step, 0) + 1
 
-    def on_votes(msg: VoteArray) -> None:
-        for vote in msg.messages:
-            on_vote(vote)
+    def on_votes(msg: Votes) -> None:
+        for sender, step in zip(msg.sender_id.tolist(), msg.step.tolist(), strict=True):
+            if sender in needed:
+                got[step] = got.get(step, 0) + 1
 
     peers = [b for b in blocks if b is not mine and any(n in b for n in needed)]
     for peer in peers:
@@ -103,24 +106,20 @@ def bare_worker(side: int, steps: int, block: int, procs: int, packed: int = 0) 
     matched = time.monotonic()
     vote = Vote(p=[0.2, 0.3, 0.5], degree=8)
     parts = {"edge": [r for r in mine if r in edge], "core": [r for r in mine if r not in edge]}
-    arrays = {
-        part: VoteArray(messages=[Vote(p=[0.2, 0.3, 0.5], degree=8) for _ in robots])
-        for part, robots in parts.items()
-    }
+    columns = {part: Columns("vote") for part in parts}
     local = {}
     for step in range(steps):
         vote.step = step
         for part, robots in parts.items():
-            for k, robot in enumerate(robots):
+            for robot in robots:
                 local[robot] = step  # the in-memory hand-over to this process's robots
                 if packed:
-                    element = arrays[part].messages[k]
-                    element.sender_id, element.step = robot, step
+                    columns[part].add(Message("vote", robot, 0, step, ((0.2, 0.3, 0.5), 8)))
                 else:
                     vote.sender_id = robot
                     writers[part].publish(vote)
             if packed and robots:
-                writers[part].publish(arrays[part])
+                writers[part].publish(columns[part].take())
         while got.get(step, 0) < len(needed) and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
     done = time.monotonic()

@@ -5,9 +5,9 @@ row-major: bands of the grid). Each tile publishes on eight topics, one per
 message kind for its *edge* robots (those with a neighbour hosted elsewhere)
 and one per kind for the rest (its *core*), every message carrying its
 sender's id (`RunTopics.tile`). What a tile's robots send on one topic between
-two writes goes out as one DDS message, an array of them (`camo_msgs/VoteArray`,
-...): a DDS write costs four times what packing one more robot message into it
-does (docs/swarm.md). Edge topics are written between generations of
+two writes goes out as one DDS message, their columns (`camo_msgs/Votes`, ...,
+`robot_messages.py`): a DDS write costs many times what packing one more robot
+message into it does (docs/swarm.md). Edge topics are written between generations of
 deliveries (`pump`), core topics once per turn of the host's loop. A robot
 hosted by the same process as its neighbour gets the message handed over in
 memory, as rclcpp's intra-process communication does. A process subscribes
@@ -35,7 +35,6 @@ import time
 from collections import defaultdict
 from collections.abc import Callable, Iterable
 
-from builtin_interfaces.msg import Time
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -47,7 +46,6 @@ from camo_core.algorithm.mailbox import Mailbox
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import (
     NOTHING,
-    PHASE_OF,
     Message,
     Output,
     Report,
@@ -63,7 +61,7 @@ from camo_nodes.polled import PolledTopics
 from camo_nodes.rcl_take import PREFIX, publisher_gid
 from camo_nodes.topics.names import RunTopics, tile_name
 from camo_nodes.topics.qos import HEARTBEAT_READER, LATCHED, LATCHED_READER, history_qos
-from camo_nodes.topics.robot_messages import ARRAY_TYPES, MESSAGE_TYPES, fill, from_ros, stamp
+from camo_nodes.topics.robot_messages import COLUMN_TYPES, Columns, RaggedColumns, stamp, unpack
 from camo_nodes.trust import Conflict, Hosts, Rejections
 
 # Robot messages in one array at most: a process's pump can send several steps of thousands of
@@ -141,40 +139,25 @@ class Statuses:
 
 
 class Batch:
-    """What a tile's robots send on one topic, until the next flush: one array message, its
-    elements reused from send to send (cheaper than new messages)."""
+    """What a tile's robots send on one topic, until the next flush: one message of columns."""
 
     def __init__(self, writer, kind: str, edge: bool) -> None:
         self.writer = writer
-        self.kind = kind
         self.edge = edge  # read by other processes' robots (else by recorders and viewers only)
-        self.array = ARRAY_TYPES[kind]()
-        self.array.header.frame_id = "camo"
-        self.pool: list = []
-        self.count = 0
-        # Every element's stamp: the time the array's first message was packed (an array holds
-        # what its robots sent within one turn), set in place once per array.
-        self.stamp = Time()
+        self.columns = Columns(kind)
+
+    @property
+    def count(self) -> int:
+        return len(self.columns)
 
     def add(self, message: Message) -> bool:
         """Pack one message; True if the batch is now full."""
-        if not self.count:
-            self.stamp.sec, self.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
-        if self.count == len(self.pool):
-            element = MESSAGE_TYPES[self.kind](phase=PHASE_OF[self.kind])
-            element.header.frame_id = "camo"
-            element.header.stamp = self.stamp
-            self.pool.append(element)
-        fill(self.pool[self.count], message)
-        self.count += 1
-        return self.count >= MAX_BATCH
+        self.columns.add(message)
+        return len(self.columns) >= MAX_BATCH
 
     def flush(self) -> None:
-        if self.count:
-            self.array.messages = self.pool[: self.count]
-            stamp(self.array)
-            self.writer.publish(self.array)
-            self.count = 0
+        if len(self.columns):
+            self.writer.publish(self.columns.take())
 
 
 class Transport:
@@ -252,7 +235,7 @@ class Transport:
                 # An array holds at least one message: at most as many arrays as messages.
                 depth = len(members) * messages_per_robot(self.params, kind)
                 writer = self.node.create_publisher(
-                    ARRAY_TYPES[kind], self.topics.tile(name, part, kind), history_qos(depth)
+                    COLUMN_TYPES[kind], self.topics.tile(name, part, kind), history_qos(depth)
                 )
                 batch = Batch(writer, kind, part == "edge")
                 for robot in members:
@@ -331,24 +314,34 @@ class Transport:
             for kind in self.kinds:
                 topic = self.topics.tile(name, "edge", kind)
                 handle = self._robot_messages(kind)
-                self.listen(ARRAY_TYPES[kind], topic, listener_qos(), handle, EDGE_TAKE)
+                self.listen(COLUMN_TYPES[kind], topic, listener_qos(), handle, EDGE_TAKE)
 
     def _robot_messages(self, kind: str):
-        cls = ARRAY_TYPES[kind]
+        cls = COLUMN_TYPES[kind]
 
         def handle(data: bytes, gid: bytes) -> None:
-            for msg in deserialize_message(data, cls).messages:
-                self._robot_message(kind, msg, gid)  # queued: poll() hands them over
+            msg = self.rejected.decoded(data, cls, gid, f"a tile's {kind} messages")
+            if msg is None:
+                return
+            problem = phase_problem(kind, msg.phase)
+            try:
+                messages = [] if problem else unpack(kind, msg)
+            except RaggedColumns as exc:
+                problem = str(exc)
+            if problem:  # the whole message: none of its columns can be trusted
+                self.rejected.refuse(problem, gid, f"a tile's {kind} messages")
+                return
+            for message in messages:
+                self._robot_message(message, gid)  # queued: poll() hands them over
 
         return handle
 
-    def _robot_message(self, kind: str, msg, gid: bytes) -> None:
-        sender = msg.sender_id
+    def _robot_message(self, message: Message, gid: bytes) -> None:
+        sender, kind = message.sender, message.kind
         if not self.trusted.speaks_for(gid, sender):
             self.rejected.refuse("not from the process hosting its sender", gid, f"robot {sender}")
             return
-        message = from_ros(kind, msg)
-        problem = phase_problem(kind, msg.phase) or message_problem(message, self.params)
+        problem = message_problem(message, self.params)
         key = (kind, sender, message.round, message.step)
         if problem is None and key in self._seen:
             if self._seen[key] == message.value:
