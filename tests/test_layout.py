@@ -155,12 +155,20 @@ def test_camo_core_is_layered_by_job():
 
 
 def code_strings(path: Path) -> list[str]:
-    """The string constants of a module's code, its docstrings left out."""
+    """The string constants of a module's code, its docstrings and `__slots__` (attribute
+    names) left out."""
     tree = ast.parse(path.read_text())
     docs = {
         id(node.value)
         for node in ast.walk(tree)
         if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)
+    }
+    docs |= {
+        id(constant)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Assign)
+        and any(isinstance(t, ast.Name) and t.id == "__slots__" for t in node.targets)
+        for constant in ast.walk(node.value)
     }
     return [
         node.value

@@ -24,7 +24,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from camo_core.algorithm.layout import layout_for, sense_at
 from camo_core.algorithm.params import MAX_SIDE, CamoParams, ParameterError
-from camo_core.algorithm.protocol import StepProtocol
+from camo_core.algorithm.protocol import DUE_ONLY_LATER, StepProtocol
 from camo_core.algorithm.robot_io import NOTHING, Display, Output, Sensor
 from camo_core.algorithm.run_setup import ProtocolParams, RunSetup
 from camo_core.algorithm.sensing import ProjectedSensor, Projection
@@ -73,10 +73,13 @@ class RobotNode(Node):
         super().__init__(name, namespace=transport.topics.robot_namespace, **node_kwargs)
         self.protocol = protocol
         self.transport = transport
+        # Looked up once: used every step.
+        self._send_message, self._report_status = transport.send, transport.report
         self.clock = clock
         # Its host's tick schedule, told when the robot stepped: a step can bring its deadline
         # nearer (out of discovery, whose timeout is longer).
         self.stepped: Callable[[float], None] = lambda now: None
+        self._phase_told: int | None = None  # the phase it was in when it last told it
         # The transport keeps the robot's messages in the mailbox its robots share, wakes the
         # protocol when one came for it, and hands what the protocol answers to this node.
         transport.add(core.id, protocol.listens_to(), protocol.wake, self._emit)
@@ -108,13 +111,19 @@ class RobotNode(Node):
     def _emit(self, out: Output, now: float) -> None:
         if out is NOTHING:
             return
-        self.stepped(now)
+        phase = self.protocol.phase
+        if phase != self._phase_told or phase not in DUE_ONLY_LATER:
+            # Within consensus and formation its due only moves later: the schedule, told on
+            # entering the phase, ticks it at the earlier due and queues it again (ticks.py).
+            self._phase_told = phase
+            self.stepped(now)
         for warning in out.warnings:
             self.get_logger().warning(warning)
         for report in out.reports:
-            self.transport.report(report)
+            self._report_status(report)
+        send = self._send_message
         for message in out.send:
-            self.transport.send(message)
+            send(message)
 
 
 # Between phase changes a robot reports every 0.25 s at most, and a process's robots together

@@ -138,26 +138,17 @@ class Statuses:
         self.written = time.monotonic()
 
 
-class Batch:
+class Batch(Columns):
     """What a tile's robots send on one topic, until the next flush: one message of columns."""
 
     def __init__(self, writer, kind: str, edge: bool) -> None:
+        super().__init__(kind)
         self.writer = writer
         self.edge = edge  # read by other processes' robots (else by recorders and viewers only)
-        self.columns = Columns(kind)
-
-    @property
-    def count(self) -> int:
-        return len(self.columns)
-
-    def add(self, message: Message) -> bool:
-        """Pack one message; True if the batch is now full."""
-        self.columns.add(message)
-        return len(self.columns) >= MAX_BATCH
 
     def flush(self) -> None:
-        if len(self.columns):
-            self.writer.publish(self.columns.take())
+        if self.sender:
+            self.writer.publish(self.take())
 
 
 class Transport:
@@ -359,11 +350,17 @@ class Transport:
         """To this process's robots at once; to the world at the next `flush()`."""
         key = (message.sender, message.kind)
         batch = self.batches[key]
-        if not batch.count:
+        if not batch.sender:
             (self._unsent_edges if batch.edge else self._unsent).append(batch)
-        if batch.add(message):
+        batch.add(message)
+        if len(batch.sender) >= MAX_BATCH:
             batch.flush()
-        self._put(message, key)  # its hearers are woken by the next pump: the host loop's
+        targets = self.targets.get(key)  # _put, written out: a robot's every step
+        if targets:
+            self.mailbox.put(
+                (message.round, message.kind, message.step), message.sender, message.value
+            )
+            self._woken.update(targets)  # woken by the next pump: the host loop's
 
     def flush(self) -> None:
         """Publish what was sent since the last flush: one array per topic (the host's loop calls

@@ -59,9 +59,50 @@ TICK = 0.05  # s between the host's ticks
 STALL = 0.5  # s: a tick this late means the robot's own process stalled
 RECHECK = 0.25  # s between asks, past a deadline, whether the late neighbours are still alive
 NOBODY: frozenset[int] = frozenset()  # heard for a kind the robot does not listen to
+# Phases in which a step only moves the robot's `due()` later (its wait starts anew, with the
+# same timeout): a tick schedule told once in the phase need not be told of every step.
+DUE_ONLY_LATER = frozenset({CONSENSUS, FORMATION})
 
 
 class StepProtocol:
+    # Attributes in slots: a process steps thousands of robots in turn, and a robot's state
+    # packed in its object (no per-robot dict) is fewer memory lines to fetch each step.
+    __slots__ = (
+        "_awaiting",
+        "_awaiting_key",
+        "_expected_ids",
+        "_out",
+        "_silent_since",
+        "_vote_slots",
+        "background_up",
+        "core",
+        "deadlines",
+        "discovery_timeout",
+        "display",
+        "energy_step",
+        "hardware_wait",
+        "heard_from",
+        "kinds",
+        "known_alive",
+        "last_report",
+        "listen",
+        "mailbox",
+        "newer_background",
+        "params",
+        "phase",
+        "relayed",
+        "report_period",
+        "round",
+        "sensor",
+        "silent",
+        "slot_of",
+        "started",
+        "step",
+        "step_timeout",
+        "traces",
+        "wait_started",
+    )
+
     def __init__(
         self,
         params: CamoParams,
@@ -116,6 +157,7 @@ class StepProtocol:
         self.energy_step: int | None = None  # --threshold auto: the averaging step, once described
         self.kinds = kinds_of(params)
         self.listen = listen_slots(params, self.core.near, len(self.core.neighbors))
+        self._vote_slots = self.listen["vote"]
         # Per kind, the neighbours heard for it (what a delivery is checked against).
         self.heard_from = {
             kind: frozenset(n for n, s in self.slot_of.items() if s < slots)
@@ -240,14 +282,15 @@ class StepProtocol:
 
     def _step_once(self, now: float, ticking: bool) -> bool:
         """Take one step if it may be taken; False when the robot must wait."""
-        if self.phase == DISCOVERY:
-            return self._discovery_step(now, ticking)
-        if self.phase == SENSING:
-            return self._sensing_step(now, ticking)
-        if self.phase == CONSENSUS:
+        phase = self.phase  # the phases of most steps first
+        if phase == CONSENSUS:
             return self._consensus_step(now, ticking)
-        if self.phase == FORMATION:
+        if phase == FORMATION:
             return self._formation_step(now, ticking)
+        if phase == DISCOVERY:
+            return self._discovery_step(now, ticking)
+        if phase == SENSING:
+            return self._sensing_step(now, ticking)
         if self.newer_background:  # done, and a new background is up
             self._start_next_round(now)
             return True
@@ -318,15 +361,18 @@ class StepProtocol:
             self._report(now, forced=True)
             self._send("state", 0, core.state)
             return True
-        pending = self._waiting_for("vote", self.step, self.listen["vote"])
-        if not self._ready(pending, self.step_timeout, now, ticking):
+        # Most of a robot's steps are these: what the helpers do, partly written out.
+        step, slots = self.step, self._vote_slots
+        pending = self._waiting_for("vote", step, slots)
+        if pending and not self._ready(pending, self.step_timeout, now, ticking):
             return False
-        core.consensus(self.step, self._take("vote", self.step, self.listen["vote"]))
-        self.traces.p.extend(core.pattern_p)
-        self._next(CONSENSUS, self.step + 1, now)
+        p = core.consensus(step, self._take("vote", step, slots))
+        self.traces.p.extend(p[:3])
+        self.step = step = step + 1  # _next(CONSENSUS, step + 1, now)
+        self.wait_started, self._awaiting = now, None
         self._report(now)
-        if self.step < params.consensus_steps:
-            self._send_vote()
+        if step < params.consensus_steps:
+            self._out.send.append(Message("vote", core.id, self.round, step, (p, core.degree)))
         return True
 
     def _formation_step(self, now: float, ticking: bool) -> bool:
@@ -436,8 +482,7 @@ class StepProtocol:
     def _take(self, kind: str, step: int, slots: int) -> list:
         """The step's messages by slot (None: none came), taken out of the mailbox."""
         box = self.mailbox.take((self.round, kind, step))
-        neighbors = self.core.neighbors
-        return [box.get(neighbors[s]) for s in range(slots)]
+        return list(map(box.get, self.core.neighbors[:slots]))  # a slot's None finds nothing
 
     def _next(self, phase: int, step: int, now: float) -> None:
         self.phase, self.step = phase, step

@@ -89,11 +89,13 @@ class RobotCore:
             self._arrivals[key] = cached
         return cached
 
-    def _filter(self, stream: int, step: int, delivered: Sequence, slots: range) -> list:
+    def _filter(self, stream: int, step: int, delivered: Sequence, slots: range) -> Sequence:
         """What was delivered from known neighbours whose message survived the link (a slot
         without a neighbour delivers nothing)."""
         arriving = self.arrivals(stream, step)
         if self._all_known and arriving is self._everyone:
+            if not slots.start and slots.stop == len(delivered):
+                return delivered  # all of it (read, never changed)
             return [delivered[s] for s in slots]
         return [
             delivered[s] if delivered[s] is not None and self.known[s] and arriving[s] else None
@@ -239,7 +241,7 @@ class RobotCore:
         self.state = state
         return self.state
 
-    def _form_layer(self, state: int, received: list, knights: list) -> int:
+    def _form_layer(self, state: int, received: Sequence, knights: Sequence) -> int:
         assert self.pattern is not None  # form() finishes consensus first
         if self.place is not None:
             if self._kernel is None:

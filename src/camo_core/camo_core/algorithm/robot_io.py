@@ -114,23 +114,28 @@ class Report:
 
 @dataclass
 class Traces:
-    """A robot's p before consensus step 0, 1, ... (flattened, 3 a step) and state before
-    formation step 0, 1, ..., and how many of each went into reports already."""
+    """A robot's p before consensus step p_from, p_from + 1, ... (flattened, 3 a step) and its
+    state before formation step state_from, ...: what no report carried yet. A report takes
+    them (`unreported`) and they are let go: a robot keeps a few steps' traces, not a round's,
+    whose floats would fill a big swarm's memory and push its working set out of the caches."""
 
     p: list[float] = field(default_factory=list)
     states: list[int] = field(default_factory=list)
-    reported: tuple[int, int] = (0, 0)
+    p_from: int = 0
+    state_from: int = 0
 
     def unreported(self) -> dict[str, Any]:
         """A Report's trace fields: every p and state not reported yet (now they are)."""
-        p_from, state_from = self.reported
-        self.reported = (len(self.p), len(self.states))
-        return {
-            "p_from": p_from // 3,
-            "p_trace": tuple(self.p[p_from:]),
-            "state_from": state_from,
-            "state_trace": tuple(self.states[state_from:]),
+        fields = {
+            "p_from": self.p_from,
+            "p_trace": tuple(self.p),
+            "state_from": self.state_from,
+            "state_trace": tuple(self.states),
         }
+        self.p_from += len(self.p) // 3
+        self.state_from += len(self.states)
+        self.p, self.states = [], []
+        return fields
 
 
 @dataclass

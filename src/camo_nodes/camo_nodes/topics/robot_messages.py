@@ -96,7 +96,9 @@ class Columns:
         self.round.append(message.round)
 
     def _add_vote(self, message: Message) -> None:
-        self._head(message)
+        self.sender.append(message.sender)  # _head, written out: a robot's every step
+        self.step.append(message.step)
+        self.round.append(message.round)
         p, degree = message.value
         self.values[0].append(degree)
         self.values[1].extend(p)
