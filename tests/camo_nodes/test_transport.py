@@ -9,7 +9,7 @@ import rclpy
 from support import ros_context
 
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.robot_io import NOTHING, Message, Output
+from camo_core.algorithm.robot_io import CONSENSUS, DONE, NOTHING, Message, Output
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.transport import MAX_STATUS_ROWS, STATUS_PERIOD, Statuses, Transport
 
@@ -22,8 +22,8 @@ class Writer:
         self.sent.append(msg)
 
 
-def report(robot: int) -> SimpleNamespace:
-    return SimpleNamespace(sender_id=robot, phase=2, step=1, sensed=9.0, p=(1.0, 0.0, 0.0))
+def report(robot: int, phase: int = CONSENSUS, step: int = 1) -> SimpleNamespace:
+    return SimpleNamespace(sender_id=robot, phase=phase, step=step, sensed=9.0, p=(1.0, 0.0, 0.0))
 
 
 def test_thousands_of_reports_go_out_as_a_few_arrays_and_no_more_often_than_the_period():
@@ -39,6 +39,24 @@ def test_thousands_of_reports_go_out_as_a_few_arrays_and_no_more_often_than_the_
     assert len(writer.sent[-1].sender_id) == 5 and writer.sent[-1].sender_id[-1] == 2 * 4096 + 4
     statuses.flush()  # nothing left: nothing written
     assert len(writer.sent) == 3
+
+
+@pytest.mark.parametrize(("phase", "step"), [(CONSENSUS, 0), (DONE, 10)])
+def test_a_report_of_voting_or_finishing_goes_out_at_the_turns_end_not_the_period(phase, step):
+    """Those reports time a run (timing.json): held for the period, a run shorter than it
+    measured no time at all."""
+    writer = Writer()
+    statuses = Statuses(writer, "w")
+    now = time.monotonic()
+    statuses.add(report(1))
+    statuses.flush(now)  # a step's report: it waits for the period
+    assert writer.sent == []
+    statuses.add(report(2, phase, step))
+    statuses.flush(now)
+    assert [list(m.sender_id) for m in writer.sent] == [[1, 2]]
+    statuses.add(report(3))  # and the period holds again after it
+    statuses.flush(now)
+    assert len(writer.sent) == 1
 
 
 def test_a_pump_stops_at_its_budget_and_the_next_ones_wake_every_robot_once():

@@ -45,6 +45,8 @@ from camo_core.algorithm.liveness import Liveness
 from camo_core.algorithm.mailbox import Mailbox
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import (
+    CONSENSUS,
+    DONE,
     NOTHING,
     Message,
     Output,
@@ -112,26 +114,38 @@ def edge_of(params: CamoParams, hosted: set[int], robots: Iterable[int]) -> set[
     return edge
 
 
+def times_a_round(report: Report) -> bool:
+    """A report that says when its robot voted (entered consensus) or finished: what a run's
+    timing is measured by, so it goes out at the end of the turn, not the period."""
+    return report.phase == DONE or (report.phase == CONSENSUS and report.step == 0)
+
+
 class Statuses:
     """What a process's robots reported since the last write: one StatusArray per STATUS_PERIOD
-    (or MAX_STATUS_ROWS reports), not a message per report."""
+    (or MAX_STATUS_ROWS reports), and at the end of a turn in which a robot voted or finished
+    (the array's stamp is when its robots said so), not a message per report."""
 
     def __init__(self, writer, name: str) -> None:
         self.writer = writer
         self.name = name
         self.reports: list[Report] = []
         self.written = time.monotonic()
+        self.timed = False  # a report that times the round waits in `reports`
 
     def add(self, report: Report) -> None:
         self.reports.append(report)
+        self.timed = self.timed or times_a_round(report)
         if len(self.reports) >= MAX_STATUS_ROWS:
             self.flush()
 
     def flush(self, now: float | None = None) -> None:
-        """Write what was reported (with `now`: only once STATUS_PERIOD has passed)."""
-        if not self.reports or (now is not None and now - self.written < STATUS_PERIOD):
+        """Write what was reported (with `now`: only once STATUS_PERIOD has passed, or a report
+        times the round)."""
+        if not self.reports:
             return
-        reports, self.reports = self.reports, []
+        if now is not None and not self.timed and now - self.written < STATUS_PERIOD:
+            return
+        reports, self.reports, self.timed = self.reports, [], False
         msg = StatusArray(name=self.name, **StatusRows.from_reports(reports).message_fields())
         stamp(msg)
         self.writer.publish(msg)
