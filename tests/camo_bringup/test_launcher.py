@@ -772,7 +772,7 @@ def test_the_swarm_with_threshold_auto_equals_the_simulator_and_its_bag_holds_th
     assert json.loads((tmp_path / "fixed" / "summary.json").read_text())["pattern"] == "mottled"
     info = bag_tool("cli", "info", str(tmp_path / "bag"))
     energies = [x for x in info.stdout.splitlines() if "/energy " in x]
-    assert energies and all("camo_msgs/msg/Energy" in x for x in energies)
+    assert energies and all("Type: camo_msgs/msg/Energies" in x for x in energies)
     rendered = bag_tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
     assert rendered.returncode == 0, rendered.stderr
     assert_like_sim(tmp_path / "rendered", tmp_path / "sim")

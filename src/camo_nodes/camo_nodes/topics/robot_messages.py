@@ -36,6 +36,7 @@ from camo_msgs.msg import (
     Votes,
 )
 
+# One robot's message of each kind (what bags of the oldest camo hold, one a bag message).
 MESSAGE_TYPES = {
     "hello": Hello,
     "color": Color,
