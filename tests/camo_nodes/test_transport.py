@@ -6,12 +6,19 @@ from types import SimpleNamespace
 
 import pytest
 import rclpy
+from rclpy.serialization import serialize_message
 from support import ros_context
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import CONSENSUS, DONE, NOTHING, Message, Output
 from camo_nodes.topics.names import RunTopics
-from camo_nodes.transport import MAX_STATUS_ROWS, STATUS_PERIOD, Statuses, Transport
+from camo_nodes.transport import (
+    MAX_STATUS_BYTES,
+    STATUS_PERIOD,
+    STATUS_ROW_BYTES,
+    Statuses,
+    Transport,
+)
 
 
 class Writer:
@@ -22,23 +29,42 @@ class Writer:
         self.sent.append(msg)
 
 
-def report(robot: int, phase: int = CONSENSUS, step: int = 1) -> SimpleNamespace:
-    return SimpleNamespace(sender_id=robot, phase=phase, step=step, sensed=9.0, p=(1.0, 0.0, 0.0))
+def report(robot: int, phase: int = CONSENSUS, step: int = 1, steps: int = 0) -> SimpleNamespace:
+    """A status report; `steps`: how many steps' p and states it carries."""
+    return SimpleNamespace(
+        sender_id=robot, phase=phase, step=step, sensed=9.0, p=(1.0, 0.0, 0.0),
+        p_from=step, p_trace=(1.0, 0.0, 0.0) * steps, state_trace=(), silent=(), palette=(),
+    )  # fmt: skip
 
 
 def test_thousands_of_reports_go_out_as_a_few_arrays_and_no_more_often_than_the_period():
     writer = Writer()
     statuses = Statuses(writer, "w")
     now = time.monotonic()
-    for robot in range(2 * MAX_STATUS_ROWS + 5):
+    rows = MAX_STATUS_BYTES // STATUS_ROW_BYTES
+    for robot in range(2 * rows + 5):
         statuses.add(report(robot))
-    assert [len(m.sender_id) for m in writer.sent] == [MAX_STATUS_ROWS, MAX_STATUS_ROWS]
+    assert [len(m.sender_id) for m in writer.sent] == [rows, rows]
     statuses.flush(now)  # within the period since the last array: not yet
     assert len(writer.sent) == 2
     statuses.flush(now + STATUS_PERIOD + 1.0)
-    assert len(writer.sent[-1].sender_id) == 5 and writer.sent[-1].sender_id[-1] == 2 * 4096 + 4
+    assert len(writer.sent[-1].sender_id) == 5 and writer.sent[-1].sender_id[-1] == 2 * rows + 4
     statuses.flush()  # nothing left: nothing written
     assert len(writer.sent) == 3
+
+
+def test_reports_with_long_traces_go_out_in_arrays_within_the_shared_memory_segment():
+    """A stopping process sends every robot's report at once; an array past Fast DDS's
+    shared-memory segment would go out slowly, in UDP fragments."""
+    writer = Writer()
+    statuses = Statuses(writer, "w")
+    for robot in range(2000):
+        statuses.add(report(robot, steps=40))  # 40 steps of p since its last report
+    statuses.flush()
+    assert [r for m in writer.sent for r in m.sender_id] == list(range(2000))  # all, in order
+    assert len(writer.sent) > 1
+    assert all(len(serialize_message(m)) <= 512 * 1024 for m in writer.sent)
+    assert all(len(serialize_message(m)) <= MAX_STATUS_BYTES * 1.25 for m in writer.sent)
 
 
 @pytest.mark.parametrize(("phase", "step"), [(CONSENSUS, 0), (DONE, 10)])

@@ -69,9 +69,13 @@ from camo_nodes.trust import Conflict, Hosts, Rejections
 # Robot messages in one array at most: a process's pump can send several steps of thousands of
 # robots, and a DDS message past Fast DDS's shared-memory segment (512 KB) is slow.
 MAX_BATCH = 256
-# A process's statuses go out as one array a STATUS_PERIOD (s), of MAX_STATUS_ROWS at most.
+# A process's statuses go out as one array a STATUS_PERIOD (s), of MAX_STATUS_BYTES at most: an
+# array past Fast DDS's shared-memory segment (512 KB) goes out in UDP fragments, slowly (eight
+# stopping 256x256 workers, each sending its robots' last reports as two arrays of 4096 rows,
+# took more than 5 s).
 STATUS_PERIOD = 0.2
-MAX_STATUS_ROWS = 4096
+MAX_STATUS_BYTES = 256 * 1024
+STATUS_ROW_BYTES = 128  # a status row's fixed fields, about; its traces and lists on top
 CLOSE_ACK_WAIT = 1.0  # s a closing process waits for its last statuses to be acknowledged
 # Arrays taken from one edge topic per poll at most (each up to MAX_BATCH robot messages).
 EDGE_TAKE = 4
@@ -120,23 +124,32 @@ def times_a_round(report: Report) -> bool:
     return report.phase == DONE or (report.phase == CONSENSUS and report.step == 0)
 
 
+def row_bytes(report: Report) -> int:
+    """A report's size in a StatusArray, about."""
+    traces = 8 * len(report.p_trace) + len(report.state_trace)
+    return STATUS_ROW_BYTES + traces + 4 * len(report.silent) + len(report.palette)
+
+
 class Statuses:
     """What a process's robots reported since the last write: one StatusArray per STATUS_PERIOD
-    (or MAX_STATUS_ROWS reports), and at the end of a turn in which a robot voted or finished
-    (the array's stamp is when its robots said so), not a message per report."""
+    (or MAX_STATUS_BYTES of reports), and at the end of a turn in which a robot voted or
+    finished (the array's stamp is when its robots said so), not a message per report."""
 
     def __init__(self, writer, name: str) -> None:
         self.writer = writer
         self.name = name
         self.reports: list[Report] = []
+        self.size = 0  # bytes of `reports` as a StatusArray, about
         self.written = time.monotonic()
         self.timed = False  # a report that times the round waits in `reports`
 
     def add(self, report: Report) -> None:
-        self.reports.append(report)
-        self.timed = self.timed or times_a_round(report)
-        if len(self.reports) >= MAX_STATUS_ROWS:
+        size = row_bytes(report)
+        if self.reports and self.size + size > MAX_STATUS_BYTES:
             self.flush()
+        self.reports.append(report)
+        self.size += size
+        self.timed = self.timed or times_a_round(report)
 
     def flush(self, now: float | None = None) -> None:
         """Write what was reported (with `now`: only once STATUS_PERIOD has passed, or a report
@@ -145,7 +158,7 @@ class Statuses:
             return
         if now is not None and not self.timed and now - self.written < STATUS_PERIOD:
             return
-        reports, self.reports, self.timed = self.reports, [], False
+        reports, self.reports, self.timed, self.size = self.reports, [], False, 0
         msg = StatusArray(name=self.name, **StatusRows.from_reports(reports).message_fields())
         stamp(msg)
         self.writer.publish(msg)
