@@ -180,7 +180,7 @@ def test_ctrl_c_during_a_recorded_run_leaves_a_complete_indexed_bag(tmp_path):
         "--cols",
         "4",
         "--consensus-steps",
-        "5000",
+        "30000",  # long enough to be seen in consensus: 16 robots take thousands a second
         "--run-id",
         "ctrlc",
         "--out",

@@ -182,7 +182,7 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     out_dir = tmp_path / "run"
     proc = start_run(
         *["--pattern", "forest", "--procs", "1", "--own-process", "2,3", "--own-process", "5,6"],
-        *["--step-timeout", "2", "--discovery-timeout", "20", "--consensus-steps", "1500"],
+        *["--step-timeout", "2", "--discovery-timeout", "20", "--consensus-steps", "4000"],
         *["--out", str(out_dir)],
     )
     seen = wait_for_line(proc, "consensus 64")  # every robot has voted and is in consensus
@@ -207,7 +207,7 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
 def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
     out_dir = tmp_path / "run"
     proc = start_run(
-        "--pattern", "forest", "--procs", "2", "--consensus-steps", "5000", "--out", str(out_dir)
+        "--pattern", "forest", "--procs", "2", "--consensus-steps", "10000", "--out", str(out_dir)
     )
     wait_for_line(proc, "consensus 64")
     time.sleep(1.0)
@@ -555,7 +555,7 @@ def test_nothing_the_launcher_started_outlives_its_sigkill(tmp_path):
     out_dir = tmp_path / "run"
     proc = start_run(
         *["--pattern", "forest", "--procs", "2", "--own-process", "2,3"],
-        *["--consensus-steps", "5000", "--record", str(tmp_path / "bag"), "--out", str(out_dir)],
+        *["--consensus-steps", "10000", "--record", str(tmp_path / "bag"), "--out", str(out_dir)],
     )
     wait_for_line(proc, "consensus 64")
     started = children_of(proc.pid)
@@ -576,7 +576,7 @@ def test_nothing_the_launcher_started_outlives_its_sigkill(tmp_path):
 def test_a_robot_stopped_for_seconds_is_waited_for_not_marked_dead(tmp_path):
     """SIGSTOP a robot's process for 5 s mid-consensus, then SIGCONT: its neighbours wait (their
     deadline is longer), nobody reports it silent, and the run equals the simulator."""
-    options = ["--pattern", "forest", "--seed", "3", "--consensus-steps", "3000"]
+    options = ["--pattern", "forest", "--seed", "3", "--consensus-steps", "6000"]
     out_dir = tmp_path / "run"
     proc = start_run(
         *options,
