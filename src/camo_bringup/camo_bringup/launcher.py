@@ -188,6 +188,8 @@ def run(config: RunConfig) -> int:
     finally:
         stuck = watchdog(config.folder)
         group.stop(keep=lambda proc: proc in (group.recorder, group.server))
+        # The robots' last reports came while the workers stopped, and nobody took them yet.
+        session.monitor.take_waiting()
         if len(ran) < config.rounds and group.cells:
             summary = write_partial(config, session.monitor, len(ran))
             if summary is not None:

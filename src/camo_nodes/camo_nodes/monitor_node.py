@@ -160,6 +160,13 @@ class MonitorNode(Node):
         for index in np.unique(rows.round).tolist():
             self.rounds[index].add_rows(rows.select(rows.round == index), stamp)
 
+    def take_waiting(self, limit: float = 2.0) -> None:
+        """Take what waits in the readers (bounded batches, for `limit` seconds at most): the last
+        reports of robots that stopped while nobody spun the monitor."""
+        deadline = time.monotonic() + limit
+        while time.monotonic() < deadline and (self.polled.poll() or self.polled.more):
+            pass
+
     def rejected_messages(self) -> dict:
         """Messages refused in the whole run: by this monitor and by every host."""
         return merged(self.rejected.as_dict(), *self.trusted.refused.values())
