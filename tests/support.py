@@ -321,7 +321,7 @@ class FixedSensor:
     def read(self) -> Reading:
         return Reading(self.value)
 
-    def next_round(self) -> None:
+    def next_round(self, frame: int) -> None:
         pass
 
     def ok(self) -> bool:

@@ -216,7 +216,7 @@ def test_a_new_background_makes_a_finished_robot_camouflage_again():
     protocol = robot(CamoParams(rows=1, cols=1), 0, 0)
     protocol.start(0.0)
     assert protocol.phase == DONE and protocol.round == 0
-    out = protocol.background(1.0)
+    out = protocol.background(1.0, 1)  # frame 1
     assert protocol.round == 1 and protocol.phase == DONE
     assert {m.round for m in out.send} == {1} and out.send[0].kind == "hello"
     assert out.reports[-1].round == 1

@@ -26,7 +26,7 @@ import rclpy
 from rclpy.signals import SignalHandlerOptions
 
 from camo_bringup.processes import ProcessGroup
-from camo_bringup.round_report import report_round, write_partial
+from camo_bringup.round_report import continuous_round, report_round, write_partial
 from camo_bringup.run_config import RunConfig, build_parser, config_from
 from camo_bringup.session import Interrupted, RunFailed, Session
 from camo_core.algorithm.run_setup import contiguous
@@ -159,6 +159,41 @@ def run_rounds(
         ran.append(round_ran(config, session.monitor, index, summary))
 
 
+def run_continuous(config: RunConfig, session: Session, group: ProcessGroup, ran: list[dict]):
+    """--continuous: the rounds the robots start by themselves, each written once every live
+    robot has finished it, until --rounds of them or --duration seconds (or Ctrl-C). A round
+    that robots left for a later one before all finished it was superseded: said, not written."""
+    monitor = session.monitor
+    started = last_print = time.monotonic()
+    written: list[int] = []
+    while config.until_rounds is None or len(written) < config.until_rounds:
+        if config.until_seconds is not None and time.monotonic() - started >= config.until_seconds:
+            break
+        session.spin_for(0.1)
+        for round_ in sorted(monitor.heard - monitor.closed):
+            if monitor.complete(round_):
+                summary = continuous_round(config, monitor, len(written), round_)
+                ran.append({"round": round_, **round_ran(config, monitor, round_, summary)})
+                written.append(round_)
+                monitor.close(round_)
+            elif monitor.superseded(round_):
+                print(f"camo run: the round of frame {round_} was superseded", file=sys.stderr)
+                monitor.close(round_)
+        if time.monotonic() - last_print > 1.0:
+            latest = max(monitor.heard - monitor.closed, default=None)
+            line = monitor.progress_line(latest) if latest is not None else "watching"
+            print(f"camo run: {len(written)} rounds done; {line}", file=sys.stderr)
+            last_print = time.monotonic()
+            group.sample_memory()
+        problem = group.failed()
+        if problem:
+            raise RunFailed(problem)
+        session.check_hosts(group.cells)
+        for robot in group.lost_cells():
+            monitor.lost[robot] = True
+    group.interrupt(keep=lambda proc: proc in (group.recorder, group.server))
+
+
 def run(config: RunConfig) -> int:
     launched = (time.monotonic(), time.time())
     os.environ.update(config.env)
@@ -177,7 +212,10 @@ def run(config: RunConfig) -> int:
     ran: list[dict] = []  # per round written: who finished, who died, refusals
     try:
         start_processes(config, group, session)
-        run_rounds(config, session, group, launched, ran)
+        if config.continuous:
+            run_continuous(config, session, group, ran)
+        else:
+            run_rounds(config, session, group, launched, ran)
         ended = "finished"
     except Interrupted:
         print("camo run: interrupted; stopping the swarm and writing what it has", file=sys.stderr)
@@ -190,7 +228,7 @@ def run(config: RunConfig) -> int:
         group.stop(keep=lambda proc: proc in (group.recorder, group.server))
         # The robots' last reports came while the workers stopped, and nobody took them yet.
         session.monitor.take_waiting()
-        if len(ran) < config.rounds and group.cells:
+        if len(ran) < config.rounds and group.cells and not config.continuous:
             summary = write_partial(config, session.monitor, len(ran))
             if summary is not None:
                 ran.append(round_ran(config, session.monitor, len(ran), summary))

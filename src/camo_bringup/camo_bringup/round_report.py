@@ -3,10 +3,12 @@ and the result line; or, for a round that was stopped, what the swarm had report
 
 from __future__ import annotations
 
+import csv
 import json
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from camo_bringup.run_config import RunConfig
@@ -89,4 +91,55 @@ def write_partial(config: RunConfig, monitor: MonitorNode, index: int) -> dict |
         return None
     summary = monitor.write(index, folder, config.labels[index] + " (incomplete)", partial=True)
     print(f"camo run: wrote what the swarm had reported to {folder}/", file=sys.stderr)
+    return summary
+
+
+ROUNDS_CSV = (
+    "round", "frame", "seed", "pattern", "background_sha256", "changed_at", "noticed_at",
+    "noticed_by", "done_at", "noticed_s", "done_s",
+)  # fmt: skip
+
+
+def continuous_round(config: RunConfig, monitor: MonitorNode, index: int, round_: int) -> dict:
+    """A finished round of a continuous run (the `index`-th, on frame `round_`): round_<index>/
+    with summary.json (its seed, the SHA-256 of its frame, when the scene changed, when and by
+    whom that was noticed, when every robot was done: ROS time, s since the epoch), figure.png,
+    run.gif and background.png; its line of rounds.csv. The summary."""
+    folder = config.folder / f"round_{index}"
+    folder.mkdir(exist_ok=True)
+    record = monitor.record(round_)
+    noticed = monitor.notices.get(round_)
+    clocks = record.timing()
+    done_at = clocks[1] if clocks is not None else None
+    extra = {
+        "round": index,
+        "frame": round_,
+        "background_sha256": monitor.images.digests.get(round_),
+        "changed_at": noticed[1] if noticed else monitor.images.times.get(round_),
+        "noticed_at": noticed[2] if noticed else None,
+        "noticed_by": noticed[0] if noticed else None,
+        "done_at": done_at,
+    }
+    label = f"{config.labels[0]}, frame {round_}"
+    summary = monitor.write(round_, folder, label, extra=extra)
+    image = monitor.images.get(round_)
+    if image is not None:
+        cv2.imwrite(str(folder / "background.png"), image)  # lossless: `sim --image` takes it
+    row = {key: summary.get(key) for key in ROUNDS_CSV}
+    changed = summary["changed_at"]
+    for key, at in (("noticed_s", summary["noticed_at"]), ("done_s", done_at)):
+        row[key] = None if at is None or changed is None else round(at - changed, 3)
+    with open(config.folder / "rounds.csv", "a", newline="") as file:
+        writer = csv.DictWriter(file, ROUNDS_CSV)
+        if file.tell() == 0:
+            writer.writeheader()
+        writer.writerow(row)
+    dead = summary.get("dead", [])
+    notes = f"; {len(dead)} dead robots" if dead else ""
+    by = f"noticed by robot {noticed[0]}" if noticed else "noticed"
+    after = f" {row['noticed_s']:.2f} s after the change" if row["noticed_s"] is not None else ""
+    print(
+        f"round {index} (frame {round_}, {by}{after}): pattern {pattern_said(summary)}{notes}; "
+        f"wrote {folder}/"
+    )
     return summary

@@ -17,7 +17,7 @@ import numpy as np
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.run_setup import ProtocolParams, RunSetup, contiguous
+from camo_core.algorithm.run_setup import MAX_WAIT, ProtocolParams, RunSetup, contiguous
 from camo_core.algorithm.sensing import Calibration, image_digest, load_image, sense_image
 from camo_core.cli.options import (
     Parser,
@@ -37,6 +37,19 @@ from camo_nodes.topics.names import RunTopics, check_run_id, new_run_id
 from camo_nodes.topics.parameters import ros_arguments
 from camo_nodes.topics.startup import add_network_options, network_env, use_camo_dds_settings
 from camo_projector.projector_node import ProjectorParams
+
+# The projector's stream options `./camo run` takes (camo_projector: what it projects).
+STREAM_OPTIONS = (
+    "background_topic",
+    "video",
+    "fps",
+    "loop",
+    "images",
+    "period",
+    "camera",
+    "max_fps",
+)
+MAX_ROUNDS = 1_000_000
 
 # Robots a worker hosts at most by default: creating a process's nodes grows with their square
 # (docs/swarm.md, "Set-up"), so a large swarm is spread over more processes than cores.
@@ -85,6 +98,20 @@ def build_parser() -> Parser:
         help="after the camouflage finishes, project this built-in name or image file and "
         "camouflage again (repeatable); each round writes round_<k>/",
     )
+    add(
+        "--rounds",
+        type=int,
+        default=None,
+        help="with --continuous: end the run after this many finished rounds (exit code 0)",
+    )
+    add(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="S",
+        help="with --continuous: end the run after this many seconds (exit code 0)",
+    )
+    add_options(parser, ProjectorParams, only=STREAM_OPTIONS)
     add(
         "--bridge",
         action="append",
@@ -142,6 +169,9 @@ class RunConfig:
     record: Path | None = None
     foxglove: int | None = None  # the live view's port
     digests: list[str] = field(default_factory=list)  # of the backgrounds our projector shows
+    # --continuous: finished rounds and seconds after which the run ends (None: no end).
+    until_rounds: int | None = None
+    until_seconds: float | None = None
     # A large swarm on this machine: its processes find each other through a discovery server
     # of the run's own, started once every worker has created its robot nodes (HOST:PORT).
     deferred: str | None = None
@@ -149,6 +179,10 @@ class RunConfig:
     @property
     def rounds(self) -> int:
         return len(self.labels)
+
+    @property
+    def continuous(self) -> bool:
+        return self.protocol.continuous
 
     def setup(self) -> RunSetup:
         """What /<run>/swarm/params says of the run: all a worker on another machine needs."""
@@ -239,6 +273,22 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         problem = new_folder_problem(record, "the bag")
         if problem or record.suffix == ".mcap":
             raise UsageError(problem or f"--record {record}: give a bag folder, not a .mcap file")
+    stream = {n: v for n, v in options_of(args, ProjectorParams).items() if n in STREAM_OPTIONS}
+    ProjectorParams(**stream)  # each in its range, before anything starts
+    until_rounds, until_seconds = continuous_ends(args, protocol)
+    if protocol.continuous and (args.then or bridges):
+        given = "--then" if args.then else "--bridge"
+        raise UsageError(
+            f"--continuous and {given} do not go together: a continuous swarm starts its own "
+            "rounds, on projected frames only"
+        )
+    sources = [n for n in ("background_topic", "video", "images") if stream.get(n)]
+    sources += ["camera"] if stream.get("camera", -1) >= 0 else []
+    if len(sources) > 1 or (sources and args.image is not None):
+        given = [*(["image"] if args.image is not None else []), *sources]
+        raise UsageError(f"one background source: {' and '.join(given)} were given")
+    if sources and args.then:
+        raise UsageError("--then switches still backgrounds: not with a stream")
     image, label = image_from(args)
     sense_image(image, params.rows, params.cols, params.profile)  # a too-small image fails here
     images = [image]
@@ -253,6 +303,11 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         projector = None
         # The background is whatever another projector publishes: say so, not the default's name.
         label = f"the background on {topics.background}"
+    elif sources:
+        stream = {n: str(Path(v).resolve()) if n == "video" else v for n, v in stream.items()}
+        # Without --continuous the swarm camouflages once: on the stream's first frame.
+        projector = ros_arguments(ProjectorParams(**stream, snapshot=not protocol.continuous))
+        label = f"{sources[0].replace('_', ' ')} {stream[sources[0]]}"
     elif args.image is not None:
         projector = ros_arguments(ProjectorParams(image=str(Path(args.image).resolve())))
     else:
@@ -274,9 +329,27 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         topics=topics,
         remote=remote,
         named=args.run_id is not None,
-        digests=[] if projector is None else [image_digest(i) for i in images],
+        # A continuous run's or a stream's frames are not known in advance: its processes take
+        # the frames of the first projector they hear (trust.py).
+        digests=[]
+        if projector is None or sources or protocol.continuous
+        else [image_digest(i) for i in images],
         deferred=deferred,
+        until_rounds=until_rounds,
+        until_seconds=until_seconds,
     )
+
+
+def continuous_ends(args: argparse.Namespace, protocol: ProtocolParams):
+    """--rounds and --duration, checked: only with --continuous, in range."""
+    for option, value in (("--rounds", args.rounds), ("--duration", args.duration)):
+        if value is not None and not protocol.continuous:
+            raise UsageError(f"{option} ends a --continuous run: give --continuous too")
+    if args.rounds is not None and not 1 <= args.rounds <= MAX_ROUNDS:
+        raise UsageError(f"--rounds must be an integer in 1..{MAX_ROUNDS} (got {args.rounds})")
+    if args.duration is not None and not 0 < args.duration <= MAX_WAIT:
+        raise UsageError(f"--duration must be a number in (0, {MAX_WAIT:g}] (got {args.duration})")
+    return args.rounds, args.duration
 
 
 def default_procs(robots: int) -> int:

@@ -90,7 +90,7 @@ class DropletSensor:
         self.reconnector.logger.info(f"read r {r} g {g} b {b}: grey {grey:g}")
         return Reading(grey, real=True)
 
-    def next_round(self) -> None:
+    def next_round(self, frame: int) -> None:
         """The projector changed what the Droplet sees: nothing to do here."""
 
     def ok(self) -> bool:

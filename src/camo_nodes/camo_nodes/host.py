@@ -17,21 +17,26 @@ import gc
 import os
 import socket
 import time
+from collections import OrderedDict
 from functools import partial
 
+import numpy as np
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
+from camo_core.algorithm.change import Watch
 from camo_core.algorithm.liveness import HEARTBEAT_PERIOD
 from camo_core.algorithm.protocol import TICK
+from camo_core.algorithm.run_setup import ProtocolParams
 from camo_core.algorithm.sensing import ImageError, Projection, image_digest
 from camo_core.algorithm.ticks import Ticks
-from camo_nodes.topics.images import ImageEncodingError, image_from_msg
+from camo_msgs.msg import Notices
+from camo_nodes.topics.images import ImageEncodingError, frame_number, image_from_msg
 from camo_nodes.topics.names import RunTopics
-from camo_nodes.topics.qos import LATCHED_READER
+from camo_nodes.topics.qos import LATCHED_READER, history_qos
 from camo_nodes.topics.startup import LEAN_NODE, Participants
 from camo_nodes.transport import Transport
 from camo_nodes.trust import BackgroundCheck
@@ -49,6 +54,8 @@ SPIN_EVERY = 0.02  # s between turns of the executor while messages keep coming
 # most: each costs tens of microseconds, and a turn stays short.
 BATCH = 256
 TICKS_PER_TURN = 2048
+STAMPS_KEPT = 1024  # backgrounds remembered by stamp (a frame heard again is not new)
+NOTICES_KEPT = 64  # notices a late monitor still gets
 
 
 def host_node_name(pid: int | None = None) -> str:
@@ -72,7 +79,9 @@ class Host:
     of their own).
     `hardware`: indices of robots with a real sensor or display (ticked every TICK while they
     wait for it, and said offline in the heartbeat when it is). `participants`: the DDS
-    participants the robot nodes were created in, ended after them."""
+    participants the robot nodes were created in, ended after them. `protocol`: the run's
+    protocol parameters; with `continuous`, the robots watch their readings (`change.Watch`,
+    one reading every `sense_period` for all of them) and start rounds themselves."""
 
     def __init__(
         self,
@@ -83,6 +92,7 @@ class Host:
         spin_robots: bool,
         hardware: tuple[int, ...] = (),
         participants: Participants | None = None,
+        protocol: ProtocolParams | None = None,
     ) -> None:
         self.node = node
         self.transport = transport
@@ -94,12 +104,14 @@ class Host:
         self.ticks = Ticks([robot.protocol for robot in robots])
         for index, robot in enumerate(robots):
             robot.stepped = partial(self.ticks.add, index)
-        self._stamps: set[tuple[int, int]] = set()
+            robot.joined = partial(self._joined, index)
+        self._stamps: OrderedDict[tuple[int, int], None] = OrderedDict()
         self.spun = [node, *robots] if spin_robots else [node]
         self.backgrounds = BackgroundCheck(transport.setup)
         # Robots still to start, and to be told of a new background: a bounded number a turn.
         self._to_start = 0 if robots else None
         self._to_show: int | None = None
+        self.shown = 0  # the number of the frame last projected
         transport.listen(
             Image, transport.topics.background, LATCHED_READER, self._on_background, 1
         )
@@ -107,12 +119,69 @@ class Host:
         node.create_timer(1.0, transport.announce_rejections)
         if hardware:
             node.create_timer(HEARTBEAT_PERIOD, self._hardware_state)
+        self.watch: Watch | None = None
+        if protocol is not None and protocol.continuous and robots:
+            ids = np.array([robot.protocol.id for robot in robots])
+            params = robots[0].protocol.base_params
+            self.watch = Watch(ids, params, protocol.change_window, protocol.change_threshold)
+            self.idle = np.array([robot.protocol.round < 0 for robot in robots])
+            self._joins: list[int] = []
+            self.notices = node.create_publisher(
+                Notices, transport.topics.notices, history_qos(NOTICES_KEPT)
+            )
+            node.create_timer(protocol.sense_period, self._read)
+            node.create_timer(1.0, self._forget)
+
+    def _joined(self, index: int, round_: int) -> None:
+        """Robot `index` is in round `round_` now: its watch looks for its reference anew."""
+        if self.watch is not None:
+            self._joins.append(index)
+            self.idle[index] = False
+
+    def _read(self) -> None:
+        """Continuous camouflage: every robot reads the newest frame; those that notice a change
+        start its round (and are told to the monitor)."""
+        grid = self.projection.latest
+        if grid is None or self.watch is None:
+            return
+        if self._joins:
+            self.watch.reset(self._joins)
+            self._joins.clear()
+        frame = self.projection.newest
+        judged = self.watch.read(grid, frame, self.idle)
+        if not len(judged.robots):
+            return
+        now, wall = time.monotonic(), self.node.get_clock().now().nanoseconds * 1e-9
+        notice = Notices(name=self.node.get_name())
+        for index, changed in zip(
+            judged.robots.tolist(), judged.changed_frames.tolist(), strict=True
+        ):
+            robot = self.robots[index]
+            before = robot.protocol.round
+            robot.notice(frame, now)
+            if robot.protocol.round != before:
+                notice.robot.append(robot.protocol.id)
+                notice.round.append(frame)
+                notice.changed_at.append(self.projection.stamps.get(changed, wall))
+                notice.noticed_at.append(wall)
+        self.watch.reset(judged.robots)  # noticed: a new reference, joined or not
+        if notice.robot:
+            notice.header.stamp = self.node.get_clock().now().to_msg()
+            notice.header.frame_id = "camo"
+            self.notices.publish(notice)
+
+    def _forget(self) -> None:
+        """Drop what was kept of rounds no hosted robot is in any more."""
+        earliest = min(robot.protocol.round for robot in self.robots)
+        if earliest > 0:
+            self.transport.forget_before(earliest)
 
     def _on_background(self, data: bytes, gid: bytes) -> None:
         msg = deserialize_message(data, Image)
         stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
         if stamp in self._stamps:
             return
+        number = frame_number(msg.header.frame_id)
         try:
             image = image_from_msg(msg)
         except ImageEncodingError:
@@ -123,13 +192,18 @@ class Host:
             if problem != BackgroundCheck.REPEAT:
                 self.transport.rejected.refuse(problem, gid)
             return
-        self._stamps.add(stamp)
+        self._stamps[stamp] = None
+        if len(self._stamps) > STAMPS_KEPT:
+            self._stamps.popitem(last=False)
+        if number is not None and number in self.projection.frames:
+            return  # a frame already held, stamped anew
         try:
-            self.projection.add(image)
+            self.shown = self.projection.add(image, number, stamp[0] + stamp[1] * 1e-9)
         except ImageError as exc:
             self.node.get_logger().error(f"background not used: {exc}")
             return
-        self._to_show = 0  # every robot is told, a batch a turn (`_work`)
+        if self.watch is None:
+            self._to_show = 0  # every robot is told, a batch a turn (`_work`)
 
     def _work(self) -> bool:
         """A batch of robots started or shown the new background; whether any is left."""
@@ -144,7 +218,7 @@ class Host:
         if self._to_show is not None:
             first, self._to_show = self._to_show, self._to_show + BATCH
             for index in range(first, min(self._to_show, len(self.robots))):
-                self.robots[index].background(now)
+                self.robots[index].background(now, self.shown)
             if self._to_show >= len(self.robots):
                 self._to_show = None
             return True

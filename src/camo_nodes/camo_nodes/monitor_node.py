@@ -43,11 +43,17 @@ from camo_core.results.animation import Snapshots, write_animation
 from camo_core.results.output import run_title, write_round
 from camo_core.results.record import Backgrounds, RoundRecord, Rounds
 from camo_core.shutdown import StopFlag
-from camo_msgs.msg import Host, StatusArray
+from camo_msgs.msg import Host, Notices, StatusArray
 from camo_nodes import scene
 from camo_nodes.polled import PolledTopics
 from camo_nodes.rcl_take import PREFIX
-from camo_nodes.topics.images import ImageEncodingError, image_from_msg, image_to_msg
+from camo_nodes.topics.images import (
+    ImageEncodingError,
+    frame_number,
+    image_from_msg,
+    image_to_msg,
+    pixels_sha256,
+)
 from camo_nodes.topics.names import RunTopics, check_run_id
 from camo_nodes.topics.qos import LATCHED_READER
 from camo_nodes.topics.runs import wait_for_run, wait_for_setup
@@ -63,8 +69,14 @@ class MonitorNode(Node):
         self.params = params
         self.topics = topics
         self.rounds = Rounds(params)
-        self.images = Backgrounds()  # the background of round k is images[k]
+        self.images = Backgrounds()  # the frame of round r is images[r]
+        # Continuous camouflage: round -> (robot, changed_at, noticed_at) of its first notice.
+        self.notices: dict[int, tuple[int, float, float]] = {}
         self.lost = np.zeros(params.count, bool)  # robots whose process is known to have died
+        self.round_of = np.full(params.count, -1, np.int64)  # each robot's latest round
+        self.closed: set[int] = set()  # rounds written or superseded: their records let go
+        self.heard: set[int] = set()  # rounds robots reported in
+        self._shown: tuple[int, RoundRecord | None] = (-1, None)  # the last closed round
         self.offline = np.zeros(params.count, bool)
         self.statuses_heard = 0  # a recording of the run must hold at least these
         # Statuses count only from the process hosting their robot; a background only if it is
@@ -84,6 +96,7 @@ class MonitorNode(Node):
         # (LATCHED_READER keeps every sample), or bursts would push statuses out.
         self.polled.listen(StatusArray, topics.status, LATCHED_READER, self._on_status, 16)
         self.polled.listen(Image, topics.background, LATCHED_READER, self._on_background)
+        self.polled.listen(Notices, topics.notices, LATCHED_READER, self._on_notices)
         self.create_timer(0.02, self.polled.poll)
         self.pattern_pub = self.create_publisher(Image, topics.pattern, 10)
         self.create_timer(0.2, self._publish_pattern)
@@ -117,7 +130,27 @@ class MonitorNode(Node):
             if problem != BackgroundCheck.REPEAT:
                 self.rejected.refuse(problem, gid)
             return
-        self.images.add(stamp, lambda: image)
+        self.images.add(
+            stamp, lambda: image, frame_number(msg.header.frame_id), pixels_sha256(msg)
+        )
+
+    def _on_notices(self, data: bytes, gid: bytes) -> None:
+        msg = self.rejected.decoded(data, Notices, gid, "a notice")
+        if msg is None:
+            return
+        columns = (msg.robot, msg.round, msg.changed_at, msg.noticed_at)
+        if len({len(c) for c in columns}) != 1:
+            self.rejected.refuse("a notice whose columns disagree", gid, msg.name)
+            return
+        for robot, round_, changed, noticed in zip(*columns, strict=True):
+            if not self.trusted.speaks_for(gid, int(robot)):
+                self.rejected.refuse(
+                    "not from the process hosting its sender", gid, f"robot {robot}"
+                )
+                continue
+            first = self.notices.get(int(round_))
+            if first is None or noticed < first[2]:
+                self.notices[int(round_)] = (int(robot), float(changed), float(noticed))
 
     def _on_status(self, data: bytes, gid: bytes) -> None:
         msg = self.rejected.decoded(data, StatusArray, gid, "a status array")
@@ -157,7 +190,13 @@ class MonitorNode(Node):
         rows = rows.select(good)
         # A bridged Droplet whose port went away.
         self.offline[rows.sender_id] = ~rows.alive
+        np.maximum.at(self.round_of, rows.sender_id, rows.round.astype(np.int64))
         for index in np.unique(rows.round).tolist():
+            if index in self.closed:
+                continue
+            if index not in self.heard:
+                self.heard.add(index)
+                self.images.pin(index)  # a round's frame is kept for its figure
             self.rounds[index].add_rows(rows.select(rows.round == index), stamp)
 
     def take_waiting(self, limit: float = 2.0) -> None:
@@ -191,6 +230,22 @@ class MonitorNode(Node):
     def complete(self, round_index: int = 0) -> bool:
         return bool(np.all(self.rounds[round_index].finished | self.dead(round_index)))
 
+    def superseded(self, round_index: int) -> bool:
+        """An unfinished round that no robot is in any more: every one has finished it, is dead
+        or has moved to a later round (continuous camouflage)."""
+        record = self.rounds[round_index]
+        out = record.finished | self.dead(round_index) | (self.round_of > round_index)
+        return bool(out.all()) and not self.complete(round_index)
+
+    def close(self, round_index: int) -> None:
+        """A round written or superseded: its record is let go (a 256x256 round's traces are
+        tens of MB), and later reports of it are not recorded."""
+        self.closed.add(round_index)
+        record = self.rounds.pop(round_index, None)
+        if record is not None and round_index >= self._shown[0]:
+            self._shown = (round_index, record)  # the views show it until a later one begins
+        self.images.pinned.discard(round_index)
+
     def progress_line(self, round_index: int = 0) -> str:
         record = self.rounds[round_index]
         counts = np.bincount(record.phase, minlength=5)
@@ -212,10 +267,17 @@ class MonitorNode(Node):
     def result(self, round_index: int = 0, partial: bool = False) -> RunResult:
         return self.rounds[round_index].result(self.dead(round_index), partial)
 
-    def write(self, round_index: int, folder: Path, label: str, partial: bool = False) -> dict:
+    def write(
+        self,
+        round_index: int,
+        folder: Path,
+        label: str,
+        partial: bool = False,
+        extra: dict | None = None,
+    ) -> dict:
         """summary.json, figure.png and run.gif of a round (partial: how far a stopped run
-        got)."""
-        image = self.images[round_index] if round_index < len(self.images) else None
+        got; `extra`: more fields for its summary)."""
+        image = self.images.get(round_index)
         title = run_title(label, self.params, "robot nodes")
         record, dead = self.record(round_index), self.dead(round_index)
         marks = record.marks(dead, self.bridged)
@@ -225,30 +287,34 @@ class MonitorNode(Node):
             folder,
             title,
             self.progress_line(round_index) if partial else None,
-            {"rejected_messages": self.rejected_messages()},
+            {"rejected_messages": self.rejected_messages(), **(extra or {})},
             marks,
         )
         snapshots = Snapshots.of_record(record)
         write_animation(snapshots, record.sensed, dead, folder / "run.gif", title, marks)
         return summary
 
+    def _view(self) -> tuple[int, RoundRecord]:
+        """The round the views show: the latest one recorded (or closed)."""
+        latest = max(self.rounds, default=-1)
+        if latest > self._shown[0] or self._shown[1] is None:
+            return max(latest, 0), self.rounds[max(latest, 0)]
+        return self._shown  # type: ignore[return-value]
+
     def _publish_pattern(self) -> None:
-        latest = self.rounds[max(self.rounds, default=0)]
+        latest = self._view()[1]
         shape = (self.params.rows, self.params.cols)
         pixels = np.where(latest.state < 0, 128, np.where(latest.state == 1, 0, 255))
         msg = image_to_msg(pixels.astype(np.uint8).reshape(shape), frame_id="swarm")
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pattern_pub.publish(msg)
 
-    def _latest(self) -> int:
-        return max(self.rounds, default=0)
-
     def publish_views(self) -> None:
         """The 3D scene and the diagnostics of the latest round, to those who listen (thousands
         of cubes and statuses are not built for nobody)."""
-        index = self._latest()
+        _, record = self._view()
         stamp = self.get_clock().now().to_msg()
-        record, dead = self.rounds[index], self.dead(index)
+        dead = record.dead(self.lost)
         if self.markers_pub.get_subscription_count():
             self.markers_pub.publish(scene.markers(record, dead, self.bridged, stamp))
         if self.diagnostics_pub.get_subscription_count():

@@ -80,6 +80,9 @@ class RobotNode(Node):
         # nearer (out of discovery, whose timeout is longer).
         self.stepped: Callable[[float], None] = lambda now: None
         self._phase_told: int | None = None  # the phase it was in when it last told it
+        # Its host's watch, told when the robot joined a round (continuous camouflage).
+        self.joined: Callable[[int], None] = lambda round_: None
+        self._round_told = protocol.round
         # The transport keeps the robot's messages in the mailbox its robots share, wakes the
         # protocol when one came for it, and hands what the protocol answers to this node.
         transport.add(core.id, protocol.listens_to(), protocol.wake, self._emit)
@@ -105,13 +108,20 @@ class RobotNode(Node):
     def tick(self, now: float) -> None:
         self._emit(self.protocol.tick(now), now)
 
-    def background(self, now: float) -> None:
-        self._emit(self.protocol.background(now), now)
+    def background(self, now: float, frame: int = 0) -> None:
+        self._emit(self.protocol.background(now, frame), now)
+
+    def notice(self, frame: int, now: float) -> None:
+        self._emit(self.protocol.notice(frame, now), now)
 
     def _emit(self, out: Output, now: float) -> None:
         if out is NOTHING:
             return
-        phase = self.protocol.phase
+        protocol = self.protocol
+        if protocol.round != self._round_told:
+            self._round_told = protocol.round
+            self.joined(protocol.round)
+        phase = protocol.phase
         if phase != self._phase_told or phase not in DUE_ONLY_LATER:
             # Within consensus and formation its due only moves later: the schedule, told on
             # entering the phase, ticks it at the earlier due and queues it again (ticks.py).
@@ -167,7 +177,7 @@ def robot_setup(values: dict) -> RobotSetup:
     """A standalone robot's ROS parameters, checked (ParameterError in one line)."""
     declared = declarations(CamoParams)
     params = CamoParams.from_options(**{k: v for k, v in values.items() if k in declared})
-    protocol = ProtocolParams(values["step_timeout"], values["discovery_timeout"])
+    protocol = ProtocolParams(**{k: values[k] for k in declarations(ProtocolParams)})
     cell = RobotCell(values["row"], values["col"])
     if not (cell.row < params.rows and cell.col < params.cols):
         raise ParameterError(
@@ -244,11 +254,15 @@ def host_robots(
             max(REPORT_PERIOD, len(transport.hosted) / REPORTS_PER_PROCESS),
             transport.mailbox,
         )
+        if protocol.continuous:
+            steps.watching()
         node_kwargs = {**LEAN_NODE, **GROUPED_NODE, "context": participants.next()} if lean else {}
         robots.append(RobotNode(steps, transport, **node_kwargs))
         if created is not None and len(robots) % 1024 == 0:
             created(len(robots))
-    return Host(node, transport, projection, robots, not lean, tuple(hardware), participants)
+    return Host(
+        node, transport, projection, robots, not lean, tuple(hardware), participants, protocol
+    )
 
 
 def main(args=None) -> int:

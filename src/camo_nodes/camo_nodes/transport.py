@@ -296,6 +296,12 @@ class Transport:
             if sender not in self.hosted:
                 self.needed.add(sender)
 
+    def forget_before(self, round_: int) -> None:
+        """What was kept of rounds before `round_`, which none of the hosted robots is in any
+        more (continuous camouflage: a superseded round's messages are never all taken)."""
+        self.mailbox.forget_before(round_)
+        self._seen = {k: v for k, v in self._seen.items() if k[2] >= round_}
+
     def check_hosted(self) -> None:
         """Every hosted robot was added: the mailbox forgets a step's messages once each of them
         (its `readers`) took the step, and one never added would keep every step in memory."""

@@ -29,6 +29,10 @@ class Mailbox:
         self.boxes: dict[Key, dict[int, Any]] = {}
         self.spoke: dict[int, int] = {}  # messages put, per sender: a silent one speaks again
         self._taken: dict[Key, int] = {}  # readers that took each step (a few keys a round)
+        # Rounds whose hellos came (ascending), and the latest: a robot hearing a neighbour's
+        # hello of a later round than its own joins it (protocol.py).
+        self.hello_rounds: list[int] = []
+        self.newest = -1
 
     def put(self, key: Key, sender: int, value: Any) -> None:
         self.spoke[sender] = self.spoke.get(sender, 0) + 1
@@ -37,6 +41,10 @@ class Mailbox:
             box[sender] = value
         elif self._taken.get(key, 0) < self.readers:
             self.boxes[key] = {sender: value}
+            if key[1] == "hello" and key[0] not in self.hello_rounds:
+                self.hello_rounds.append(key[0])
+                self.hello_rounds.sort()
+                self.newest = self.hello_rounds[-1]
 
     # A step's messages by sender; read with any key (a robot looks up None for a slot
     # without a neighbour, and finds nothing).
@@ -51,3 +59,14 @@ class Mailbox:
         if taken >= self.readers:
             return self.boxes.pop(key, EMPTY)
         return self.boxes.get(key, EMPTY)
+
+    def hello_rounds_after(self, round_: int) -> list[int]:
+        """The rounds later than `round_` that hellos came for, latest first."""
+        return [r for r in reversed(self.hello_rounds) if r > round_]
+
+    def forget_before(self, round_: int) -> None:
+        """Drop what was kept of rounds before `round_`: none of the readers is in them any more
+        (a superseded round's messages are never all taken)."""
+        self.boxes = {k: v for k, v in self.boxes.items() if k[0] >= round_}
+        self._taken = {k: v for k, v in self._taken.items() if k[0] >= round_}
+        self.hello_rounds = [r for r in self.hello_rounds if r >= round_]

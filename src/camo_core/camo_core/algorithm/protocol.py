@@ -17,7 +17,14 @@ for every neighbour slot the phase needs, one of these holds:
 
 The machine is driven from outside: `start`, `deliver`, `tick` and
 `background` are handed the current time (the clock is injected) and return an
-`Output`: the messages to send and the reports for monitors. `due()` says when
+`Output`: the messages to send and the reports for monitors.
+
+Rounds are named by the projector's frame numbers: round r camouflages against frame r
+(with the seed `change.round_seed`). A robot that hears a neighbour's hello of a later round
+than its own joins that round, abandoning an unfinished one: a newer round supersedes an
+older. Without --continuous a robot starts the next round when a new frame is projected and it
+is done; with it, only when it or a neighbour notices a change (`notice`, from the process's
+`change.Watch`), and until then it is in no round. `due()` says when
 a tick could next change anything, so that a process with thousands of robots
 ticks only those (`Ticks`); `stalled()` discounts a stall of the robot's own
 process from its deadline.
@@ -32,6 +39,7 @@ import math
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from camo_core.algorithm.change import params_of_round
 from camo_core.algorithm.mailbox import Key, Mailbox
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot import RobotCore
@@ -75,6 +83,8 @@ class StepProtocol:
         "_silent_since",
         "_vote_slots",
         "background_up",
+        "base_params",
+        "continuous",
         "core",
         "deadlines",
         "discovery_timeout",
@@ -82,6 +92,7 @@ class StepProtocol:
         "energy_step",
         "hardware_wait",
         "heard_from",
+        "hello_from",
         "kinds",
         "known_alive",
         "last_report",
@@ -120,6 +131,8 @@ class StepProtocol:
         process (which then wakes it: `wake`); its own when messages are handed to it one by
         one (`deliver`)."""
         self.params = params
+        self.base_params = params
+        self.continuous = False
         # A neighbour the transport knows to be alive (hosted by this process, or by one whose
         # heartbeats say it lives: liveness.py) is waited for past the deadline: it is slow, or
         # itself waiting, and giving up on it would compute something else than the simulator.
@@ -146,11 +159,13 @@ class StepProtocol:
         # What each silent slot's robot had said when it fell silent (`Mailbox.spoke`).
         self._silent_since: dict[int, int] = {}
         self.deadlines = 0  # step deadlines let pass in this round
+        # The round it is in (-1: none yet, a continuous robot that has not noticed a scene).
         self.round = 0
         self.phase = DISCOVERY
         self.step = 0
         self.background_up = False
-        self.newer_background = False  # a background arrived mid-round: camouflaged next
+        # A newer frame arrived mid-round (its number; -1: none): camouflaged next.
+        self.newer_background = -1
         self.started = False
         self.hardware_wait = False  # waiting for the sensor or display: ticks retry
         self.wait_started = 0.0
@@ -163,9 +178,17 @@ class StepProtocol:
             kind: frozenset(n for n, s in self.slot_of.items() if s < slots)
             for kind, slots in self.listen.items()
         }
+        self.hello_from = self.heard_from["hello"]  # whose hellos of a later round it joins
         # --orientation any: the formation step whose states were taken and relayed, and them.
         self.relayed: tuple[int, list] | None = None
         self._out = Output()
+
+    def watching(self) -> StepProtocol:
+        """Camouflage continuously (before `start`): rounds begin when this robot or a neighbour
+        notices a change (`notice`), not when a frame is projected; until then it is in none."""
+        self.continuous = True
+        self.round, self.phase = -1, DONE
+        return self
 
     @property
     def id(self) -> int:
@@ -184,9 +207,12 @@ class StepProtocol:
     # ---- events ---------------------------------------------------------------------
 
     def start(self, now: float) -> Output:
-        """Say hello and begin. Messages delivered before are kept for their steps."""
+        """Say hello and begin (a continuous robot: watch, in no round yet). Messages delivered
+        before are kept for their steps."""
         self.started = True
         self.wait_started = now
+        if self.continuous:
+            return self.wake(now)  # a neighbour may have started a round already
         self._send("hello", 0, (self.core.row, self.core.col))
         return self._advance(now)
 
@@ -204,6 +230,8 @@ class StepProtocol:
         neighbour's message, and steps on the last one it waits for."""
         if not self.started:
             return NOTHING
+        if self.mailbox.newest > self.round and self._later_round(now):
+            return self._advance(now)
         if self.silent:
             self._heard_silent()
         awaiting = self._awaiting
@@ -223,14 +251,34 @@ class StepProtocol:
                 del self._silent_since[slot]
                 self._awaiting = None
 
+    def _later_round(self, now: float) -> bool:
+        """Join the latest round later than its own that a neighbour has said hello in; whether
+        there was one."""
+        hello_from, mailbox = self.hello_from, self.mailbox
+        for round_ in mailbox.hello_rounds_after(self.round):
+            box = mailbox.box((round_, "hello", 0))
+            if any(n in box for n in hello_from):
+                self._join(round_, now)
+                return True
+        return False
+
+    def notice(self, frame: int, now: float) -> Output:
+        """Its process's watch says this robot noticed a change (continuous camouflage): start
+        the round of `frame`, the newest frame, unless it is in that round or a later one."""
+        if not self.started or frame <= self.round:
+            return NOTHING
+        self._join(frame, now)
+        return self._advance(now)
+
     def holds(self, round_: int, kind: str, step: int, slot: int) -> bool:
         """Whether a message delivered for that step and slot waits to be taken."""
         return self.core.neighbors[slot] in self.mailbox.box((round_, kind, step))
 
-    def background(self, now: float) -> Output:
-        """The projected background changed (the sensor holds the image)."""
-        if self.background_up:
-            self.newer_background = True
+    def background(self, now: float, frame: int = 0) -> Output:
+        """Frame `frame` is projected (the sensor holds it). Without --continuous, a frame later
+        than the robot's round is camouflaged next."""
+        if self.background_up and frame > self.round and not self.continuous:
+            self.newer_background = max(self.newer_background, frame)
         self.background_up = True
         return self._advance(now) if self.started else self._flush()
 
@@ -291,8 +339,8 @@ class StepProtocol:
             return self._discovery_step(now, ticking)
         if phase == SENSING:
             return self._sensing_step(now, ticking)
-        if self.newer_background:  # done, and a new background is up
-            self._start_next_round(now)
+        if self.newer_background > self.round:  # done, and a newer frame is up
+            self._join(self.newer_background, now)
             return True
         return False
 
@@ -493,18 +541,22 @@ class StepProtocol:
         self.wait_started = now
         self._awaiting = None
 
-    def _start_next_round(self, now: float) -> None:
-        """Camouflage again on the new background: same rules, a fresh robot state."""
-        self.round += 1
-        self.newer_background = False
-        self.sensor.next_round()
-        self.core = RobotCore(self.params, self.core.row, self.core.col)
+    def _join(self, round_: int, now: float) -> None:
+        """Camouflage in round `round_` (on its frame, with its seed): same rules, a fresh robot
+        state; what it did of an unfinished round is left."""
+        self.round = round_
+        self.background_up = True  # a round's frame is projected, or about to be
+        self.sensor.next_round(round_)
+        core = self.core
+        self.core = RobotCore(params_of_round(self.base_params, round_), core.row, core.col)
         self._expected_ids.clear()
         self.energy_step = None
         self.relayed = None
         self.deadlines = 0
+        self.hardware_wait = False
+        self.traces = Traces()
         self._next(DISCOVERY, 0, now)
-        self._send("hello", 0, (self.core.row, self.core.col))
+        self._send("hello", 0, (core.row, core.col))
 
     # ---- output ---------------------------------------------------------------------
 

@@ -152,8 +152,8 @@ class Sensor(Protocol):
     def read(self) -> Reading | None:
         """This robot's grey value now, or None if it cannot be read yet (try again later)."""
 
-    def next_round(self) -> None:
-        """A new background is up: later reads are of it."""
+    def next_round(self, frame: int) -> None:
+        """A round on frame `frame` begins: later reads are of it."""
 
     def ok(self) -> bool:
         """The hardware behind the sensor is reachable."""

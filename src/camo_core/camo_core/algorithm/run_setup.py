@@ -9,11 +9,11 @@ not keys of a dict.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from camo_core.algorithm.params import CamoParams
-from camo_core.schema import ParameterError, check_fields, from_dict, param, to_dict
+from camo_core.schema import ParameterError, check_fields, declared, from_dict, param, to_dict
 
 Tile = tuple[int, int]  # first and last robot id, inclusive
 
@@ -43,6 +43,25 @@ class ProtocolParams:
         unit="s",
         none_means="60 + 0.01 per robot",
     )
+    # Continuous camouflage (docs/algorithm.md §6; camo_core.algorithm.change).
+    continuous: bool = param(
+        False,
+        "keep sensing after a round: a robot whose reading changes beyond its noise starts the "
+        "next round, and robots that hear of it join",
+    )
+    sense_period: float = param(
+        0.1, "seconds between a watching robot's readings", low=0.01, high=60.0, unit="s"
+    )
+    change_window: int = param(
+        6, "readings a level is judged on (one wild reading of them allowed)", low=3, high=64
+    )
+    change_threshold: float = param(
+        24.0,
+        "grey levels a robot's reading must move by, at least, to be a change (more where its "
+        "readings are noisier)",
+        low=1.0,
+        high=255.0,
+    )
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -51,7 +70,7 @@ class ProtocolParams:
         """With the defaults that depend on the swarm's size filled in."""
         if self.discovery_timeout is not None:
             return self
-        return ProtocolParams(self.step_timeout, 60.0 + 0.01 * robots)
+        return replace(self, discovery_timeout=60.0 + 0.01 * robots)
 
 
 class SetupError(ParameterError):
@@ -142,7 +161,7 @@ class RunSetup:
             params = from_dict(CamoParams, data.get("params"), "params")
             protocol = from_dict(
                 ProtocolParams,
-                {k: data[k] for k in ("step_timeout", "discovery_timeout") if k in data},
+                {k: data[k] for k in declared(ProtocolParams) if k in data},
                 "setup",
             )
             return cls(

@@ -362,39 +362,61 @@ class Reading:
     real: bool = False
 
 
+FRAMES_KEPT = 256  # a process keeps the sensed grids of this many frames (a few seconds of video)
+
+
 class Projection:
-    """The backgrounds projected so far, as sensed grids (one resize per image, shared by all the
-    robots of a process)."""
+    """The frames projected so far, by the projector's frame number, as sensed grids (one resize
+    per frame, shared by all the robots of a process); the latest FRAMES_KEPT of them."""
 
     def __init__(self, rows: int, cols: int, profile: str, sample=None) -> None:
         self.rows, self.cols, self.profile = rows, cols, profile
         # How an image becomes the robots' greys (rows x cols, by robot id): block means, or
         # on a --layout the means round the robots' positions (layout.sense_at).
         self.sample = sample or (lambda image: sense_image(image, rows, cols, profile))
-        self.grids: list[np.ndarray] = []
+        self.frames: dict[int, np.ndarray] = {}
+        self.stamps: dict[int, float] = {}  # when each frame was projected (ROS time, s)
+        self.newest = -1
 
-    def add(self, image: np.ndarray) -> None:
-        """Raises ImageError for an image smaller than the grid."""
-        self.grids.append(self.sample(image))
+    def add(self, image: np.ndarray, number: int | None = None, stamp: float = 0.0) -> int:
+        """Frame `number` (by default the one after the newest); its number. Raises ImageError
+        for an image smaller than the grid."""
+        number = self.newest + 1 if number is None else number
+        self.frames[number] = self.sample(image)
+        self.stamps[number] = stamp
+        self.newest = max(self.newest, number)
+        while len(self.frames) > FRAMES_KEPT:
+            oldest = min(self.frames)
+            del self.frames[oldest], self.stamps[oldest]
+        return number
+
+    def grid(self, number: int) -> np.ndarray | None:
+        """Frame `number`'s grid; None while it has not come. A frame let go already (a round
+        its process joined very late) is read as the oldest frame kept after it."""
+        grid = self.frames.get(number)
+        if grid is None and number < self.newest:
+            later = [n for n in self.frames if n > number]
+            grid = self.frames[min(later)] if later else None
+        return grid
+
+    @property
+    def latest(self) -> np.ndarray | None:
+        return self.frames.get(self.newest)
 
 
 class ProjectedSensor:
-    """A simulated robot's sensor: its cell's block mean of the background of its round."""
+    """A simulated robot's sensor: its cell's block mean of the frame of its round."""
 
     def __init__(self, projection: Projection, row: int, col: int) -> None:
         self.projection, self.row, self.col = projection, row, col
-        self.index = 0
+        self.frame = 0
 
     def read(self) -> Reading | None:
-        grids = self.projection.grids
-        return (
-            Reading(float(grids[self.index][self.row, self.col]))
-            if self.index < len(grids)
-            else None
-        )
+        grid = self.projection.grid(self.frame)
+        return None if grid is None else Reading(float(grid[self.row, self.col]))
 
-    def next_round(self) -> None:
-        self.index = len(self.projection.grids) - 1  # the newest background
+    def next_round(self, frame: int) -> None:
+        self.frame = frame  # a round camouflages against the frame it is named after
 
     def ok(self) -> bool:
         return True

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from camo_core.algorithm.change import params_of_round
 from camo_core.algorithm.layout import layout_for
 from camo_core.algorithm.orientation import selector
 from camo_core.algorithm.params import CamoParams
@@ -217,19 +218,39 @@ class Rounds(dict):
         self.params = params
 
     def __missing__(self, index: int) -> RoundRecord:
-        record = self[index] = RoundRecord(self.params)
+        record = self[index] = RoundRecord(params_of_round(self.params, index))
         return record
 
 
-class Backgrounds(list):
-    """The backgrounds a run showed, each kept once (by its stamp): round k camouflaged self[k]."""
+class Backgrounds(dict):
+    """The frames a run projected, by frame number (round r camouflaged self[r]), each kept once
+    (by its stamp): the newest `keep` of them, and those pinned (the frames of rounds)."""
 
-    def __init__(self) -> None:
+    def __init__(self, keep: int = 64) -> None:
         super().__init__()
-        self.stamps: list[tuple[int, int]] = []
+        self.keep = keep
+        self.stamps: set[tuple[int, int]] = set()
+        self.digests: dict[int, str] = {}  # frame number -> SHA-256 of its pixels as published
+        self.times: dict[int, float] = {}  # frame number -> when it was projected (s, ROS time)
+        self.pinned: set[int] = set()
 
-    def add(self, stamp: tuple[int, int], decode) -> None:
-        """`decode()` gives the image; called only for a stamp not seen before."""
-        if stamp not in self.stamps:
-            self.stamps.append(stamp)
-            self.append(decode())
+    def add(
+        self, stamp: tuple[int, int], decode, number: int | None = None, digest: str = ""
+    ) -> int | None:
+        """`decode()` gives the image; called only for a stamp not seen before. `number`: the
+        frame's (None: the one after the newest, as frames without numbers were counted)."""
+        if stamp in self.stamps:
+            return None
+        self.stamps.add(stamp)
+        number = (max(self) + 1 if self else 0) if number is None else number
+        self[number] = decode()
+        self.digests[number] = digest
+        self.times[number] = stamp[0] + stamp[1] * 1e-9
+        loose = sorted(n for n in self if n not in self.pinned)
+        for old in loose[: max(0, len(loose) - self.keep)]:
+            del self[old]
+        return number
+
+    def pin(self, number: int) -> None:
+        """Keep frame `number` (a round's) whatever comes after it."""
+        self.pinned.add(number)

@@ -1,0 +1,192 @@
+"""Continuous camouflage (docs/algorithm.md §6): when a robot decides that the scene it stands on
+has changed, and which round that starts.
+
+A watching robot reads its sensor every `sense_period` seconds, between rounds and during them.
+A reading is its cell's grey in the newest projected frame, after measurement error drawn anew
+for every reading (streams 9 and 10, keyed on the reading's number and the robot: with
+probability rho_meas a uniform grey). Each robot judges its own readings only:
+
+- A *window* is its last `change_window` (m) readings. A window is *coherent* when at least
+  m - 1 of them lie within half the threshold of the window's median (one wild reading is
+  allowed); the median is the window's level.
+- The threshold is max(change_threshold, NOISE_FACTOR x sigma), at most MAX_THRESHOLD; sigma is
+  the robot's noise, estimated from its last NOISE_READINGS readings (from the lower quartile of
+  the differences of successive readings, which readings replaced by noise leave alone). A
+  camera whose frames flicker raises it; a clean projection leaves it at change_threshold.
+  A robot judges nothing before it holds two windows of readings.
+- After a robot joins a round its *reference* is the first coherent window of the readings it
+  takes from then on.
+- It notices a change when its newest window is coherent and its level differs from the
+  reference by more than the threshold. A robot that is in no round yet notices the scene as
+  soon as it has a reference.
+
+A noticing robot starts the round named after the newest frame (rounds are named by the
+projector's frame numbers, so that robots noticing one change together start the same round,
+and a later frame's round supersedes an earlier one). What the rule costs in false alarms and
+delays is measured in docs/algorithm.md §6 (`false_alarm_rate` below is the estimate the docs
+check against a simulation).
+
+`Watch` applies the rule to all the robots of a process at once (NumPy); `noticed` is the same
+rule for one robot's readings, written plainly, which the tests hold the vectorised form to.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from itertools import pairwise
+
+import numpy as np
+
+from camo_core.algorithm import rng
+from camo_core.algorithm.params import CamoParams
+
+NOISE_FACTOR = 6.0  # the threshold is at least this many times the readings' noise
+MAX_THRESHOLD = 128.0  # grey levels: beyond this, noise this large hides any scene
+SEED_MASK = (1 << 64) - 1
+
+
+def round_seed(seed: int, round_: int) -> int:
+    """The seed round `round_` of a run of `seed` draws from: `./camo sim --seed` with it on
+    the round's frame gives the round bit for bit (round 0 keeps the run's seed)."""
+    return (seed + round_) & SEED_MASK
+
+
+@lru_cache(maxsize=16)
+def params_of_round(params: CamoParams, round_: int) -> CamoParams:
+    """The parameters a robot camouflages with in round `round_` (its seed: `round_seed`);
+    shared by every robot of a process."""
+    if round_ == 0:
+        return params
+    return replace(params, seed=round_seed(params.seed, round_))
+
+
+def threshold(base: float, sigma: np.ndarray | float) -> np.ndarray:
+    return np.minimum(np.maximum(base, NOISE_FACTOR * np.asarray(sigma)), MAX_THRESHOLD)
+
+
+NOISE_READINGS = 32  # the readings a robot estimates its noise from
+# sigma from the lower quartile of |differences of successive readings|: a difference of two
+# normal readings is normal with sqrt(2) sigma, whose |.| has its lower quartile at 0.3186 x that.
+# A reading replaced by noise spoils two differences; the lower quartile stands while fewer
+# than three quarters of them are spoilt (the median would fall at a half: often, at 15%).
+QUARTILE_TO_SIGMA = 1.0 / (0.31864 * math.sqrt(2.0))
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """What a process's robots made of a reading: the robots (indices into the process's list)
+    that noticed a change, and for each the frame its new level was first read in."""
+
+    robots: np.ndarray
+    changed_frames: np.ndarray
+
+
+class Watch:
+    """The change rule over the robots of one process (indices 0..n-1, robot ids `ids`)."""
+
+    def __init__(
+        self, ids: np.ndarray, params: CamoParams, window: int, change_threshold: float
+    ) -> None:
+        self.ids = np.asarray(ids, dtype=np.int64)
+        self.params = params
+        self.window = window
+        self.base = float(change_threshold)
+        n = len(self.ids)
+        self.kept = max(NOISE_READINGS, window)
+        self.readings = np.zeros((n, self.kept))
+        self.frames = np.zeros((n, self.kept), np.int64)  # the frame each reading was of
+        self.held = 0  # readings held (the same for every robot), at most `kept`
+        self.since = np.zeros(n, np.int64)  # readings since the robot's last reset
+        self.reference = np.full(n, np.nan)  # the reference level (NaN: none yet)
+        self.taken = 0  # readings so far: the noise draws' number
+
+    def reset(self, robots) -> None:
+        """These robots joined a round (or noticed): their reference is to be found anew."""
+        self.since[robots] = 0
+        self.reference[robots] = np.nan
+
+    def values(self, grid: np.ndarray) -> np.ndarray:
+        """Every robot's reading of `grid` (rows x cols greys), after measurement error."""
+        values = np.asarray(grid, dtype=np.float64).ravel()[self.ids]
+        rho = self.params.rho_meas
+        if rho > 0.0:
+            seed = self.params.seed
+            replaced = rng.uniform_array(
+                seed, rng.STREAM_READING_REPLACED, self.taken, self.ids, 0
+            )
+            noise = rng.uniform_array(seed, rng.STREAM_READING_VALUE, self.taken, self.ids, 0)
+            values = np.where(replaced < rho, np.floor(256.0 * noise), values)
+        self.taken += 1
+        return values
+
+    def read(self, grid: np.ndarray, frame: int, idle: np.ndarray | None = None) -> Judgement:
+        """A reading of frame `frame` for every robot; `idle` marks robots in no round yet."""
+        values = self.values(grid)
+        m = self.window
+        self.readings[:, :-1] = self.readings[:, 1:]
+        self.readings[:, -1] = values
+        self.frames[:, :-1] = self.frames[:, 1:]
+        self.frames[:, -1] = frame
+        self.held = min(self.held + 1, self.kept)
+        self.since = np.minimum(self.since + 1, m)
+        held = self.readings[:, self.kept - self.held :]
+        if self.held >= 2:
+            sigma = QUARTILE_TO_SIGMA * np.quantile(np.abs(np.diff(held, axis=1)), 0.25, axis=1)
+        else:
+            sigma = np.zeros(len(self.ids))
+        limit = threshold(self.base, sigma)
+        recent = self.readings[:, -m:]
+        level = np.median(recent, axis=1)
+        near = np.abs(recent - level[:, None]) <= limit[:, None] / 2
+        judged = (self.since >= m) & (self.held >= 2 * m)  # enough readings for a noise too
+        coherent = judged & (near.sum(axis=1) >= m - 1)
+        unreferenced = np.isnan(self.reference)
+        found = coherent & unreferenced
+        with np.errstate(invalid="ignore"):  # NaN references compare False
+            moved = coherent & ~unreferenced & (np.abs(level - self.reference) > limit)
+        noticed = moved | (found & idle) if idle is not None else moved
+        self.reference[found] = level[found]
+        robots = np.flatnonzero(noticed)
+        # Where the change was first seen: the first reading of the window's last run of readings
+        # at its level (a reading replaced by noise can pass for one, at worst a reading early).
+        # If the newest reading is the wild one, the first reading at the level.
+        far = ~near[robots]
+        last_far = np.where(far.any(axis=1), m - 1 - np.argmax(far[:, ::-1], axis=1), -1)
+        start = np.where(last_far < m - 1, last_far + 1, np.argmax(near[robots], axis=1))
+        changed = self.frames[robots, self.kept - m + start]
+        return Judgement(robots, changed)
+
+
+def noticed(readings: list[float], window: int, change_threshold: float, idle: bool) -> int | None:
+    """The plain rule for one robot's readings since it joined its round (and no more than
+    those): the index of the reading at which it notices a change (or, `idle`, the scene)."""
+    reference: float | None = None
+    for k in range(len(readings)):
+        held = readings[max(0, k + 1 - NOISE_READINGS) : k + 1]
+        diffs = [abs(b - a) for a, b in pairwise(held)]
+        sigma = QUARTILE_TO_SIGMA * float(np.quantile(diffs, 0.25)) if diffs else 0.0
+        limit = float(threshold(change_threshold, sigma))
+        if k < 2 * window - 1:  # a window, and readings enough for a noise
+            continue
+        recent = readings[k - window + 1 : k + 1]
+        level = float(np.median(recent))
+        if sum(abs(x - level) <= limit / 2 for x in recent) < window - 1:
+            continue
+        if reference is None:
+            reference = level
+            if idle:
+                return k
+        elif abs(level - reference) > limit:
+            return k
+    return None
+
+
+def false_alarm_rate(rho_meas: float, window: int, change_threshold: float) -> float:
+    """An upper estimate of the chance that one reading makes a robot on an unchanged, noise-free
+    scene notice a change: at least m - 1 of the window's m readings replaced by noise, and
+    those m - 1 within one threshold of each other and away from the scene's grey."""
+    band = min(1.0, change_threshold / 256.0)
+    k = window - 1
+    return math.comb(window, k) * rho_meas**k * band ** (k - 1)

@@ -1,0 +1,137 @@
+"""Where a projector's frames come from besides a still image: a video file, a sequence of image
+files, a local camera (OpenCV), each asked for its frame at a given time. No ROS here."""
+
+from __future__ import annotations
+
+import glob
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from camo_core.algorithm.sensing import ImageError, load_image
+from camo_core.inputs.files import checked_file, shown
+
+MAX_SEQUENCE = 10_000  # image files of one --images pattern at most
+
+
+def _quiet_opencv() -> None:
+    """OpenCV's video back-ends log to stderr when a device or file cannot be opened: camo says
+    so in one line of its own instead."""
+    logging = getattr(getattr(cv2, "utils", None), "logging", None)
+    if logging is not None:
+        logging.setLogLevel(logging.LOG_LEVEL_SILENT)
+
+
+class Source:
+    """A stream of frames: `frame(now)` gives the frame to project at `now` (s, monotonic) if it
+    is a new one, else None; `ended` once it has no more."""
+
+    ended = False
+
+    def frame(self, now: float) -> np.ndarray | None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        pass
+
+
+class VideoSource(Source):
+    """A video file at its own frame rate (or `fps`), once or looped."""
+
+    def __init__(self, path: str, fps: float = 0.0, loop: bool = False) -> None:
+        _quiet_opencv()
+        self.path = checked_file(path, "video", ImageError)
+        self.capture = cv2.VideoCapture(str(self.path))
+        if not self.capture.isOpened():
+            raise ImageError(f"video {shown(path)}: OpenCV cannot read it (not a video it knows)")
+        own = self.capture.get(cv2.CAP_PROP_FPS)
+        self.fps = fps or (own if math.isfinite(own) and 0 < own <= 1000 else 25.0)
+        self.loop = loop
+        self.started: float | None = None
+        self.shown = -1  # the index of the last frame given
+        first = self._read()
+        if first is None:
+            raise ImageError(f"video {shown(path)}: it holds no frame OpenCV can decode")
+        self.first = first
+
+    def _read(self) -> np.ndarray | None:
+        ok, frame = self.capture.read()
+        return frame if ok and frame is not None and frame.size else None
+
+    def frame(self, now: float) -> np.ndarray | None:
+        if self.started is None:
+            self.started, self.shown = now, 0
+            return self.first
+        due = int((now - self.started) * self.fps)
+        if due <= self.shown or self.ended:
+            return None
+        frame = None
+        while self.shown < due:  # frames whose time passed are skipped, not shown late
+            frame = self._read()
+            if frame is None:
+                if not self.loop:
+                    self.ended = True
+                    return None
+                self.capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
+                frame = self._read()
+                if frame is None:
+                    self.ended = True
+                    return None
+            self.shown += 1
+        return frame
+
+    def close(self) -> None:
+        self.capture.release()
+
+
+class ImagesSource(Source):
+    """Image files matching a glob pattern, in name order, each for `period` seconds; looped."""
+
+    def __init__(self, pattern: str, period: float, loop: bool = True) -> None:
+        names = sorted(glob.glob(pattern))
+        files = [n for n in names if Path(n).is_file()]
+        if not files:
+            raise ImageError(f"--images {shown(pattern)}: no file matches it")
+        if len(files) > MAX_SEQUENCE:
+            raise ImageError(
+                f"--images {shown(pattern)}: {len(files)} files, more than {MAX_SEQUENCE}"
+            )
+        self.images = [load_image(f) for f in files]  # each checked as --image is, at once
+        self.period, self.loop = period, loop
+        self.started: float | None = None
+        self.shown = -1
+
+    def frame(self, now: float) -> np.ndarray | None:
+        if self.started is None:
+            self.started = now
+        due = int((now - self.started) / self.period)
+        if not self.loop and due >= len(self.images):
+            self.ended = True
+            return None
+        if due == self.shown:
+            return None
+        self.shown = due
+        return self.images[due % len(self.images)]
+
+
+class CameraSource(Source):
+    """A local camera (OpenCV's device `index`): its newest frame whenever asked."""
+
+    def __init__(self, index: int) -> None:
+        _quiet_opencv()
+        self.capture = cv2.VideoCapture(index)
+        if not self.capture.isOpened():
+            raise ImageError(f"camera {index}: there is none (OpenCV opened no device {index})")
+        self.index = index
+
+    def frame(self, now: float) -> np.ndarray | None:
+        ok, frame = self.capture.read()
+        if not ok or frame is None:
+            self.ended = True  # unplugged
+            return None
+        return frame
+
+    def close(self) -> None:
+        self.capture.release()
