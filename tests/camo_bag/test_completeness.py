@@ -228,7 +228,7 @@ def test_the_ledger_counts_each_step_once_and_ignores_steps_no_robot_sends():
 
     ledger = Ledger()
     ledger.set_run(CamoParams(rows=1, cols=2, consensus_steps=3, formation_steps=2), 1)
-    ledger.backgrounds = 1
+    ledger.background()  # frame 0
     for robot in (0, 1):
         ledger.message("hello", robot, 0)
         ledger.message("color", robot, 0)
@@ -242,3 +242,27 @@ def test_the_ledger_counts_each_step_once_and_ignores_steps_no_robot_sends():
     assert ledger.complete(0) == {1}
     assert ledger.gaps() == ["round 0: 1 robot lacks votes: 0"]
     assert ledger.lacking(0) == {"vote": 1}
+
+
+def test_a_continuous_runs_rounds_are_its_frames_and_its_result_names_them():
+    from camo_bag.ledger import Ledger
+    from camo_core.algorithm.params import CamoParams
+
+    ledger = Ledger()
+    ledger.set_run(CamoParams(rows=1, cols=1, consensus_steps=1, formation_steps=1), 1)
+    for frame in (0, 1, 7, 40):
+        ledger.background(frame)
+    for round_ in (7, 40):
+        for kind in ("hello", "color", "vote", "state"):
+            ledger.message(kind, 0, round_)
+        ledger.reported_done(0, round_)
+    result = [{"round": 7, "finished": [[0, 0]]}, {"round": 40, "finished": [[0, 0]]}]
+    ledger.set_result({"run": "r", "ended": "finished", "rounds": result})
+    assert ledger.complete(7) == ledger.complete(40) == {0} and not ledger.gaps()
+    ledger.set_result(
+        {"run": "r", "ended": "finished", "rounds": [{"round": 41, "finished": [[0, 0]]}]}
+    )
+    assert ledger.gaps() == [
+        "round 41: its background is not in the bag",
+        "round 41: 1 robot lacks hellos, colours, votes, states, done reports: 0",
+    ]

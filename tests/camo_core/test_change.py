@@ -135,7 +135,7 @@ class Scene:
         p = self.robots[robot]
         if p.round != self.rounds[robot]:
             self.rounds[robot] = p.round
-            self.watch.reset([robot])
+            self.watch.reset([robot], self.projection.frames.get(p.round), p.round)
         if p.phase == DONE and p.round >= 0:
             core = p.core
             self.results.setdefault(p.round, {})[robot] = (core.pattern, core.p, core.state)
@@ -159,7 +159,9 @@ class Scene:
             self.post(robot, self.robots[robot].notice(self.projection.newest, self.now))
             if self.robots[robot].round != before:
                 self.noticed.setdefault(self.robots[robot].round, robot)
-        self.watch.reset(judged.robots)
+        for robot in judged.robots.tolist():
+            round_ = self.robots[robot].round
+            self.watch.reset([robot], self.projection.frames.get(round_), round_)
         for _ in range(deliveries):
             if not self.sent and not self.woken:
                 break
@@ -211,6 +213,19 @@ def test_robots_start_their_own_rounds_on_each_changed_scene_each_equal_to_the_s
     assert latest >= switched
     assert scene.finished(latest) and scene.noticed.get(latest) is not None
     assert_round_like_sim(scene, latest, desert)
+
+
+def test_a_scene_that_changes_as_a_round_starts_is_still_a_change_for_its_robots():
+    # The reference is the round's frame read a window's worth of times, not the readings that
+    # follow the join, which may be of the next scene already.
+    watch = watch_of(4)
+    forest, desert = np.full((1, 4), 70.0), np.full((1, 4), 180.0)
+    for _ in range(2 * WINDOW):
+        watch.read(forest, 0)
+    watch.reset(np.arange(4), forest, 0)  # they joined the round of frame 0
+    noticed = [len(watch.read(desert, 1 + k).robots) for k in range(WINDOW)]
+    # As soon as all but one of a window's readings are of the new scene.
+    assert noticed[: WINDOW - 2] == [0] * (WINDOW - 2) and noticed[WINDOW - 2] == 4
 
 
 def test_a_newer_round_supersedes_an_unfinished_one():

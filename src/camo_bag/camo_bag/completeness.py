@@ -28,6 +28,7 @@ from camo_core.algorithm.run_setup import RunSetup, SetupError
 from camo_core.algorithm.status_rows import rows_of_message
 from camo_core.exceptions import CamoError
 from camo_msgs.msg import RobotStatus, StatusArray
+from camo_nodes.topics.images import frame_number
 from camo_nodes.topics.names import PARAMS_SUFFIX
 from camo_nodes.topics.robot_messages import senders_rounds_steps
 from camo_nodes.topics.runs import result_from
@@ -49,6 +50,17 @@ def message_fields(kind: str, data: bytes) -> tuple[int, int, int]:
     else:
         sender, _phase, step, round_index = struct.unpack_from(order + "IB3xII", data, at)
     return sender, round_index, step
+
+
+def header_frame_id(data: bytes) -> str:
+    """The header.frame_id of a CDR message whose first field is std_msgs/Header ("" if the bytes
+    do not hold one)."""
+    if len(data) < 16:
+        return ""
+    (length,) = struct.unpack_from("<I" if data[1] == 1 else ">I", data, 12)
+    if not 0 < length <= 256 or len(data) < 16 + length:
+        return ""
+    return data[16 : 16 + length - 1].decode("utf-8", "replace")  # without its NUL
 
 
 def ledger_message(ledger: Ledger, kind: str, sender: int, round_index: int, step: int) -> None:
@@ -138,7 +150,7 @@ def ledger_one(ledger: Ledger, topics: Topics, message: BagMessage) -> None:
         for robot, index in done_reports(topics.decode_status(data)):
             ledger.reported_done(robot, index)
     elif topic == topics.background:
-        ledger.backgrounds += 1
+        ledger.background(frame_number(header_frame_id(data)))
     elif topic == topics.params and ledger.params is None:
         setup = setup_in(data)
         if setup is not None:

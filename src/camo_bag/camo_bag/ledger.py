@@ -45,7 +45,7 @@ class Ledger:
     counts: Counter = field(default_factory=Counter)  # (round, robot, kind) -> distinct steps
     steps: dict[tuple[int, int, str], bytearray] = field(default_factory=dict)
     done: dict[int, set[int]] = field(default_factory=lambda: defaultdict(set))  # round -> robots
-    backgrounds: int = 0
+    frames: set[int] = field(default_factory=set)  # the background frames recorded, by number
     result: dict | None = None  # the launcher's /<run>/swarm/result, once recorded
     limits: dict[str, int] = field(default_factory=dict)  # kind -> steps a robot sends
     results_expected: bool = True  # bags of runs before run ids hold no result
@@ -67,6 +67,15 @@ class Ledger:
             flags[step] = 1
             self.counts[key] += 1
 
+    def background(self, number: int | None = None) -> None:
+        """A background frame is recorded: its number, or (a frame of a camo before numbered
+        frames) the next."""
+        self.frames.add(len(self.frames) if number is None else number)
+
+    @property
+    def backgrounds(self) -> int:
+        return len(self.frames)
+
     def reported_done(self, robot: int, round_index: int) -> None:
         self.done[round_index].add(robot)
 
@@ -81,7 +90,7 @@ class Ledger:
 
     def complete(self, round_index: int) -> set[int]:
         """Robots whose whole round is recorded (done reported and every message there)."""
-        if self.params is None or self.backgrounds <= round_index:
+        if self.params is None or round_index not in self.frames:
             return set()
         return {r for r in self.done.get(round_index, ()) if self._holds(round_index, r)}
 
@@ -98,13 +107,18 @@ class Ledger:
 
     # ---- what a finished recording lacks ------------------------------------------------
 
-    def expected(self) -> list[set[int]]:
-        """Per round the bag must hold, the robots that must be whole in it."""
+    def expected(self) -> dict[int, set[int]]:
+        """Per round the bag must hold (by its frame number), the robots that must be whole in
+        it. The result names a continuous run's rounds; the others' are 0, 1, ..."""
         if self.result is not None:
-            return [set(cells(r.get("finished", []))) for r in self.result.get("rounds", [])]
+            rounds = self.result.get("rounds", [])
+            return {
+                int(r.get("round", k)): set(cells(r.get("finished", [])))
+                for k, r in enumerate(rounds)
+            }
         if self.params is None:
-            return []
-        return [set(range(self.params.count)) for _ in range(self.rounds or 1)]
+            return {}
+        return {k: set(range(self.params.count)) for k in range(self.rounds or 1)}
 
     def gaps(self) -> list[str]:
         """What the bag lacks of the run, one line per round (or for the whole bag); none when
@@ -117,8 +131,8 @@ class Ledger:
         elif self.result is not None and self.result.get("ended") != "finished":
             lines.append(f"the run ended early ({self.result.get('ended')}): not every round ran")
         wanted = messages_per_round(self.params)
-        for k, robots in enumerate(self.expected()):
-            if self.backgrounds <= k:
+        for k, robots in self.expected().items():
+            if k not in self.frames:
                 lines.append(f"round {k}: its background is not in the bag")
             missing = sorted(r for r in robots if not self._holds(k, r))
             if not missing:

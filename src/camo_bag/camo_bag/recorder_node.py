@@ -36,7 +36,7 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import String
 
 from camo_bag import msgdefs, qos_yaml
-from camo_bag.completeness import done_reports
+from camo_bag.completeness import done_reports, header_frame_id
 from camo_bag.container import BagWriter, TopicInfo
 from camo_bag.graph_topics import new_topics, taking_qos
 from camo_bag.ledger import ROBOT_KINDS, Ledger
@@ -44,6 +44,7 @@ from camo_core.cli.options import Parser, seconds
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.results.folders import new_folder_problem
 from camo_core.shutdown import StopFlag
+from camo_nodes.topics.images import frame_number
 from camo_nodes.topics.names import RunTopics, check_run_id
 from camo_nodes.topics.qos import LATCHED
 from camo_nodes.topics.robot_messages import RaggedColumns, senders_rounds_steps
@@ -147,7 +148,7 @@ class RecorderNode(Node):
         if cls is not None:
             self._account(topic, deserialize_message(data, cls))
         elif self.run is not None and topic == self.run.background:
-            self.ledger.backgrounds = self.recorded(topic)
+            self.ledger.background(frame_number(header_frame_id(data)))
         if time.monotonic() - self._flushed > self.flush_period:  # timers starve under floods
             self._flush()
 
@@ -197,6 +198,8 @@ class RecorderNode(Node):
             "messages": self.bag.message_count,
             "complete": [len(ledger.complete(k)) for k in range(rounds)],
             "lacking": [ledger.lacking(k) for k in range(rounds)],
+            # By round (its frame number), every round robots finished in: a continuous run's.
+            "rounds": {str(k): len(ledger.complete(k)) for k in sorted(ledger.done)},
         }
         changed = {k: v for k, v in report.items() if k != "messages"}
         if changed != self._reported or final:

@@ -17,7 +17,7 @@ lacks; `--partial` renders what it holds, with the gaps named in summary.json
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -36,7 +36,8 @@ from camo_core.results import figures
 from camo_core.results.animation import Snapshots, write_animation
 from camo_core.results.output import run_title, write_round
 from camo_core.results.record import Backgrounds, Rounds
-from camo_nodes.topics.images import image_from_msg
+from camo_msgs.msg import Notices
+from camo_nodes.topics.images import frame_number, image_from_msg, pixels_sha256
 
 
 @dataclass
@@ -46,9 +47,11 @@ class RecordedRun:
     params: CamoParams
     labels: list[str]  # the backgrounds, in round order
     rounds: Rounds
-    images: Backgrounds  # round k camouflaged images[k]
+    images: Backgrounds  # round r camouflaged images[r] (frame r)
     elapsed_s: dict[int, float]  # span of each round's statuses in the bag
     bridged: frozenset[int] = frozenset()  # robots that were real Droplets
+    # A continuous run's notices: round -> (robot, changed_at, noticed_at) of its first.
+    notices: dict[int, tuple[int, float, float]] = field(default_factory=dict)
 
 
 def load_run(path: str | Path | Bag) -> RecordedRun:
@@ -57,18 +60,25 @@ def load_run(path: str | Path | Bag) -> RecordedRun:
     bag = path if isinstance(path, Bag) else open_bag(path)
     path = bag.path
     params_topic, status_topic, background_topic, _ = run_topics_of(bag.summary)
+    notices_topic = background_topic.removesuffix("background") + "notices"
     decode_status = status_decoder(bag.summary, status_topic)
     setup = None
-    images = Backgrounds()
+    images = Backgrounds(keep=MAX_FRAMES)
+    notices: dict[int, tuple[int, float, float]] = {}
     pending: list[tuple[object, BagMessage]] = []
-    for message in bag.messages([params_topic, status_topic, background_topic]):
+    topics = [params_topic, status_topic, background_topic, notices_topic]
+    for message in bag.messages(topics):
         try:
             if message.topic == params_topic and setup is None:
                 setup = setup_in(message.data) or False
             elif message.topic == background_topic:
                 msg = deserialize_message(message.data, Image)
                 stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
-                images.add(stamp, lambda msg=msg: image_from_msg(msg))
+                number = frame_number(msg.header.frame_id)
+                digest = pixels_sha256(msg)
+                images.add(stamp, lambda msg=msg: image_from_msg(msg), number, digest)
+            elif message.topic == notices_topic:
+                first_notices(deserialize_message(message.data, Notices), notices)
             elif message.topic == status_topic:
                 pending.append((decode_status(message.data), message))
         except CamoError:
@@ -89,14 +99,29 @@ def load_run(path: str | Path | Bag) -> RecordedRun:
             bag.reject(message)
             continue
         rows = rows.select(rows.sender_id < params.count)
+        header = getattr(status, "header", None)  # when its process sent it, as live
+        stamp = header.stamp.sec + header.stamp.nanosec * 1e-9 if header is not None else None
         for index in np.unique(rows.round).tolist():
-            rounds[index].add_rows(rows.select(rows.round == index))
+            rounds[index].add_rows(rows.select(rows.round == index), stamp)
             times.setdefault(index, []).append(message.log_time)
     if not rounds:
         raise BagError(f"{path} holds no robot status: nothing to render")
     elapsed = {index: (max(t) - min(t)) / 1e9 for index, t in times.items()}
     bridged = frozenset(setup.bridged)
-    return RecordedRun(params, list(setup.backgrounds), rounds, images, elapsed, bridged)
+    return RecordedRun(params, list(setup.backgrounds), rounds, images, elapsed, bridged, notices)
+
+
+MAX_FRAMES = 100_000  # frames a render holds at most (a continuous run's bag holds many)
+
+
+def first_notices(msg: Notices, notices: dict[int, tuple[int, float, float]]) -> None:
+    """A Notices message into round -> the first notice of it (what the monitor keeps)."""
+    for robot, round_, changed, noticed in zip(
+        msg.robot, msg.round, msg.changed_at, msg.noticed_at, strict=False
+    ):
+        first = notices.get(int(round_))
+        if first is None or noticed < first[2]:
+            notices[int(round_)] = (int(robot), float(changed), float(noticed))
 
 
 class IncompleteBag(CamoError):
@@ -119,18 +144,27 @@ def render(path: str | Path | Bag, out: Path, partial: bool = False) -> list[dic
     run = load_run(bag)
     params, summaries = run.params, []
     results = (held.result or {}).get("rounds", [])
-    for index in sorted(run.rounds):
+    # A continuous run's result names the rounds it wrote (by frame): those, as round_<k>/.
+    named = [int(r["round"]) for r in results if isinstance(r.get("round"), int)]
+    order = [r for r in named if r in run.rounds] if named else sorted(run.rounds)
+    for k, index in enumerate(order):
         record = run.rounds[index]
-        folder = out if len(run.rounds) == 1 else out / f"round_{index}"
+        many = len(order) > 1 or bool(named)
+        folder = out / f"round_{k if named else index}" if many else out
         folder.mkdir(parents=True, exist_ok=True)
         result = record.result(dead=~record.finished)
         result.elapsed_s = run.elapsed_s[index]
-        label = run.labels[index] if index < len(run.labels) else f"round {index}"
-        image = run.images[index] if index < len(run.images) else None
+        label = run.labels[index] if index < len(run.labels) and not named else f"round {index}"
+        if named:
+            label = f"{run.labels[0] if run.labels else 'background'}, frame {index}"
+        image = run.images.get(index)
         title = run_title(f"{label} (from {Path(path).name})", params, "robot nodes")
         extra = {}
-        if index < len(results) and "rejected_messages" in results[index]:
-            extra["rejected_messages"] = results[index]["rejected_messages"]
+        at = k if named else index
+        if at < len(results) and "rejected_messages" in results[at]:
+            extra["rejected_messages"] = results[at]["rejected_messages"]
+        if named:
+            extra.update(continuous_fields(run, k, index, record))
         lacks = "; ".join(gaps_of_round(gaps, index))
         marks = record.marks(~record.finished, run.bridged)
         summaries.append(write_round(result, image, folder, title, lacks or None, extra, marks))
@@ -145,6 +179,22 @@ def render(path: str | Path | Bag, out: Path, partial: bool = False) -> list[dic
             f"formation steps f0..",
         )
     return summaries
+
+
+def continuous_fields(run: RecordedRun, k: int, frame: int, record) -> dict:
+    """The fields a continuous round's summary.json has besides the simulator's (as the live
+    run writes them: round_report.continuous_round)."""
+    noticed = run.notices.get(frame)
+    clocks = record.timing()
+    return {
+        "round": k,
+        "frame": frame,
+        "background_sha256": run.images.digests.get(frame),
+        "changed_at": noticed[1] if noticed else run.images.times.get(frame),
+        "noticed_at": noticed[2] if noticed else None,
+        "noticed_by": noticed[0] if noticed else None,
+        "done_at": clocks[1] if clocks is not None else None,
+    }
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -166,6 +166,7 @@ def run_continuous(config: RunConfig, session: Session, group: ProcessGroup, ran
     monitor = session.monitor
     started = last_print = time.monotonic()
     written: list[int] = []
+    finished: dict[int, int] = {}  # round -> robots that finished it
     while config.until_rounds is None or len(written) < config.until_rounds:
         if config.until_seconds is not None and time.monotonic() - started >= config.until_seconds:
             break
@@ -175,6 +176,7 @@ def run_continuous(config: RunConfig, session: Session, group: ProcessGroup, ran
                 summary = continuous_round(config, monitor, len(written), round_)
                 ran.append({"round": round_, **round_ran(config, monitor, round_, summary)})
                 written.append(round_)
+                finished[round_] = int(monitor.record(round_).finished.sum())
                 monitor.close(round_)
             elif monitor.superseded(round_):
                 print(f"camo run: the round of frame {round_} was superseded", file=sys.stderr)
@@ -191,6 +193,8 @@ def run_continuous(config: RunConfig, session: Session, group: ProcessGroup, ran
         session.check_hosts(group.cells)
         for robot in group.lost_cells():
             monitor.lost[robot] = True
+    if written and session.recorders.present():
+        session.recorders.hold(written[-1], group, finished=finished[written[-1]])
     group.interrupt(keep=lambda proc: proc in (group.recorder, group.server))
 
 

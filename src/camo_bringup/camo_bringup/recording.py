@@ -36,8 +36,12 @@ def recorder_report(text: str) -> dict | None:
     return report if valid else None
 
 
-def holds(report: dict, round_index: int, finished: int) -> bool:
-    """Whether a recorder's bag holds a round of `finished` robots."""
+def holds(report: dict, round_index: int, finished: int, continuous: bool = False) -> bool:
+    """Whether a recorder's bag holds a round of `finished` robots (a continuous run's round by
+    its frame number, the others' by their index)."""
+    if continuous:
+        rounds = report.get("rounds", {})
+        return isinstance(rounds, dict) and rounds.get(str(round_index), -1) >= finished
     complete = report.get("complete", [])
     return len(complete) > round_index and complete[round_index] >= finished
 
@@ -94,20 +98,29 @@ class Recorders:
             self.session.spin_for(settle)
         return self.count() > 0
 
-    def hold(self, round_index: int, group: ProcessGroup, limit: float = 60.0) -> None:
+    def hold(
+        self,
+        round_index: int,
+        group: ProcessGroup,
+        limit: float = 60.0,
+        finished: int | None = None,
+    ) -> None:
         """Before the robots stop or start a new round: a robot's topics keep one round of
-        history for late subscribers, so every recorder must have taken this round in first."""
+        history for late subscribers, so every recorder must have taken this round in first
+        (`finished`: the robots that finished it, if the monitor's record is let go)."""
         from camo_bringup.session import RunFailed
 
         session = self.session
-        finished = int(session.monitor.record(round_index).finished.sum())
+        if finished is None:
+            finished = int(session.monitor.record(round_index).finished.sum())
 
         def short() -> list[dict]:
             """The reports of recorders that do not hold the round yet."""
             reports = self.live_reports()
             if len(reports) < self.count() or not self.own_heard():
                 return [{}]  # a recorder not heard from yet
-            return [r for r in reports if not holds(r, round_index, finished)]
+            continuous = session.config.continuous
+            return [r for r in reports if not holds(r, round_index, finished, continuous)]
 
         deadline = time.monotonic() + limit
         while lacking := short():

@@ -145,8 +145,7 @@ class Host:
         if grid is None or self.watch is None:
             return
         if self._joins:
-            self.watch.reset(self._joins)
-            self._joins.clear()
+            self._reset(self._joins)
         frame = self.projection.newest
         judged = self.watch.read(grid, frame, self.idle)
         if not len(judged.robots):
@@ -164,11 +163,26 @@ class Host:
                 notice.round.append(frame)
                 notice.changed_at.append(self.projection.stamps.get(changed, wall))
                 notice.noticed_at.append(wall)
-        self.watch.reset(judged.robots)  # noticed: a new reference, joined or not
+        self._reset(judged.robots.tolist())  # noticed: a new reference, joined or not
         if notice.robot:
             notice.header.stamp = self.node.get_clock().now().to_msg()
             notice.header.frame_id = "camo"
             self.notices.publish(notice)
+
+    def _reset(self, robots: list[int]) -> None:
+        """New references for these robots, from their rounds' frames; those whose frame has not
+        come yet wait for it."""
+        assert self.watch is not None
+        by_round: dict[int, list[int]] = {}
+        for index in robots:
+            by_round.setdefault(self.robots[index].protocol.round, []).append(index)
+        self._joins = []
+        for round_, indices in by_round.items():
+            grid = self.projection.frames.get(round_) if round_ >= 0 else None
+            if round_ >= 0 and grid is None and round_ > self.projection.newest:
+                self._joins.extend(indices)  # its frame is on its way
+                continue
+            self.watch.reset(indices, grid, round_)
 
     def _forget(self) -> None:
         """Drop what was kept of rounds no hosted robot is in any more."""

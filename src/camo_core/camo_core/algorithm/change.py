@@ -14,8 +14,10 @@ probability rho_meas a uniform grey). Each robot judges its own readings only:
   the differences of successive readings, which readings replaced by noise leave alone). A
   camera whose frames flicker raises it; a clean projection leaves it at change_threshold.
   A robot judges nothing before it holds two windows of readings.
-- After a robot joins a round its *reference* is the first coherent window of the readings it
-  takes from then on.
+- When a robot joins a round it reads the round's frame a window's worth of times; if those
+  readings are coherent their level is its *reference*, else the first coherent window of the
+  readings it takes from then on is. (So a scene that changes while a round starts is still
+  a change against the scene the round camouflages.)
 - It notices a change when its newest window is coherent and its level differs from the
   reference by more than the threshold. A robot that is in no round yet notices the scene as
   soon as it has a reference.
@@ -102,21 +104,48 @@ class Watch:
         self.reference = np.full(n, np.nan)  # the reference level (NaN: none yet)
         self.taken = 0  # readings so far: the noise draws' number
 
-    def reset(self, robots) -> None:
-        """These robots joined a round (or noticed): their reference is to be found anew."""
+    def reset(self, robots, grid: np.ndarray | None = None, frame: int = -1) -> None:
+        """These robots joined a round (or noticed): their reference is to be found anew. With
+        `grid`, the round's frame (number `frame`), they read it a window's worth of times
+        (each reading with its own measurement error), and a coherent window of those is their
+        reference at once: the scene their round camouflages, not what is projected after it."""
+        robots = np.asarray(robots, dtype=np.int64)
         self.since[robots] = 0
         self.reference[robots] = np.nan
+        if grid is None or not len(robots):
+            return
+        m = self.window
+        for _ in range(m):
+            values = self.values(grid, robots)
+            self.readings[robots, :-1] = self.readings[robots, 1:]
+            self.readings[robots, -1] = values
+            self.frames[robots, :-1] = self.frames[robots, 1:]
+            self.frames[robots, -1] = frame
+        recent = self.readings[robots, -m:]
+        level = np.median(recent, axis=1)
+        limit = threshold(self.base, self.sigma()[robots])
+        near = np.abs(recent - level[:, None]) <= limit[:, None] / 2
+        coherent = near.sum(axis=1) >= m - 1
+        self.reference[robots[coherent]] = level[coherent]
+        self.since[robots] = m
 
-    def values(self, grid: np.ndarray) -> np.ndarray:
-        """Every robot's reading of `grid` (rows x cols greys), after measurement error."""
-        values = np.asarray(grid, dtype=np.float64).ravel()[self.ids]
+    def sigma(self) -> np.ndarray:
+        """Each robot's noise, from the readings held (0 before it holds two)."""
+        held = self.readings[:, self.kept - self.held :]
+        if self.held < 2:
+            return np.zeros(len(self.ids))
+        return QUARTILE_TO_SIGMA * np.quantile(np.abs(np.diff(held, axis=1)), 0.25, axis=1)
+
+    def values(self, grid: np.ndarray, robots: np.ndarray | None = None) -> np.ndarray:
+        """Every robot's reading of `grid` (rows x cols greys), or these robots' (indices),
+        after measurement error."""
+        ids = self.ids if robots is None else self.ids[robots]
+        values = np.asarray(grid, dtype=np.float64).ravel()[ids]
         rho = self.params.rho_meas
         if rho > 0.0:
             seed = self.params.seed
-            replaced = rng.uniform_array(
-                seed, rng.STREAM_READING_REPLACED, self.taken, self.ids, 0
-            )
-            noise = rng.uniform_array(seed, rng.STREAM_READING_VALUE, self.taken, self.ids, 0)
+            replaced = rng.uniform_array(seed, rng.STREAM_READING_REPLACED, self.taken, ids, 0)
+            noise = rng.uniform_array(seed, rng.STREAM_READING_VALUE, self.taken, ids, 0)
             values = np.where(replaced < rho, np.floor(256.0 * noise), values)
         self.taken += 1
         return values
@@ -131,12 +160,7 @@ class Watch:
         self.frames[:, -1] = frame
         self.held = min(self.held + 1, self.kept)
         self.since = np.minimum(self.since + 1, m)
-        held = self.readings[:, self.kept - self.held :]
-        if self.held >= 2:
-            sigma = QUARTILE_TO_SIGMA * np.quantile(np.abs(np.diff(held, axis=1)), 0.25, axis=1)
-        else:
-            sigma = np.zeros(len(self.ids))
-        limit = threshold(self.base, sigma)
+        limit = threshold(self.base, self.sigma())
         recent = self.readings[:, -m:]
         level = np.median(recent, axis=1)
         near = np.abs(recent - level[:, None]) <= limit[:, None] / 2
