@@ -39,6 +39,9 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=1e9)
     parser.add_argument("--size", type=int, default=160, help="frame width and height")
     parser.add_argument("--out", default=None, help="keep every frame sent here")
+    parser.add_argument(
+        "--start-when", default=None, help="show the first scene until this file exists"
+    )
     args = parser.parse_args()
     scenes = [cv2.resize(scene(s), (args.size, args.size)) for s in args.scenes.split(",")]
     out = Path(args.out) if args.out else None
@@ -49,10 +52,14 @@ def main() -> None:
     publisher = node.create_publisher(Image, args.topic, qos_profile_sensor_data)
     generator = np.random.default_rng(0)
     start = time.monotonic()
+    switching = None if args.start_when else start  # when the switches' clock started
     frame = 0
     try:
-        while (now := time.monotonic() - start) < args.seconds:
-            index = min(int(now // args.switch), len(scenes) - 1)
+        while time.monotonic() - start < args.seconds:
+            if switching is None and Path(args.start_when).exists():
+                switching = time.monotonic()
+            since = 0.0 if switching is None else time.monotonic() - switching
+            index = min(int(since // args.switch), len(scenes) - 1)
             pixels = scenes[index].astype(np.float64)
             if args.noise:
                 pixels = pixels + generator.normal(0, args.noise, pixels.shape)
