@@ -1,9 +1,25 @@
 """The projector started alone: its image is checked before it waits for a run."""
 
+import os
 import subprocess
+import sys
+import time
 
 import pytest
-from support import PROCESS, png_bytes, ros_node
+import rclpy
+from support import (
+    PROCESS,
+    ROOT,
+    SWARM,
+    assert_like_sim,
+    domain,
+    finished,
+    png_bytes,
+    ros_context,
+    ros_node,
+    run_camo,
+    start_run,
+)
 
 
 def projector(*ros_args: str) -> subprocess.CompletedProcess:
@@ -31,5 +47,107 @@ def test_a_projector_given_a_parameter_it_has_not_exits_at_once_naming_itself():
     out = projector("-p", "bogus:=1")
     assert out.returncode == 2
     assert out.stderr.strip() == (
-        "projector_node: error: projector has no parameter bogus (it has: image, pattern, run_id)"
+        "projector_node: error: projector has no parameter bogus (it has: image, pattern, "
+        "background_topic, video, fps, loop, images, period, camera, max_fps, snapshot, run_id)"
     )
+
+
+@pytest.mark.slow(PROCESS)
+@pytest.mark.parametrize(
+    "args, said",
+    [
+        (["--camera", "57"], "camera 57: there is none"),
+        (["--images", "/nonexistent/*.png"], "no file matches it"),
+        (["--video", "/nonexistent/clip.mp4"], "not found"),
+        (["--video", "x.mp4", "--camera", "0"], "one source: video and camera"),
+        (["--fps", "-3", "--video", "x.mp4"], "fps must be a number in [0, 1000]"),
+    ],
+)
+def test_a_projector_without_its_stream_exits_at_once_with_one_line(args, said):
+    out = subprocess.run(
+        [sys.executable, "-m", "camo_projector.projector_node", *args],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
+    )
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and len(lines) == 1 and said in lines[0], out.stderr
+
+
+def frames_of(run_id: str, domain_id: int, count: int, timeout: float = 30.0) -> list:
+    """The first `count` frames a projector publishes on /<run>/camo/background."""
+    from sensor_msgs.msg import Image
+
+    from camo_nodes.topics.qos import LATCHED_READER
+
+    got: list = []
+    with ros_context(domain_id) as context:
+        node = rclpy.create_node("frames_listener", context=context)
+        node.create_subscription(Image, f"/{run_id}/camo/background", got.append, LATCHED_READER)
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        deadline = time.monotonic() + timeout
+        while len(got) < count and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        node.destroy_node()
+    return got
+
+
+@pytest.mark.slow(SWARM)
+def test_a_projector_plays_a_video_as_numbered_frames(tmp_path):
+    import cv2
+    import numpy as np
+
+    video = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 25, (64, 48))
+    for k in range(12):
+        writer.write(np.full((48, 64, 3), 20 * k, np.uint8))
+    writer.release()
+    domain_id = domain()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_projector.projector_node", "--video", str(video),
+         "--max-fps", "50", "--ros-args", "-p", "run_id:=clipped"],
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain_id)},
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        frames = frames_of("clipped", domain_id, 12)
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    numbers = [int(f.header.frame_id.removeprefix("arena/frame_")) for f in frames]
+    assert numbers == sorted(numbers) and len(set(numbers)) == len(numbers) >= 8, numbers
+    greys = [int(np.frombuffer(bytes(f.data), np.uint8).mean()) for f in frames]
+    assert greys == sorted(greys) and greys[-1] - greys[0] >= 120  # played in order, to its end
+    assert {(f.width, f.height, f.encoding) for f in frames} == {(64, 48, "bgr8")}
+
+
+@pytest.mark.slow(SWARM)
+@pytest.mark.parametrize("encoding, size", [("rgb8", 97), ("mono8", 64), ("bgr8", 160)])
+def test_a_frame_from_an_image_topic_gives_the_readings_the_same_picture_gives(
+    tmp_path, encoding, size
+):
+    # Without --continuous the swarm camouflages once, on the first frame that came.
+    domain_id = domain()
+    frames = tmp_path / "frames"
+    camera = subprocess.Popen(
+        [sys.executable, str(ROOT / "tests" / "camera.py"), "/cam/image_raw", "--scenes",
+         "leopard", "--encoding", encoding, "--size", str(size), "--out", str(frames)],
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain_id)},
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    try:
+        proc = start_run(
+            "--background-topic", "/cam/image_raw", "--rows", "8", "--cols", "8",
+            "--out", str(tmp_path / "run"), domain_id=domain_id,
+        )  # fmt: skip
+        _, err = finished(proc, 120)
+    finally:
+        camera.terminate()
+        camera.wait(10)
+    assert proc.returncode == 0, err[-2000:]
+    (frame,) = {p.name for p in frames.glob("*.png")}  # no noise: every frame the same
+    sim = run_camo("sim", "--image", str(frames / frame), "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    assert_like_sim(tmp_path / "run", tmp_path / "sim")

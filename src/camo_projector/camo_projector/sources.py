@@ -14,6 +14,7 @@ from camo_core.algorithm.sensing import ImageError, load_image
 from camo_core.inputs.files import checked_file, shown
 
 MAX_SEQUENCE = 10_000  # image files of one --images pattern at most
+MAX_VIDEO_BYTES = 1 << 40  # a video is read frame by frame: its size costs no memory
 
 
 def _quiet_opencv() -> None:
@@ -42,7 +43,7 @@ class VideoSource(Source):
 
     def __init__(self, path: str, fps: float = 0.0, loop: bool = False) -> None:
         _quiet_opencv()
-        self.path = checked_file(path, "video", ImageError)
+        self.path = checked_file(path, "video", MAX_VIDEO_BYTES, ImageError)
         self.capture = cv2.VideoCapture(str(self.path))
         if not self.capture.isOpened():
             raise ImageError(f"video {shown(path)}: OpenCV cannot read it (not a video it knows)")
