@@ -9,9 +9,9 @@ each time; with `snapshot` only its first frame (a run without --continuous camo
 
 Every frame it publishes is numbered (header.frame_id `arena/frame_<n>`, n counting from 0): a
 round of the swarm is named after the frame it camouflages against. Setting `image` or
-`pattern` while running, sending a name or path on /<run>/camo/projector/load, or an image on
-/<run>/camo/projector/image (what the Camouflage action's goal holds) projects that instead,
-and ends a stream.
+`pattern` while running (what the run's Camouflage action does with a goal's image), or
+sending a name or path on /<run>/camo/projector/load, projects that instead, and ends a
+stream.
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ from camo_nodes.topics.parameters import (
     parameters_help,
     ros_arguments,
 )
-from camo_nodes.topics.qos import LATCHED_READER, history_qos
+from camo_nodes.topics.qos import history_qos
 from camo_nodes.topics.runs import run_from_parameter
 from camo_nodes.topics.startup import LEAN_NODE, node_help, start_ros, wants_help
 from camo_projector.sources import CameraSource, ImagesSource, Source, VideoSource
@@ -145,7 +145,6 @@ class ProjectorNode(Node):
         self.add_on_set_parameters_callback(self._on_set)
         # A topic as well as the parameters: data is a built-in name or an image path.
         self.create_subscription(String, topics.load, self._on_load, 10)
-        self.create_subscription(Image, topics.projector_image, self._on_image, LATCHED_READER)
         streaming = source is not None or values["background_topic"]
         if values["background_topic"]:
             # Best effort matches a camera driver's sensor-data QoS and a reliable writer alike.
@@ -205,15 +204,6 @@ class ProjectorNode(Node):
             return
         self._stop_stream()
         self.publish(image)
-
-    def _on_image(self, msg: Image) -> None:
-        try:
-            image_from_msg(msg)
-        except ImageEncodingError as exc:
-            self.get_logger().error(f"image not projected: {exc}", throttle_duration_sec=1.0)
-            return
-        self._stop_stream()
-        self._publish_msg(msg)
 
     def _on_set(self, params) -> SetParametersResult:
         values = {p.name: p.value for p in params}

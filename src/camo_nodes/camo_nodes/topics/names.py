@@ -94,11 +94,6 @@ class RunTopics:
         return f"/{self.run}/camo/projector/load"
 
     @property
-    def projector_image(self) -> str:
-        """sensor_msgs/Image: an image for the projector to project (the Camouflage action's)."""
-        return f"/{self.run}/camo/projector/image"
-
-    @property
     def hosts(self) -> str:
         """camo_msgs/Host, latched: which robots each process hosts."""
         return f"/{self.run}/camo/hosts"
