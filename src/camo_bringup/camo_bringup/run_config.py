@@ -102,6 +102,7 @@ def build_parser() -> Parser:
         "--rounds",
         type=int,
         default=None,
+        metavar="N",
         help="with --continuous: end the run after this many finished rounds (exit code 0)",
     )
     add(

@@ -69,18 +69,35 @@ class ProjectorParams:
     image: str = param("", "background image file (PNG, JPEG, BMP, TIFF, WebP, ...)")
     pattern: str = param("forest", "built-in background", choices=BACKGROUNDS)
     background_topic: str = param(
-        "", "project what arrives on this sensor_msgs/Image topic (mono8, rgb8, bgr8)"
+        "",
+        "project what arrives on this sensor_msgs/Image topic (mono8, rgb8, bgr8)",
+        metavar="TOPIC",
     )
-    video: str = param("", "project this video file, frame by frame")
-    fps: float = param(0.0, "frames a second of the video (0: its own rate)", low=0.0, high=1000.0)
+    video: str = param("", "project this video file, frame by frame", metavar="FILE")
+    fps: float = param(
+        0.0, "frames a second of the video (0: its own rate)", low=0.0, high=1000.0, metavar="F"
+    )
     loop: bool = param(False, "play the video (or the images) again from the start at its end")
-    images: str = param("", "project the image files matching this glob pattern, in name order")
-    period: float = param(
-        1.0, "seconds each of the images is projected", low=0.01, high=MAX_WAIT, unit="s"
+    images: str = param(
+        "", "project the image files matching this glob pattern, in name order", metavar="GLOB"
     )
-    camera: int = param(-1, "project this local camera (OpenCV device number; -1: none)", low=-1)
+    period: float = param(
+        1.0,
+        "seconds each of the images is projected",
+        low=0.01,
+        high=MAX_WAIT,
+        unit="s",
+        metavar="S",
+    )
+    camera: int = param(
+        -1, "project this local camera (OpenCV device number; -1: none)", low=-1, metavar="N"
+    )
     max_fps: float = param(
-        10.0, "frames a second projected at most from a stream (its newest)", low=0.1, high=120.0
+        10.0,
+        "frames a second projected at most from a stream (its newest)",
+        low=0.1,
+        high=120.0,
+        metavar="F",
     )
     snapshot: bool = param(False, "project only a stream's first frame")
 

@@ -50,10 +50,19 @@ class ProtocolParams:
         "next round, and robots that hear of it join",
     )
     sense_period: float = param(
-        0.1, "seconds between a watching robot's readings", low=0.01, high=60.0, unit="s"
+        0.1,
+        "seconds between a watching robot's readings",
+        low=0.01,
+        high=60.0,
+        unit="s",
+        metavar="S",
     )
     change_window: int = param(
-        6, "readings a level is judged on (one wild reading of them allowed)", low=3, high=64
+        6,
+        "readings a level is judged on (one wild reading of them allowed)",
+        low=3,
+        high=64,
+        metavar="N",
     )
     change_threshold: float = param(
         24.0,
@@ -61,6 +70,7 @@ class ProtocolParams:
         "readings are noisier)",
         low=1.0,
         high=255.0,
+        metavar="GREYS",
     )
 
     def __post_init__(self) -> None:
