@@ -12,11 +12,13 @@ from support import (
     ROOT,
     SWARM,
     assert_like_sim,
+    bag_tool,
     camo_run,
     domain,
     finished,
     run_camo,
     start_run,
+    wait_for_line,
 )
 
 CAMERA = str(ROOT / "tests" / "camera.py")
@@ -134,3 +136,54 @@ def test_continuous_options_that_do_not_fit_are_one_line(argv, said, capsys):
     code = launcher.main([*argv, "--rows", "2", "--cols", "2"])
     err = capsys.readouterr().err
     assert code == 2 and said in err and len(err.strip().splitlines()) == 1, err
+
+
+@pytest.mark.slow(SWARM)
+def test_a_recorded_continuous_run_renders_its_rounds_one_after_another(tmp_path):
+    from PIL import Image
+
+    domain_id = domain()
+    run = tmp_path / "run"
+    cam = camera(
+        domain_id, tmp_path / "frames", "--scenes", "desert,forest", "--switch", "2",
+        "--fps", "10", "--seconds", "90", "--start-when", str(run / "round_0"),
+    )  # fmt: skip
+    try:
+        proc = start_run(
+            "--continuous", "--rounds", "2", "--background-topic", "/cam/image_raw",
+            "--rho-comm", "0.1", "--record", str(tmp_path / "bag"), "--out", str(run),
+            domain_id=domain_id,
+        )  # fmt: skip
+        _, err = finished(proc, 120)
+    finally:
+        cam.terminate()
+        cam.wait(10)
+    assert proc.returncode == 0, err[-3000:]
+    rendered = bag_tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
+    assert rendered.returncode == 0, rendered.stderr
+    for k in (0, 1):
+        live = json.loads((run / f"round_{k}" / "summary.json").read_text())
+        again = json.loads((tmp_path / "rendered" / f"round_{k}" / "summary.json").read_text())
+        live.pop("elapsed_s"), again.pop("elapsed_s")
+        assert again == live
+    for folder in (run, tmp_path / "rendered"):
+        with Image.open(folder / "run.gif") as gif:
+            parts = []
+            for k in (0, 1):
+                with Image.open(folder / f"round_{k}" / "run.gif") as part:
+                    parts.append(part.n_frames)
+            assert gif.n_frames == sum(parts)
+
+
+@pytest.mark.slow(SWARM)
+def test_ctrl_c_of_a_continuous_run_writes_the_round_under_way(tmp_path):
+    proc = start_run(
+        "--continuous", "--consensus-steps", "30000", "--out", str(tmp_path / "run"),
+    )  # fmt: skip
+    wait_for_line(proc, "consensus 64")
+    proc.send_signal(2)
+    _, err = finished(proc, 60)
+    assert proc.returncode == 130, err[-2000:]
+    summary = json.loads((tmp_path / "run" / "round_0" / "summary.json").read_text())
+    assert "incomplete" in summary and summary["frame"] == 0
+    assert len(summary["consensus_trace"]) >= 2

@@ -33,7 +33,7 @@ from camo_core.algorithm.status_rows import rows_of_message
 from camo_core.cli.options import Parser, add_out_options, out_dir
 from camo_core.exceptions import CamoError
 from camo_core.results import figures
-from camo_core.results.animation import Snapshots, write_animation
+from camo_core.results.animation import Snapshots, join_animations, write_animation
 from camo_core.results.output import run_title, write_round
 from camo_core.results.record import Backgrounds, Rounds
 from camo_msgs.msg import Notices
@@ -158,7 +158,7 @@ def render(path: str | Path | Bag, out: Path, partial: bool = False) -> list[dic
         if named:
             label = f"{run.labels[0] if run.labels else 'background'}, frame {index}"
         image = run.images.get(index)
-        title = run_title(f"{label} (from {Path(path).name})", params, "robot nodes")
+        title = run_title(f"{label} (from {Path(path).name})", record.params, "robot nodes")
         extra = {}
         at = k if named else index
         if at < len(results) and "rejected_messages" in results[at]:
@@ -177,6 +177,10 @@ def render(path: str | Path | Bag, out: Path, partial: bool = False) -> list[dic
             folder / "timeline.png",
             title=f"{label}: {params.rows}x{params.cols} robots; consensus steps c0.., "
             f"formation steps f0..",
+        )
+    if named and summaries:  # a continuous run's GIF: its rounds one after another
+        join_animations(
+            [out / f"round_{k}" / "run.gif" for k in range(len(summaries))], out / "run.gif"
         )
     return summaries
 

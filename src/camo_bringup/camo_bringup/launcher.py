@@ -26,7 +26,12 @@ import rclpy
 from rclpy.signals import SignalHandlerOptions
 
 from camo_bringup.processes import ProcessGroup
-from camo_bringup.round_report import continuous_round, report_round, write_partial
+from camo_bringup.round_report import (
+    continuous_partial,
+    continuous_round,
+    report_round,
+    write_partial,
+)
 from camo_bringup.run_config import RunConfig, build_parser, config_from
 from camo_bringup.session import Interrupted, RunFailed, Session
 from camo_core.algorithm.run_setup import contiguous
@@ -236,6 +241,13 @@ def run(config: RunConfig) -> int:
             summary = write_partial(config, session.monitor, len(ran))
             if summary is not None:
                 ran.append(round_ran(config, session.monitor, len(ran), summary))
+        elif config.continuous and ended == "interrupted":
+            summary = continuous_partial(config, session.monitor, len(ran))
+            if summary is not None:
+                round_ = summary["frame"]
+                ran.append(
+                    {"round": round_, **round_ran(config, session.monitor, round_, summary)}
+                )
         session.recorders.publish_result({"run": config.topics.run, "ended": ended, "rounds": ran})
         group.stop()  # the recorder last: it closes the bag on SIGINT
         remove_stale()  # the shared-memory files of workers that exited without tearing down

@@ -15,6 +15,7 @@ from camo_bringup.run_config import RunConfig
 from camo_core.algorithm.result import pattern_said
 from camo_core.algorithm.robot_io import CONSENSUS
 from camo_core.algorithm.run_setup import contiguous
+from camo_core.results.animation import join_animations
 from camo_nodes.monitor_node import MonitorNode
 
 
@@ -129,6 +130,11 @@ def continuous_round(config: RunConfig, monitor: MonitorNode, index: int, round_
     changed = summary["changed_at"]
     for key, at in (("noticed_s", summary["noticed_at"]), ("done_s", done_at)):
         row[key] = None if at is None or changed is None else round(at - changed, 3)
+    # The run's GIF: every round so far, one after another.
+    join_animations(
+        [config.folder / f"round_{k}" / "run.gif" for k in range(index + 1)],
+        config.folder / "run.gif",
+    )
     with open(config.folder / "rounds.csv", "a", newline="") as file:
         writer = csv.DictWriter(file, ROUNDS_CSV)
         if file.tell() == 0:
@@ -141,5 +147,34 @@ def continuous_round(config: RunConfig, monitor: MonitorNode, index: int, round_
     print(
         f"round {index} (frame {round_}, {by}{after}): pattern {pattern_said(summary)}{notes}; "
         f"wrote {folder}/"
+    )
+    return summary
+
+
+def continuous_partial(config: RunConfig, monitor: MonitorNode, index: int) -> dict | None:
+    """A stopped continuous run: what the swarm had reported of the round under way (the
+    latest one robots reported in), as round_<index>/."""
+    under_way = sorted(monitor.heard - monitor.closed)
+    if not under_way:
+        return None
+    round_ = under_way[-1]
+    if not np.any(monitor.record(round_).phase >= CONSENSUS):
+        print(
+            "camo run: nothing to write of the round under way (no robot had voted)",
+            file=sys.stderr,
+        )
+        return None
+    folder = config.folder / f"round_{index}"
+    folder.mkdir(exist_ok=True)
+    label = f"{config.labels[0]}, frame {round_} (incomplete)"
+    extra = {
+        "round": index,
+        "frame": round_,
+        "background_sha256": monitor.images.digests.get(round_),
+    }
+    summary = monitor.write(round_, folder, label, partial=True, extra=extra)
+    print(
+        f"camo run: wrote what the swarm had reported of frame {round_}'s round to {folder}/",
+        file=sys.stderr,
     )
     return summary

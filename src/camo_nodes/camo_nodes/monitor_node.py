@@ -278,8 +278,8 @@ class MonitorNode(Node):
         """summary.json, figure.png and run.gif of a round (partial: how far a stopped run
         got; `extra`: more fields for its summary)."""
         image = self.images.get(round_index)
-        title = run_title(label, self.params, "robot nodes")
         record, dead = self.record(round_index), self.dead(round_index)
+        title = run_title(label, record.params, "robot nodes")  # the round's seed
         marks = record.marks(dead, self.bridged)
         summary = write_round(
             self.result(round_index, partial),

@@ -181,3 +181,21 @@ def write_animation(
     duration = round(FRAME_S * 1000)
     images[0].save(path, save_all=True, append_images=images[1:], duration=duration, loop=0)
     return path
+
+
+MAX_JOINED = 20  # rounds a joined GIF shows at most: the latest
+
+
+def join_animations(paths: list[Path], path: str | Path) -> Path:
+    """One GIF of several rounds' run.gif, one after another (the latest MAX_JOINED): a
+    continuous run's scenes and how the swarm followed each."""
+    images: list[Image.Image] = []
+    for part in paths[-MAX_JOINED:]:
+        with Image.open(part) as gif:
+            for k in range(getattr(gif, "n_frames", 1)):
+                gif.seek(k)
+                images.append(gif.convert("RGB").quantize(colors=255, method=Image.Quantize.FASTOCTREE))
+    path = Path(path)
+    duration = round(FRAME_S * 1000)
+    images[0].save(path, save_all=True, append_images=images[1:], duration=duration, loop=0)
+    return path
