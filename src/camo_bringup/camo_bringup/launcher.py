@@ -161,6 +161,7 @@ def run_rounds(
             # The robots tear down while this process writes the results.
             group.interrupt(keep=lambda proc: proc in (group.recorder, group.server))
         summary = report_round(config, session.monitor, index, times)
+        session.action.written(index, index, summary)
         ran.append(round_ran(config, session.monitor, index, summary))
 
 
@@ -179,6 +180,7 @@ def run_continuous(config: RunConfig, session: Session, group: ProcessGroup, ran
         for round_ in sorted(monitor.heard - monitor.closed):
             if monitor.complete(round_):
                 summary = continuous_round(config, monitor, len(written), round_)
+                session.action.written(len(written), round_, summary)
                 ran.append({"round": round_, **round_ran(config, monitor, round_, summary)})
                 written.append(round_)
                 finished[round_] = int(monitor.record(round_).finished.sum())

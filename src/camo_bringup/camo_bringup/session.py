@@ -10,6 +10,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from std_msgs.msg import String
 
+from camo_bringup.camouflage_action import CamouflageAction
 from camo_bringup.recording import Recorders
 from camo_bringup.run_config import RunConfig
 from camo_core.exceptions import CamoError
@@ -49,6 +50,7 @@ class Session:
         self.node = Node("launcher", namespace=topics.swarm_namespace, context=context)
         self.executor = EventsExecutor(context=context)
         self.executor.add_node(self.node)
+        self.action: CamouflageAction | None = None  # served once the run's nodes are up
         if config.named:
             self.refuse_a_live_run()
         setup = config.setup()
@@ -61,6 +63,7 @@ class Session:
             String(data=setup.to_json())
         )
         self.recorders = Recorders(self)
+        self.action = CamouflageAction(self)
 
     def refuse_a_live_run(self, settle: float = 1.0) -> None:
         """Two launchers of one run id would share its topics: the second refuses to start."""
@@ -100,6 +103,8 @@ class Session:
         if self.stop:
             raise Interrupted
         self.executor.spin_once(timeout_sec=seconds)
+        if self.action is not None:
+            self.action.update()
 
     def spin_for(self, seconds: float) -> None:
         end = time.monotonic() + seconds
@@ -123,6 +128,8 @@ class Session:
         self.loader.publish(String(data=label))
 
     def close(self) -> None:
+        if self.action is not None:
+            self.action.close()
         # Executor first, then nodes, then context: the EventsExecutor must let go of the
         # nodes' handles before they are destroyed, or interpreter exit can crash.
         self.executor.shutdown()

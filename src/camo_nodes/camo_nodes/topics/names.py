@@ -94,6 +94,11 @@ class RunTopics:
         return f"/{self.run}/camo/projector/load"
 
     @property
+    def camouflage(self) -> str:
+        """camo_msgs/action/Camouflage: camouflage on an image, and follow it (the launcher's)."""
+        return f"/{self.run}/swarm/camouflage"
+
+    @property
     def hosts(self) -> str:
         """camo_msgs/Host, latched: which robots each process hosts."""
         return f"/{self.run}/camo/hosts"

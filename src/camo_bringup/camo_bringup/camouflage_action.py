@@ -1,0 +1,206 @@
+"""The run's Camouflage action (camo_msgs/action/Camouflage on /<run>/swarm/camouflage).
+
+A goal with an image: the launcher writes it into the run's folder (goals/goal_<n>.png) and has
+the projector load it (/<run>/camo/projector/load, as a --then switch does); the swarm
+notices the change by itself (--continuous) and the goal's result is the first round written
+on a frame projected after it. A goal without an image: the round under way, or if none is,
+the latest one written. Feedback, twice a second: the robots per phase of the round being
+followed and the slowest robot's consensus step. A run without --continuous starts no round for
+a goal: it refuses goals with an image. Goals still open when the run ends are aborted.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+from rclpy.action import ActionServer, CancelResponse, GoalResponse
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.task import Future
+from std_msgs.msg import String
+
+from camo_core.algorithm.robot_io import CONSENSUS
+from camo_core.algorithm.sensing import sense_image
+from camo_core.exceptions import CamoError
+from camo_msgs.action import Camouflage
+from camo_nodes.topics.images import image_from_msg
+
+FEEDBACK_PERIOD = 0.5  # s
+SPINS = 8  # turns of the action's executor per turn of the launcher's loop
+GOAL_WAIT = 120.0  # s a goal's image may take to start a round before the goal is aborted
+
+
+@dataclass
+class OpenGoal:
+    handle: object  # rclpy's ServerGoalHandle
+    future: Future
+    image: np.ndarray | None
+    accepted: float = field(default_factory=time.monotonic)
+    after: int | None = None  # the goal is met by a round on a frame later than this
+    fed: float = 0.0
+
+
+class CamouflageAction:
+    """Serves the action from the launcher's node; `update()` each turn of the launcher's loop,
+    `written()` for each round it writes."""
+
+    def __init__(self, session) -> None:
+        self.session = session
+        config = session.config
+        self.continuous = config.continuous
+        self.folder: Path = config.folder / "goals"
+        self.open: list[OpenGoal] = []
+        self.done: list[tuple[int, int, dict]] = []  # (index, frame, summary) of rounds written
+        self._numbers = itertools.count()
+        # A node and executor of its own: a result sent after its request's callback returned
+        # fails from rclpy's EventsExecutor, which the launcher's other nodes spin ("Failed to
+        # send result response"); rclpy's own executor keeps the request for later.
+        context = session.node.context
+        self.node = Node("camouflage", namespace=config.topics.swarm_namespace, context=context)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self.server = ActionServer(
+            self.node,
+            Camouflage,
+            config.topics.camouflage,
+            execute_callback=self._execute,
+            goal_callback=self._goal,
+            cancel_callback=lambda handle: CancelResponse.ACCEPT,
+        )
+
+    # ---- the server's callbacks ------------------------------------------------------------
+
+    def _goal(self, request) -> GoalResponse:
+        problem = self._problem(request.image)
+        if problem:
+            self.session.node.get_logger().warning(f"Camouflage goal refused: {problem}")
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
+
+    def _problem(self, image) -> str | None:
+        if not image.width and not image.height:
+            return None
+        if not self.continuous:
+            return "this run has no --continuous: it camouflages its own backgrounds only"
+        try:
+            pixels = image_from_msg(image)
+            params = self.session.config.params
+            sense_image(pixels, params.rows, params.cols, params.profile)
+        except CamoError as exc:
+            return str(exc)
+        return None
+
+    async def _execute(self, handle):
+        image = handle.request.image
+        pixels = image_from_msg(image) if image.width or image.height else None
+        goal = OpenGoal(handle, Future(), pixels)
+        self.open.append(goal)
+        result = await goal.future
+        if handle.is_cancel_requested:
+            handle.canceled()
+        elif result.success:
+            handle.succeed()
+        else:
+            handle.abort()
+        return result
+
+    # ---- what the launcher's loop tells it ---------------------------------------------------
+
+    def written(self, index: int, frame: int, summary: dict) -> None:
+        self.done.append((index, frame, summary))
+
+    def update(self) -> None:
+        for _ in range(SPINS):  # the goals' requests, their execution, feedback and results
+            self.executor.spin_once(timeout_sec=0.0)
+        monitor = self.session.monitor
+        now = time.monotonic()
+        for goal in list(self.open):
+            if goal.handle.is_cancel_requested:
+                self._finish(goal, Camouflage.Result(success=False, message="cancelled"))
+                continue
+            if goal.image is not None and goal.after is None:
+                self._project(goal, monitor)
+            met = self._round_for(goal)
+            if met is not None:
+                self._finish(goal, result_of(*met))
+            elif now - goal.accepted > GOAL_WAIT:
+                message = f"no round began on the goal's scene within {GOAL_WAIT:g} s"
+                self._finish(goal, Camouflage.Result(success=False, message=message))
+            elif now - goal.fed >= FEEDBACK_PERIOD:
+                goal.fed = now
+                goal.handle.publish_feedback(feedback_of(monitor))
+
+    def close(self) -> None:
+        """The run ends: goals its last rounds met get their results, the others are aborted."""
+        self.update()
+        for goal in list(self.open):
+            self._finish(goal, Camouflage.Result(success=False, message="the run ended"))
+        for _ in range(SPINS):
+            self.executor.spin_once(timeout_sec=0.01)
+        self.server.destroy()
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+    # ---- helpers ------------------------------------------------------------------------------
+
+    def _project(self, goal: OpenGoal, monitor) -> None:
+        """Its image into the run's folder, and the projector told to project it."""
+        self.folder.mkdir(exist_ok=True)
+        path = self.folder / f"goal_{next(self._numbers)}.png"
+        cv2.imwrite(str(path), goal.image)
+        goal.after = max(monitor.images, default=-1)  # the frames before the goal's
+        self.session.loader.publish(String(data=str(path)))
+
+    def _round_for(self, goal: OpenGoal) -> tuple[int, int, dict] | None:
+        """The round that meets the goal, once it is written."""
+        if goal.image is not None:
+            if goal.after is None:
+                return None
+            later = [d for d in self.done if d[1] > goal.after]
+            return later[0] if later else None
+        monitor = self.session.monitor
+        under_way = sorted(monitor.heard - monitor.closed)
+        if goal.after is None:  # the round to wait for, fixed when the goal came
+            goal.after = (
+                under_way[-1] - 1 if under_way else (self.done[-1][1] - 1 if self.done else -1)
+            )
+        later = [d for d in self.done if d[1] > goal.after]
+        return later[0] if later else None
+
+    def _finish(self, goal: OpenGoal, result) -> None:
+        self.open.remove(goal)
+        goal.future.set_result(result)
+
+
+def feedback_of(monitor) -> Camouflage.Feedback:
+    """The robots per phase of the latest round robots report in, its slowest consensus step."""
+    under_way = sorted(monitor.heard - monitor.closed)
+    if not under_way:
+        return Camouflage.Feedback(robots_per_phase=[0] * 5)
+    frame = under_way[-1]
+    record = monitor.record(frame)
+    counts = np.bincount(record.phase, minlength=5)
+    in_consensus = record.step[record.phase == CONSENSUS]
+    step = int(in_consensus.min()) if len(in_consensus) else 0
+    return Camouflage.Feedback(
+        frame=frame, robots_per_phase=[int(c) for c in counts[:5]], consensus_step=step
+    )
+
+
+def result_of(index: int, frame: int, summary: dict) -> Camouflage.Result:
+    votes = summary.get("votes", {})
+    return Camouflage.Result(
+        success=True,
+        pattern=str(summary.get("pattern", "")),
+        patterns=list(votes),
+        votes=[int(v) for v in votes.values()],
+        round=index,
+        frame=frame,
+        summary_json=json.dumps(summary),
+    )

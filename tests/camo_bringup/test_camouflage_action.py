@@ -1,0 +1,77 @@
+"""The run's Camouflage action, driven by the client docs/ros.md shows: a goal without an image
+gets the round the swarm has done, one with an image makes a continuous swarm camouflage it."""
+
+import os
+import re
+import subprocess
+import sys
+
+import cv2
+import pytest
+from support import ROOT, SWARM, domain, finished, start_run, wait_for_line
+
+from camo_core.algorithm.backgrounds import background
+
+
+def client_script(tmp_path) -> str:
+    """The client of docs/ros.md, as a file."""
+    text = (ROOT / "docs" / "ros.md").read_text()
+    code = re.search(r"<!-- camouflage_client\.py.*?-->\n```python\n(.*?)```", text, re.S)
+    assert code, "docs/ros.md has no camouflage_client.py block"
+    path = tmp_path / "camouflage_client.py"
+    path.write_text(code.group(1))
+    return str(path)
+
+
+def client(script: str, domain_id: int, *args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
+    return subprocess.run(
+        [sys.executable, script, *args], env=env, capture_output=True, text=True, timeout=120
+    )
+
+
+@pytest.mark.slow(SWARM)
+def test_the_docs_client_follows_a_goal_of_a_continuous_run_to_its_result(tmp_path):
+    domain_id = domain()
+    script = client_script(tmp_path)
+    desert = tmp_path / "desert.png"
+    cv2.imwrite(str(desert), background("desert"))
+    proc = start_run(
+        "--continuous", "--rounds", "2", "--consensus-steps", "400", "--run-id", "goals",
+        "--out", str(tmp_path / "run"), domain_id=domain_id,
+    )  # fmt: skip
+    try:
+        wait_for_line(proc, "topics under")
+        now = client(script, domain_id, "goals")  # no image: the round under way, or done
+        assert now.returncode == 0, now.stderr
+        assert re.search(r"^round 0 \(frame 0\): vertical \(", now.stdout, re.M), now.stdout
+        assert "robots per phase" in now.stdout  # feedback while it waited
+        goal = client(script, domain_id, "goals", str(desert))
+        assert goal.returncode == 0, goal.stderr
+        assert re.search(r"^round 1 \(frame [1-9]\d*\): horizontal \(", goal.stdout, re.M)
+        _, err = finished(proc, 120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err[-2000:]
+    assert (tmp_path / "run" / "goals" / "goal_0.png").exists()
+
+
+@pytest.mark.slow(SWARM)
+def test_a_run_without_continuous_refuses_a_goal_with_an_image(tmp_path):
+    domain_id = domain()
+    script = client_script(tmp_path)
+    desert = tmp_path / "desert.png"
+    cv2.imwrite(str(desert), background("desert"))
+    proc = start_run(
+        "--consensus-steps", "20000", "--run-id", "fixed", "--out", str(tmp_path / "run"),
+        domain_id=domain_id,
+    )  # fmt: skip
+    try:
+        wait_for_line(proc, "topics under")
+        goal = client(script, domain_id, "fixed", str(desert))
+        assert goal.returncode == 1 and "refused the goal" in goal.stderr, goal.stderr
+    finally:
+        proc.send_signal(2)
+        _, err = finished(proc, 60)
+    assert "no --continuous" in err
