@@ -34,7 +34,7 @@ RULES = [
     ("./camo discovery-server", SERVES, "the Fast DDS discovery server"),
     ("./camo droplet-emulator", SERVES, "a Droplet on a pseudo-terminal"),
     ("./camo record", "with a run", "records the only run in its domain"),
-    ("./camo view", SERVES, "serves a run to Foxglove until it ends"),
+    ("./camo view", SERVES, "serves runs to Foxglove until stopped"),
     ("./camo dask scheduler", SERVES, "the Dask scheduler of a cluster"),
     ("./camo dask worker tcp://HOST", "skip", "needs the scheduler's host"),
 ]
@@ -42,7 +42,7 @@ UP = {  # what a serving command says once it is up
     "./camo worker": "camo worker: waiting for",
     "./camo discovery-server": "listening on",
     "./camo droplet-emulator": "Ctrl-C to stop",
-    "./camo view": "camo view: waiting for",
+    "./camo view": "camo view: serving on",
     "./camo dask scheduler": "Scheduler at:",
 }
 

@@ -80,6 +80,48 @@ def test_foxglove_client_lists_subscribes_and_decodes_a_live_run(tmp_path, foxgl
 
 
 @pytest.mark.slow(SWARM)
+def test_a_view_started_first_serves_at_once_and_follows_runs_as_they_come(
+    tmp_path, foxglove_client
+):
+    import os
+    import sys
+
+    from support import domain
+
+    domain_id = domain()
+    port = free_port()
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
+    view = subprocess.Popen(
+        [sys.executable, "-m", "camo_bag.view_node", "--port", str(port)],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        wait_for_line(view, f"serving on ws://127.0.0.1:{port}", timeout=30)
+        for run_id in ("first", "second"):
+            # Connected before the run starts: its channels are advertised as they appear.
+            client = subprocess.Popen(
+                [foxglove_client, "client.mjs", f"ws://127.0.0.1:{port}", "90",
+                 f"/{run_id}/swarm/params", f"/{run_id}/swarm/status"],
+                cwd=CLIENT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            )  # fmt: skip
+            run = start_run(
+                *OPTIONS, "--run-id", run_id, "--out", str(tmp_path / run_id),
+                domain_id=domain_id,
+            )  # fmt: skip
+            seen_out, _ = client.communicate(timeout=120)
+            _, err = finished(run, 240)
+            assert run.returncode == 0, err[-2000:]
+            assert client.returncode == 0, seen_out[-2000:]
+            decoded = json.loads(seen_out)["decoded"]
+            assert json.loads(decoded[f"/{run_id}/swarm/params"]["data"])["run"] == run_id
+        assert view.poll() is None  # still serving, for the next run
+    finally:
+        view.send_signal(2)
+        _, err = finished(view, 30)
+    assert "Traceback" not in err
+
+
+@pytest.mark.slow(SWARM)
 def test_a_port_in_use_is_one_line(tmp_path):
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))

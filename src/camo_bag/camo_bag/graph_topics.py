@@ -13,13 +13,19 @@ from camo_bag import msgdefs
 SKIPPED = {"/rosout", "/parameter_events"}
 
 
+def hidden(name: str) -> bool:
+    """A hidden topic (a name part begins with `_`: an action's goal, feedback and status
+    topics), which ros2cli lists and rosbag2 records only when asked to."""
+    return any(part.startswith("_") for part in name.split("/"))
+
+
 def new_topics(
     node: Node, known: dict[str, object], wants: Callable[[str], bool]
 ) -> Iterator[tuple[str, str, list[QoSProfile]]]:
     """(name, pkg/msg/Type, QoS its publishers offer) of each wanted topic not in `known` that
     has a publisher. A topic carrying several types is reported once and marked in `known`."""
     for name, types in node.get_topic_names_and_types():
-        if name in known or name in SKIPPED or not wants(name):
+        if name in known or name in SKIPPED or hidden(name) or not wants(name):
             continue
         if len(types) != 1:
             node.get_logger().warning(f"{name} carries several types {types}; left out")

@@ -1,12 +1,14 @@
-"""`./camo view`: a run live in Foxglove, through a Foxglove WebSocket server (foxglove-sdk).
+"""`./camo view`: runs live in Foxglove, through a Foxglove WebSocket server (foxglove-sdk).
 
-Every topic of the run is advertised as a channel, its messages in CDR with
-the `ros2msg` schema that bags embed (`msgdefs.py`), as foxglove_bridge does
-for C++ ROS: the Foxglove app decodes them as it decodes a bag. A topic is
-subscribed on the ROS side only while a Foxglove client is subscribed to its
-channel, so with no client connected the view takes no robot message and
-costs the swarm nothing but one more participant on the graph. It serves no
-parameters (Foxglove would fetch every node's, thousands of them).
+The server opens its port at once and follows runs as they appear and end, as
+foxglove_bridge follows the graph: every topic of every run in the domain (or,
+with --run-id, of that run) is advertised as a channel while it has a publisher,
+its messages in CDR with the `ros2msg` schema that bags embed (`msgdefs.py`):
+the Foxglove app decodes them as it decodes a bag, and can be connected before a
+run starts. A topic is subscribed on the ROS side only while a Foxglove client
+is subscribed to its channel, so with no client connected the view takes no
+robot message and costs the swarm nothing but one more participant on the graph.
+It serves no parameters (Foxglove would fetch every node's, thousands of them).
 """
 
 from __future__ import annotations
@@ -24,11 +26,10 @@ from rclpy.signals import SignalHandlerOptions
 
 from camo_bag import msgdefs
 from camo_bag.graph_topics import new_topics, taking_qos
-from camo_bag.recorder_node import join
-from camo_core.cli.options import Parser, seconds
+from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
-from camo_nodes.topics.names import RunTopics, check_run_id
+from camo_nodes.topics.names import RunTopics, check_run_id, runs_on_graph
 from camo_nodes.topics.runs import run_ended
 from camo_nodes.topics.startup import add_network_options, network_env, start_ros
 
@@ -50,14 +51,19 @@ class Subscribers:
 
 class ViewNode(Node):
     def __init__(
-        self, run: RunTopics, host: str = "127.0.0.1", port: int = DEFAULT_PORT, **kwargs
+        self,
+        run_id: str | None = None,
+        host: str = "127.0.0.1",
+        port: int = DEFAULT_PORT,
+        **kwargs,
     ) -> None:
-        super().__init__("view", namespace=run.swarm_namespace, **kwargs)
-        self.run = run
+        """`run_id`: follow that run only (None: every run that appears)."""
+        super().__init__("camo_view", **kwargs)
+        self.run_id = run_id
         self.listener = Subscribers()
         try:
             self.server = foxglove.start_server(
-                name=f"camo {run.run}",
+                name=f"camo {run_id}" if run_id else "camo",
                 host=host,
                 port=port,
                 server_listener=self.listener,
@@ -79,8 +85,19 @@ class ViewNode(Node):
     def port(self) -> int:
         return self.server.port
 
+    def runs(self) -> set[str]:
+        """The runs followed now: those whose parameters have a publisher (their launcher)."""
+        names = [name for name, _ in self.get_topic_names_and_types()]
+        found = [r for r in runs_on_graph(names) if self.run_id in (None, r)]
+        return {r for r in found if self.count_publishers(RunTopics(r).params)}
+
     def discover(self) -> None:
-        wanted = lambda name: name.startswith(f"/{self.run.run}/")  # noqa: E731
+        """Channels for the followed runs' new topics; none any more for topics gone."""
+        runs = self.runs()
+        wanted = lambda name: name.split("/")[1] in runs  # noqa: E731
+        for name in [n for n, c in self.channels.items() if c is not None]:
+            if name.split("/")[1] not in runs and not self.count_publishers(name):
+                self._drop(name)
         for name, type_name, offered in new_topics(self, self.channels, wanted):
             try:
                 cls = msgdefs.message_class(type_name)
@@ -95,6 +112,16 @@ class ViewNode(Node):
                 message_encoding="cdr",
                 schema=foxglove.Schema(name=type_name, encoding="ros2msg", data=schema),
             )
+
+    def _drop(self, name: str) -> None:
+        """A topic of a run that ended: its channel is unadvertised."""
+        channel = self.channels.pop(name)
+        if channel is not None:
+            channel.close()
+        self.offered.pop(name, None)
+        self.watchers.pop(name, None)
+        if name in self.taken:
+            self.destroy_subscription(self.taken.pop(name))
 
     def follow_clients(self) -> None:
         """Take a topic from ROS while a client is subscribed to it, and only then."""
@@ -131,9 +158,9 @@ class ViewNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = Parser(prog="camo view", description="a run live in Foxglove (WebSocket)")
+    parser = Parser(prog="camo view", description="runs live in Foxglove (WebSocket)")
     parser.add_argument(
-        "--run-id", default=None, help="the run to view (default: the only one in the domain)"
+        "--run-id", default=None, help="follow this run only (default: every run that appears)"
     )
     parser.add_argument(
         "--port", type=int, default=DEFAULT_PORT, help=f"port (default {DEFAULT_PORT}; 0: any)"
@@ -142,7 +169,9 @@ def main(argv: list[str] | None = None) -> int:
         "--host", default="127.0.0.1", help="address to serve on (default 127.0.0.1; 0.0.0.0: all)"
     )
     parser.add_argument(
-        "--wait", type=seconds, default=120.0, help="seconds to wait for a run (default 120)"
+        "--exit-with-run",
+        action="store_true",
+        help="end when the --run-id run ends (as ./camo run --foxglove's view does)",
     )
     add_network_options(parser)
     try:
@@ -151,6 +180,8 @@ def main(argv: list[str] | None = None) -> int:
             raise UsageError(f"--port must be in 0..65535 (got {args.port})")
         os.environ.update(network_env(args, os.environ))
         run_id = check_run_id(args.run_id) if args.run_id else None
+        if args.exit_with_run and run_id is None:
+            raise UsageError("--exit-with-run needs the --run-id of the run to end with")
     except CamoError as exc:
         print(f"camo view: error: {exc}", file=sys.stderr)
         return 2
@@ -160,17 +191,15 @@ def main(argv: list[str] | None = None) -> int:
     node = None
     executor = EventsExecutor()
     try:
-        wanted = f"run {run_id}" if run_id else "the only run in the domain"
-        print(f"camo view: waiting for {wanted} (up to {args.wait:g} s)", file=sys.stderr)
-        run = join(executor, run_id, args.wait, stop)
-        node = ViewNode(run, args.host, args.port)
+        node = ViewNode(run_id, args.host, args.port)
         executor.add_node(node)
+        following = f"run {run_id}" if run_id else "every run in the domain as it appears"
         print(
-            f"camo view: run {run.run} on ws://{args.host}:{node.port} (Foxglove: Open "
-            f"connection, Foxglove WebSocket); Ctrl-C to stop",
+            f"camo view: serving on ws://{args.host}:{node.port} (Foxglove: Open connection, "
+            f"Foxglove WebSocket), following {following}; Ctrl-C to stop",
             file=sys.stderr,
         )
-        ended = run_ended(node, run)
+        ended = run_ended(node, RunTopics(run_id)) if args.exit_with_run else lambda: False
         while not stop and rclpy.ok() and not ended():
             executor.spin_once(timeout_sec=0.2)
     except CamoError as exc:

@@ -106,6 +106,7 @@ class ProcessGroup:
             "camo_bag.view_node",
             "--run-id",
             run,
+            "--exit-with-run",
             "--port",
             str(port),
             "--ros-args",
