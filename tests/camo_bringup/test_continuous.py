@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 from support import (
-    ROOT,
     SWARM,
     assert_like_sim,
     bag_tool,
@@ -21,13 +20,13 @@ from support import (
     wait_for_line,
 )
 
-CAMERA = str(ROOT / "tests" / "camera.py")
+CAMERA = "camo_bringup.scene_stream"
 
 
 def camera(domain_id: int, out: Path, *args: str) -> subprocess.Popen:
-    """The camera-like publisher (tests/camera.py) on /cam/image_raw in `domain_id`."""
+    """The camera-like publisher (camo_bringup.scene_stream) on /cam/image_raw in `domain_id`."""
     env = {**__import__("os").environ, "ROS_DOMAIN_ID": str(domain_id)}
-    argv = [sys.executable, CAMERA, "/cam/image_raw", "--out", str(out), *args]
+    argv = [sys.executable, "-m", CAMERA, "/cam/image_raw", "--out", str(out), *args]
     return subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 

@@ -9,7 +9,6 @@ import pytest
 import rclpy
 from support import (
     PROCESS,
-    ROOT,
     SWARM,
     assert_like_sim,
     domain,
@@ -132,7 +131,7 @@ def test_a_frame_from_an_image_topic_gives_the_readings_the_same_picture_gives(
     domain_id = domain()
     frames = tmp_path / "frames"
     camera = subprocess.Popen(
-        [sys.executable, str(ROOT / "tests" / "camera.py"), "/cam/image_raw", "--scenes",
+        [sys.executable, "-m", "camo_bringup.scene_stream", "/cam/image_raw", "--scenes",
          "leopard", "--encoding", encoding, "--size", str(size), "--out", str(frames)],
         env={**os.environ, "ROS_DOMAIN_ID": str(domain_id)},
         stdout=subprocess.PIPE, stderr=subprocess.PIPE,

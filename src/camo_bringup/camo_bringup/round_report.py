@@ -58,6 +58,10 @@ def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dic
         "launch_to_done_s": done - launched,
         "deadlines": missed,
         "peak_mib": times.get("peak_mib", {}),  # largest resident sets: a worker, all together
+        # When the round's frame was projected and when its last robot was done (ROS time, s
+        # since the epoch): what a switch of background costs (./camo bench dynamic).
+        "projected_at": monitor.images.times.get(index),
+        "done_at": clocks[1] if clocks is not None else None,
     }
     (folder / "timing.json").write_text(json.dumps(timing) + "\n")
     notes = ""

@@ -77,7 +77,7 @@ class ProjectorParams:
     fps: float = param(
         0.0, "frames a second of the video (0: its own rate)", low=0.0, high=1000.0, metavar="F"
     )
-    loop: bool = param(False, "play the video (or the images) again from the start at its end")
+    loop: bool = param(False, "play the video again from the start at its end")
     images: str = param(
         "", "project the image files matching this glob pattern, in name order", metavar="GLOB"
     )
@@ -128,7 +128,7 @@ def open_source(values: dict) -> Source | None:
     if _given(values, "video"):
         return VideoSource(values["video"], values["fps"], values["loop"])
     if _given(values, "images"):
-        return ImagesSource(values["images"], values["period"], values["loop"] or True)
+        return ImagesSource(values["images"], values["period"])  # in turn, again and again
     if _given(values, "camera"):
         return CameraSource(values["camera"])
     return None

@@ -102,6 +102,7 @@ class Watch:
         self.held = 0  # readings held (the same for every robot), at most `kept`
         self.since = np.zeros(n, np.int64)  # readings since the robot's last reset
         self.reference = np.full(n, np.nan)  # the reference level (NaN: none yet)
+        self.reference_frame = np.full(n, -1, np.int64)  # the round's frame it was read from
         self.taken = 0  # readings so far: the noise draws' number
 
     def reset(self, robots, grid: np.ndarray | None = None, frame: int = -1) -> None:
@@ -112,6 +113,7 @@ class Watch:
         robots = np.asarray(robots, dtype=np.int64)
         self.since[robots] = 0
         self.reference[robots] = np.nan
+        self.reference_frame[robots] = frame if grid is not None else -1
         if grid is None or not len(robots):
             return
         m = self.window
@@ -173,13 +175,16 @@ class Watch:
         noticed = moved | (found & idle) if idle is not None else moved
         self.reference[found] = level[found]
         robots = np.flatnonzero(noticed)
-        # Where the change was first seen: the first reading of the window's last run of readings
-        # at its level (a reading replaced by noise can pass for one, at worst a reading early).
-        # If the newest reading is the wild one, the first reading at the level.
+        # Where the change was first seen: the first reading at the new level of a frame after
+        # the reference's (else of the window's last run at its level: a reading replaced by
+        # noise can pass for one of the level, at worst a reading early).
+        frames = self.frames[robots, self.kept - m :]
+        later = near[robots] & (frames > self.reference_frame[robots, None])
         far = ~near[robots]
         last_far = np.where(far.any(axis=1), m - 1 - np.argmax(far[:, ::-1], axis=1), -1)
         start = np.where(last_far < m - 1, last_far + 1, np.argmax(near[robots], axis=1))
-        changed = self.frames[robots, self.kept - m + start]
+        start = np.where(later.any(axis=1), np.argmax(later, axis=1), start)
+        changed = frames[np.arange(len(robots)), start]
         return Judgement(robots, changed)
 
 

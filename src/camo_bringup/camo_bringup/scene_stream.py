@@ -1,9 +1,11 @@
-"""A camera-like publisher for tests: scenes on a sensor_msgs/Image topic at a frame rate, with
-frame-to-frame noise, switched at given times; each frame it sends is kept (as PNG, named by the
-SHA-256 of its pixels) so that a test can run the simulator on the frame a round sensed.
+"""A camera-like publisher of scenes, for benchmarks and tests: scenes on a sensor_msgs/Image
+topic at a frame rate, with frame-to-frame noise, switched every few seconds; with --out each
+frame it sends is kept (as PNG, named by the SHA-256 of its pixels), so that the simulator can
+be run on the frame a round sensed.
 
-python tests/camera.py TOPIC --scenes forest,desert --switch 6 --fps 15 --noise 6 --out DIR
-(a scene is a built-in background or an image file; --encoding rgb8|bgr8|mono8; --seconds).
+python -m camo_bringup.scene_stream TOPIC --scenes forest,desert --switch 6 --fps 15 --noise 6
+(a scene is a built-in background or an image file; --encoding rgb8|bgr8|mono8; --seconds;
+--start-when FILE holds the first scene until FILE exists).
 """
 
 from __future__ import annotations

@@ -1,0 +1,194 @@
+"""`./camo bench dynamic`: how fast a continuous swarm follows a changing scene, against the
+launcher switching the same scenes (`--then`), measured in the same run; and how often a static
+noisy scene starts a round it should not.
+
+Following: the projector shows forest and desert in turn (`--images`, one frame per scene),
+`--changes` times; each change is timed from the projection of its frame to the moment its
+round's last robot was done (`rounds.csv`: done_at - changed_at). The baseline is a run whose
+launcher switches the same scenes with `--then` once each round is done, timed the same way
+(`timing.json`: done_at - projected_at): the continuous swarm's extra cost is noticing.
+
+False rounds: a continuous run on a static scene streamed like a camera (frame noise, at 15
+frames a second) with measurement noise on every reading, for `--static-s` seconds: rounds
+beyond the first, per minute.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from camo_core.algorithm.backgrounds import background
+from camo_core.cli.options import Parser
+from camo_core.exceptions import EXIT_USAGE, CamoError
+from camo_core.inputs.numeric import integer
+
+SCENES = ("forest", "desert")
+
+
+def sides(text: str) -> list[int]:
+    values = [integer(x) for x in text.split(",") if x]
+    if not values or not all(4 <= v <= 128 for v in values):
+        raise CamoError(f"sides must be integers in 4..128 (got {text!r})")
+    return values
+
+
+def launch(argv: list[str], domain: int, timeout: float) -> subprocess.CompletedProcess:
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
+    proc = subprocess.run(
+        [sys.executable, "-m", "camo_bringup.launcher", *argv],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+    )
+    if proc.returncode != 0:
+        raise RuntimeError(f"camo run {' '.join(argv)} failed: {proc.stderr.strip()[-400:]}")
+    return proc
+
+
+def period_for(side: int) -> float:
+    """Seconds each scene is shown: a round of that many robots and some."""
+    return 2.5 + side * side / 1000.0
+
+
+def following(side: int, changes: int, domain: int, out: Path, rho: float) -> list[float]:
+    """Seconds from each change's frame to its round's last robot done (continuous)."""
+    scenes = out / "scenes"
+    scenes.mkdir(parents=True, exist_ok=True)
+    for k in range(changes + 1):  # forest, desert, forest, ...: each image a frame of its own
+        cv2.imwrite(str(scenes / f"{k:03d}.png"), background(SCENES[k % 2]))
+    period = period_for(side)
+    argv = [
+        "--continuous", "--rounds", str(changes + 1), "--images", str(scenes / "*.png"),
+        "--period", str(period), "--rows", str(side), "--cols", str(side),
+        "--rho-meas", str(rho), "--out", str(out / "run"),
+    ]  # fmt: skip
+    launch(argv, domain, timeout=120 + period * (changes + 4))
+    with open(out / "run" / "rounds.csv") as file:
+        rows = list(csv.DictReader(file))
+    return [float(r["done_s"]) for r in rows[1:]]  # round 0: the first scene, not a change
+
+
+def switched(side: int, changes: int, domain: int, out: Path, rho: float) -> list[float]:
+    """Seconds from each --then switch's frame to its round's last robot done (baseline)."""
+    then = [arg for k in range(changes) for arg in ("--then", SCENES[(k + 1) % 2])]
+    argv = [
+        "--pattern", SCENES[0], *then, "--rows", str(side), "--cols", str(side),
+        "--rho-meas", str(rho), "--out", str(out / "run"),
+    ]  # fmt: skip
+    launch(argv, domain, timeout=120 + 20 * changes)
+    delays = []
+    for k in range(1, changes + 1):
+        timing = json.loads((out / "run" / f"round_{k}" / "timing.json").read_text())
+        delays.append(timing["done_at"] - timing["projected_at"])
+    return delays
+
+
+def false_rounds(side: int, seconds: float, domain: int, out: Path, rho: float) -> dict:
+    """Rounds beyond the first a static, noisy camera-like scene starts in `seconds`."""
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain)}
+    camera = subprocess.Popen(
+        [sys.executable, "-m", "camo_bringup.scene_stream", "/bench/camera", "--scenes",
+         "leopard", "--fps", "15", "--noise", "8", "--seconds", str(seconds + 120)],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    try:
+        argv = [
+            "--continuous", "--duration", str(seconds), "--background-topic", "/bench/camera",
+            "--rows", str(side), "--cols", str(side), "--rho-meas", str(rho),
+            "--out", str(out / "run"),
+        ]  # fmt: skip
+        launch(argv, domain, timeout=seconds + 180)
+    finally:
+        camera.terminate()
+        camera.wait(10)
+    path = out / "run" / "rounds.csv"
+    rounds = len(list(csv.DictReader(open(path)))) if path.exists() else 0
+    extra = max(0, rounds - 1)
+    return {"seconds": seconds, "rounds": rounds, "per_minute": extra * 60.0 / seconds}
+
+
+def quantiles(values: list[float]) -> dict:
+    return {
+        "median_s": statistics.median(values),
+        "p90_s": float(np.percentile(values, 90)),
+        "changes": len(values),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = Parser(prog="camo bench dynamic", description=__doc__.splitlines()[0])
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--sides", type=sides, default="16,64", help="grid sides (default 16,64)")
+    parser.add_argument("--changes", type=int, default=10, help="scene changes per side (10)")
+    parser.add_argument(
+        "--static-s",
+        type=float,
+        default=60.0,
+        help="seconds of a static noisy scene (60; 0: none)",
+    )
+    parser.add_argument(
+        "--rho-meas", type=float, default=0.15, help="measurement noise of every reading (0.15)"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=Path("results") / time.strftime("bench-dynamic-%Y%m%d-%H%M%S")
+    )
+    try:
+        args = parser.parse_args(argv)
+        if not (1 <= args.changes <= 100 and 0 <= args.static_s <= 86400):
+            raise CamoError("--changes must be in 1..100 and --static-s in 0..86400")
+        if not 0 <= args.rho_meas <= 1:
+            raise CamoError(f"--rho-meas must be in [0, 1] (got {args.rho_meas})")
+    except CamoError as exc:
+        print(f"camo bench dynamic: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    domain = 140 + os.getpid() % 40
+    rows = []
+    for side in args.sides:
+        out = args.out / f"{side}"
+        print(f"camo bench dynamic: {side}x{side}, {args.changes} changes", file=sys.stderr)
+        noticed = quantiles(
+            following(side, args.changes, domain, out / "continuous", args.rho_meas)
+        )
+        then = quantiles(switched(side, args.changes, domain, out / "then", args.rho_meas))
+        ratio = noticed["median_s"] / then["median_s"]
+        rows.append(
+            {"robots": f"{side}x{side}", "continuous": noticed, "then": then, "ratio": ratio}
+        )
+    static = None
+    if args.static_s:
+        side = args.sides[0]
+        static = false_rounds(side, args.static_s, domain, args.out / "static", args.rho_meas)
+        static["robots"] = f"{side}x{side}"
+    if args.json:
+        print(json.dumps({"following": rows, "static": static}))
+        return 0
+    print(f"scene change to every robot done (rho_meas {args.rho_meas}), seconds:")
+    print("| robots | continuous median | p90 | --then median | p90 | ratio |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        c, t = r["continuous"], r["then"]
+        print(
+            f"| {r['robots']} | {c['median_s']:.2f} | {c['p90_s']:.2f} | {t['median_s']:.2f} | "
+            f"{t['p90_s']:.2f} | {r['ratio']:.2f} |"
+        )
+    if static:
+        print(
+            f"static noisy scene, {static['robots']}, {static['seconds']:g} s: {static['rounds']} "
+            f"rounds, {static['per_minute']:.2f} false rounds a minute"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
