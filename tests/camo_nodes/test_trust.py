@@ -184,7 +184,7 @@ def test_a_strangers_parameters_message_is_not_taken_for_the_runs(text):
 def test_the_launchers_parameters_message_is_taken():
     setup = setup_from(json.dumps(SETUP), "r")
     assert setup is not None and setup.params.count == 36 and setup.tiles == ((0, 17), (18, 35))
-    watching = {"continuous": False, "sense_period": 0.1, "change_window": 6}
+    watching = {"continuous": False, "sense_period": 0.1, "change_window": 8}
     assert json.loads(setup.to_json()) == {
         **SETUP,
         **watching,

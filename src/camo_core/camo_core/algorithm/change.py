@@ -14,10 +14,11 @@ probability rho_meas a uniform grey). Each robot judges its own readings only:
   the differences of successive readings, which readings replaced by noise leave alone). A
   camera whose frames flicker raises it; a clean projection leaves it at change_threshold.
   A robot judges nothing before it holds two windows of readings.
-- When a robot joins a round it reads the round's frame a window's worth of times; if those
-  readings are coherent their level is its *reference*, else the first coherent window of the
-  readings it takes from then on is. (So a scene that changes while a round starts is still
-  a change against the scene the round camouflages.)
+- When a robot joins a round it reads the round's frame a window's worth of times, again while
+  those readings are not coherent (SEED_TRIES windows at most); the coherent window's level is
+  its *reference*; failing that, the first coherent window of the readings it takes later is.
+  (So a scene that changes while a round starts is still a change against the scene the round
+  camouflages.)
 - It notices a change when its newest window is coherent and its level differs from the
   reference by more than the threshold. A robot that is in no round yet notices the scene as
   soon as it has a reference.
@@ -69,6 +70,7 @@ def threshold(base: float, sigma: np.ndarray | float) -> np.ndarray:
 
 
 NOISE_READINGS = 32  # the readings a robot estimates its noise from
+SEED_TRIES = 8  # windows of its round's frame a robot reads at most for a coherent reference
 # sigma from the lower quartile of |differences of successive readings|: a difference of two
 # normal readings is normal with sqrt(2) sigma, whose |.| has its lower quartile at 0.3186 x that.
 # A reading replaced by noise spoils two differences; the lower quartile stands while fewer
@@ -117,19 +119,23 @@ class Watch:
         if grid is None or not len(robots):
             return
         m = self.window
-        for _ in range(m):
-            values = self.values(grid, robots)
-            self.readings[robots, :-1] = self.readings[robots, 1:]
-            self.readings[robots, -1] = values
-            self.frames[robots, :-1] = self.frames[robots, 1:]
-            self.frames[robots, -1] = frame
-        recent = self.readings[robots, -m:]
-        level = np.median(recent, axis=1)
-        limit = threshold(self.base, self.sigma()[robots])
-        near = np.abs(recent - level[:, None]) <= limit[:, None] / 2
-        coherent = near.sum(axis=1) >= m - 1
-        self.reference[robots[coherent]] = level[coherent]
         self.since[robots] = m
+        for _ in range(SEED_TRIES):  # a window spoilt by noise is read again
+            for _ in range(m):
+                values = self.values(grid, robots)
+                self.readings[robots, :-1] = self.readings[robots, 1:]
+                self.readings[robots, -1] = values
+                self.frames[robots, :-1] = self.frames[robots, 1:]
+                self.frames[robots, -1] = frame
+            recent = self.readings[robots, -m:]
+            level = np.median(recent, axis=1)
+            limit = threshold(self.base, self.sigma()[robots])
+            near = np.abs(recent - level[:, None]) <= limit[:, None] / 2
+            coherent = near.sum(axis=1) >= m - 1
+            self.reference[robots[coherent]] = level[coherent]
+            robots = robots[~coherent]
+            if not len(robots):
+                break
 
     def sigma(self) -> np.ndarray:
         """Each robot's noise, from the readings held (0 before it holds two)."""

@@ -58,7 +58,7 @@ class ProtocolParams:
         metavar="S",
     )
     change_window: int = param(
-        6,
+        8,
         "readings a level is judged on (one wild reading of them allowed)",
         low=3,
         high=64,
