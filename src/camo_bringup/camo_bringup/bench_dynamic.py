@@ -153,6 +153,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"camo bench dynamic: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     domain = 140 + os.getpid() % 40
+    try:
+        rows, static = measure(args, domain)
+    except (RuntimeError, subprocess.TimeoutExpired) as exc:
+        print(f"camo bench dynamic: error: {exc}", file=sys.stderr)
+        return 1
+    report(args, rows, static)
+    return 0
+
+
+def measure(args, domain: int) -> tuple[list[dict], dict | None]:
     rows = []
     for side in args.sides:
         out = args.out / f"{side}"
@@ -170,9 +180,13 @@ def main(argv: list[str] | None = None) -> int:
         side = args.sides[0]
         static = false_rounds(side, args.static_s, domain, args.out / "static", args.rho_meas)
         static["robots"] = f"{side}x{side}"
+    return rows, static
+
+
+def report(args, rows: list[dict], static: dict | None) -> None:
     if args.json:
         print(json.dumps({"following": rows, "static": static}))
-        return 0
+        return
     print(f"scene change to every robot done (rho_meas {args.rho_meas}), seconds:")
     print("| robots | continuous median | p90 | --then median | p90 | ratio |")
     print("|---|---|---|---|---|---|")
@@ -187,7 +201,6 @@ def main(argv: list[str] | None = None) -> int:
             f"static noisy scene, {static['robots']}, {static['seconds']:g} s: {static['rounds']} "
             f"rounds, {static['per_minute']:.2f} false rounds a minute"
         )
-    return 0
 
 
 if __name__ == "__main__":

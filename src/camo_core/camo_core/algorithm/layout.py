@@ -33,7 +33,7 @@ FAR = 2.3
 MIN_GAP = 0.5  # spacings: closer robots would crowd a robot's reach
 MAX_SLOTS = 64  # neighbours within FAR: RobotStatus.known_slots is a 64-bit mask
 KINDS = ("hex", "jitter:A", "FILE")
-STREAM_JITTER = 9  # rng stream of the jitter draws (a = coordinate, b = robot)
+STREAM_JITTER = rng.STREAM_JITTER  # the jitter draws (a = coordinate, b = robot)
 MAX_ROBOTS = 65536
 MAX_FILE_BYTES = 16 * 1024 * 1024  # 65536 lines of x,y and then some
 

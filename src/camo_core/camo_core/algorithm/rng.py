@@ -21,8 +21,9 @@ STREAM_SENSOR_REPLACED = 5
 STREAM_SENSOR_VALUE = 6
 STREAM_ENERGY = 7  # --threshold auto's consensus on texture energy
 STREAM_RELAY = 8  # --orientation any's relayed states
-STREAM_READING_REPLACED = 9  # continuous camouflage: a watching robot's reading replaced by noise
-STREAM_READING_VALUE = 10  # ... and the noise value
+STREAM_JITTER = 9  # --layout jitter:A's shifts (camo_core.algorithm.layout)
+STREAM_READING_REPLACED = 10  # continuous camouflage: a watching robot's reading replaced by noise
+STREAM_READING_VALUE = 11  # ... and the noise value
 
 GOLDEN = 0x9E3779B97F4A7C15
 M1 = 0xBF58476D1CE4E5B9
