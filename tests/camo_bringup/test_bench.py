@@ -1,4 +1,5 @@
-"""`camo bench ros`: the bare rclpy exchange it compares against, and its options."""
+"""`camo bench ros`: the bare rclpy exchange it compares against, and its options; `camo bench
+dynamic`, a continuous swarm against --then switches."""
 
 import subprocess
 import sys
@@ -60,7 +61,9 @@ def test_grid_sides_take_a_list_where_0_or_nothing_means_none():
             grid_sides(bad)
 
 
-@pytest.mark.parametrize("module, work", [("bench", "compare"), ("soak", "soak")])
+@pytest.mark.parametrize(
+    "module, work", [("bench", "compare"), ("soak", "soak"), ("bench_dynamic", "measure")]
+)
 def test_every_option_of_bench_ros_and_soak_with_a_bad_value_is_one_line(
     module, work, tmp_path, monkeypatch, capsys
 ):
@@ -79,3 +82,20 @@ def test_every_option_of_bench_ros_and_soak_with_a_bad_value_is_one_line(
         p for o in options for p in bad_value_outcomes(command.main, [], o, capsys, parser)
     ]
     assert problems == []
+
+
+@pytest.mark.slow(SWARM)
+def test_bench_dynamic_times_a_change_against_a_switch_and_counts_false_rounds(tmp_path):
+    import json
+
+    out = subprocess.run(
+        [sys.executable, "-m", "camo_bringup.bench_dynamic", "--sides", "8", "--changes", "2",
+         "--static-s", "10", "--json", "--out", str(tmp_path / "bench")],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    figures = json.loads(out.stdout)
+    (row,) = figures["following"]
+    assert row["continuous"]["changes"] == row["then"]["changes"] == 2
+    assert 0 < row["then"]["median_s"] < row["continuous"]["median_s"] < 5  # noticing costs
+    assert figures["static"]["rounds"] == 1 and figures["static"]["per_minute"] == 0

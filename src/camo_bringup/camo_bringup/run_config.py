@@ -308,7 +308,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         stream = {n: str(Path(v).resolve()) if n == "video" else v for n, v in stream.items()}
         # Without --continuous the swarm camouflages once: on the stream's first frame.
         projector = ros_arguments(ProjectorParams(**stream, snapshot=not protocol.continuous))
-        label = f"{sources[0].replace('_', ' ')} {stream[sources[0]]}"
+        label = f"{sources[0].removeprefix('background_')} {stream[sources[0]]}"  # topic /x
     elif args.image is not None:
         projector = ros_arguments(ProjectorParams(image=str(Path(args.image).resolve())))
     else:

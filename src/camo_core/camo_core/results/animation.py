@@ -14,6 +14,7 @@ large swarm shown by every k-th robot (MAX_SIDE), so the GIF stays small and qui
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
@@ -38,6 +39,7 @@ from camo_core.results.tensor_colours import direction_legend, tensor_rgb
 MAX_FRAMES = 80
 MAX_SIDE = 256  # robots per side a frame shows: one pixel each at most, in a 3 inch panel
 FRAME_S = 0.15
+TITLE_CHARS = 84  # a title line at most, in the GIF's width
 UNKNOWN = np.array([0.5, 0.5, 0.5])
 PALETTE = np.array([matplotlib.colors.to_rgb(c) for c in PATTERN_COLORS.values()])
 
@@ -155,7 +157,7 @@ def write_animation(
         matplotlib.patches.Patch(facecolor="white", edgecolor="grey", label="formation: off"),
     ]
     fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=7)
-    fig.suptitle(title, fontsize=9)
+    fig.suptitle("\n".join(textwrap.wrap(title, TITLE_CHARS)), fontsize=9)  # long labels too
     fig.tight_layout(rect=(0, 0.16, 1, 0.95))
     # Everything that does not change is drawn once; each frame redraws only the right panel's
     # image, caption and marks over it (matplotlib's blitting), 10x quicker than whole figures.
