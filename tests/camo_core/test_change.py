@@ -179,7 +179,9 @@ class Scene:
 
 
 def assert_round_like_sim(scene: Scene, round_: int, image: np.ndarray) -> None:
-    reference = simulate(params_of_round(scene.params, round_), sense_image(image, 8, 8, "paper"))
+    params = scene.params
+    grid = sense_image(image, params.rows, params.cols, params.profile)
+    reference = simulate(params_of_round(params, round_), grid)
     for robot, (pattern, p, state) in scene.results[round_].items():
         i, j = divmod(robot, scene.params.cols)
         assert pattern == reference.selected[i, j] and state == reference.final[i, j]
@@ -226,6 +228,34 @@ def test_a_scene_that_changes_as_a_round_starts_is_still_a_change_for_its_robots
     noticed = [len(watch.read(desert, 1 + k).robots) for k in range(WINDOW)]
     # As soon as all but one of a window's readings are of the new scene.
     assert noticed[: WINDOW - 2] == [0] * (WINDOW - 2) and noticed[WINDOW - 2] == 4
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"levels": 4},
+        {"threshold": "auto"},
+        {"orientation": "any"},
+        {"profile": "droplet"},
+    ],
+    ids=["levels", "threshold-auto", "orientation-any", "droplet"],
+)
+def test_continuous_rounds_equal_the_simulator_with_the_options_beyond_the_paper(options):
+    params = CamoParams.from_options(rows=8, cols=8, rho_comm=0.1, rho_meas=0.1, seed=3, **options)
+    scene = Scene(params, seed=5)
+    scene.project(background("desert"))
+    scene.start()
+    for _ in range(100):
+        scene.tick()
+    assert scene.finished(0)
+    assert_round_like_sim(scene, 0, background("desert"))
+    leopard = background("leopard")
+    for _ in range(150):
+        scene.project(leopard)
+        scene.tick()
+    (latest,) = {p.round for p in scene.robots}
+    assert latest > 0 and scene.finished(latest)
+    assert_round_like_sim(scene, latest, leopard)
 
 
 def test_a_newer_round_supersedes_an_unfinished_one():
