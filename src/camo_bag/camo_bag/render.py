@@ -20,6 +20,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
@@ -165,6 +166,8 @@ def render(path: str | Path | Bag, out: Path, partial: bool = False) -> list[dic
             extra["rejected_messages"] = results[at]["rejected_messages"]
         if named:
             extra.update(continuous_fields(run, k, index, record))
+            if image is not None:  # the frame, as the live run keeps it
+                cv2.imwrite(str(folder / "background.png"), image)
         lacks = "; ".join(gaps_of_round(gaps, index))
         marks = record.marks(~record.finished, run.bridged)
         summaries.append(write_round(result, image, folder, title, lacks or None, extra, marks))
@@ -179,9 +182,7 @@ def render(path: str | Path | Bag, out: Path, partial: bool = False) -> list[dic
             f"formation steps f0..",
         )
     if named and summaries:  # a continuous run's GIF: its rounds one after another
-        join_animations(
-            [out / f"round_{k}" / "run.gif" for k in range(len(summaries))], out / "run.gif"
-        )
+        join_animations([out / f"round_{k}" for k in range(len(summaries))], out / "run.gif")
     return summaries
 
 

@@ -136,8 +136,7 @@ def continuous_round(config: RunConfig, monitor: MonitorNode, index: int, round_
         row[key] = None if at is None or changed is None else round(at - changed, 3)
     # The run's GIF: every round so far, one after another.
     join_animations(
-        [config.folder / f"round_{k}" / "run.gif" for k in range(index + 1)],
-        config.folder / "run.gif",
+        [config.folder / f"round_{k}" for k in range(index + 1)], config.folder / "run.gif"
     )
     with open(config.folder / "rounds.csv", "a", newline="") as file:
         writer = csv.DictWriter(file, ROUNDS_CSV)

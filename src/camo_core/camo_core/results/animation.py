@@ -13,6 +13,7 @@ large swarm shown by every k-th robot (MAX_SIDE), so the GIF stays small and qui
 
 from __future__ import annotations
 
+import json
 import math
 import textwrap
 from pathlib import Path
@@ -186,18 +187,47 @@ def write_animation(
 
 
 MAX_JOINED = 20  # rounds a joined GIF shows at most: the latest
+CARD_S = 1.5  # s a round's card (its frame and what it was) is shown
 
 
-def join_animations(paths: list[Path], path: str | Path) -> Path:
-    """One GIF of several rounds' run.gif, one after another (the latest MAX_JOINED): a
-    continuous run's scenes and how the swarm followed each."""
+def round_card(folder: Path, size: tuple[int, int]) -> Image.Image | None:
+    """A round's card: the frame it camouflaged (background.png), fitted in, and a caption
+    from its summary.json (which round, which frame, who noticed the change, how soon)."""
+    picture = folder / "background.png"
+    if not picture.exists():
+        return None
+    from PIL import ImageDraw, ImageFont, ImageOps
+
+    summary = json.loads((folder / "summary.json").read_text())
+    card = Image.new("RGB", size, "white")
+    with Image.open(picture) as frame:
+        fitted = ImageOps.contain(frame.convert("RGB"), (size[0] - 20, size[1] - 60))
+    card.paste(fitted, ((size[0] - fitted.width) // 2, 40))
+    text = f"round {summary.get('round')}: frame {summary.get('frame')}"
+    noticed, changed = summary.get("noticed_at"), summary.get("changed_at")
+    if summary.get("noticed_by") is not None and noticed is not None and changed is not None:
+        text += f", noticed by robot {summary['noticed_by']} {noticed - changed:.2f} s after it"
+    ImageDraw.Draw(card).text((10, 10), text, fill="black", font=ImageFont.load_default(14))
+    return card
+
+
+def join_animations(folders: list[Path], path: str | Path) -> Path:
+    """One GIF of several rounds (each folder's run.gif, after a card with the frame it
+    camouflaged), one after another, the latest MAX_JOINED: a continuous run's scenes and how
+    the swarm followed each."""
     images: list[Image.Image] = []
-    for part in paths[-MAX_JOINED:]:
-        with Image.open(part) as gif:
+    durations: list[int] = []
+    for folder in folders[-MAX_JOINED:]:
+        with Image.open(folder / "run.gif") as gif:
+            card = round_card(folder, gif.size)
+            if card is not None:
+                images.append(card.quantize(colors=255, method=Image.Quantize.FASTOCTREE))
+                durations.append(round(CARD_S * 1000))
             for k in range(getattr(gif, "n_frames", 1)):
                 gif.seek(k)
-                images.append(gif.convert("RGB").quantize(colors=255, method=Image.Quantize.FASTOCTREE))
+                frame = gif.convert("RGB")
+                images.append(frame.quantize(colors=255, method=Image.Quantize.FASTOCTREE))
+                durations.append(round(FRAME_S * 1000))
     path = Path(path)
-    duration = round(FRAME_S * 1000)
-    images[0].save(path, save_all=True, append_images=images[1:], duration=duration, loop=0)
+    images[0].save(path, save_all=True, append_images=images[1:], duration=durations, loop=0)
     return path
