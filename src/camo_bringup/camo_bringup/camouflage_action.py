@@ -26,7 +26,7 @@ from rclpy.task import Future
 from std_msgs.msg import String
 
 from camo_core.algorithm.robot_io import CONSENSUS
-from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.sensing import MAX_IMAGE_PIXELS, sense_image
 from camo_core.exceptions import CamoError
 from camo_msgs.action import Camouflage
 from camo_nodes.topics.images import image_from_msg
@@ -88,6 +88,8 @@ class CamouflageAction:
             return None
         if not self.continuous:
             return "this run has no --continuous: it camouflages its own backgrounds only"
+        if image.width * image.height > MAX_IMAGE_PIXELS:
+            return f"an image of {image.width}x{image.height}: more than {MAX_IMAGE_PIXELS} pixels"
         try:
             pixels = image_from_msg(image)
             params = self.session.config.params
