@@ -249,7 +249,7 @@ def test_a_continuous_runs_rounds_are_its_frames_and_its_result_names_them():
     from camo_core.algorithm.params import CamoParams
 
     ledger = Ledger()
-    ledger.set_run(CamoParams(rows=1, cols=1, consensus_steps=1, formation_steps=1), 1)
+    ledger.set_run(CamoParams(rows=1, cols=1, consensus_steps=1, formation_steps=1), 1, True)
     for frame in (0, 1, 7, 40):
         ledger.background(frame)
     for round_ in (7, 40):

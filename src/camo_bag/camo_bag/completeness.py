@@ -154,7 +154,7 @@ def ledger_one(ledger: Ledger, topics: Topics, message: BagMessage) -> None:
     elif topic == topics.params and ledger.params is None:
         setup = setup_in(data)
         if setup is not None:
-            ledger.set_run(setup.params, len(setup.backgrounds) or 1)
+            ledger.set_run(setup.params, len(setup.backgrounds) or 1, setup.protocol.continuous)
     elif topic == topics.result:
         found = result_from(deserialize_message(data, String).data, topics.run)
         if found is not None:

@@ -49,10 +49,18 @@ class Ledger:
     result: dict | None = None  # the launcher's /<run>/swarm/result, once recorded
     limits: dict[str, int] = field(default_factory=dict)  # kind -> steps a robot sends
     results_expected: bool = True  # bags of runs before run ids hold no result
+    continuous: bool = False  # rounds named by the frames' numbers (set_run)
+    # complete_count's answers, and the rounds whose counts changed since (a continuous run's
+    # recorder reports every round's, four times a second, for as long as the run goes).
+    _counted: dict[int, int] = field(default_factory=dict)
+    _changed: set[int] = field(default_factory=set)
 
-    def set_run(self, params: CamoParams, rounds: int) -> None:
-        self.params, self.rounds = params, rounds
+    def set_run(self, params: CamoParams, rounds: int, continuous: bool = False) -> None:
+        """`continuous`: its rounds are named by the frames' numbers (else the k-th background
+        is round k's, however the projector numbered it)."""
+        self.params, self.rounds, self.continuous = params, rounds, continuous
         self.limits = messages_per_round(params)
+        self._counted.clear()  # what a round must hold is known now
 
     def message(self, kind: str, robot: int, round_index: int, step: int = 0) -> None:
         if not 0 <= step < self.limits.get(kind, MAX_STEP) or round_index < 0:
@@ -66,11 +74,15 @@ class Ledger:
         if not flags[step]:
             flags[step] = 1
             self.counts[key] += 1
+            self._changed.add(round_index)
 
     def background(self, number: int | None = None) -> None:
-        """A background frame is recorded: its number, or (a frame of a camo before numbered
-        frames) the next."""
-        self.frames.add(len(self.frames) if number is None else number)
+        """A background frame is recorded: a continuous run's by its number, the others' (and a
+        frame of a camo before numbered frames) as the next."""
+        numbered = number is not None and self.continuous
+        frame = number if numbered else len(self.frames)
+        self.frames.add(frame)
+        self._changed.add(frame)
 
     @property
     def backgrounds(self) -> int:
@@ -78,6 +90,14 @@ class Ledger:
 
     def reported_done(self, robot: int, round_index: int) -> None:
         self.done[round_index].add(robot)
+        self._changed.add(round_index)
+
+    def complete_count(self, round_index: int) -> int:
+        """len(complete(round_index)), worked out again only when the round's messages changed."""
+        if round_index in self._changed or round_index not in self._counted:
+            self._counted[round_index] = len(self.complete(round_index))
+            self._changed.discard(round_index)
+        return self._counted[round_index]
 
     def set_result(self, result: dict) -> None:
         self.result = result

@@ -90,6 +90,7 @@ class RecorderNode(Node):
         self.create_timer(discovery_period, self.discover)
         self.flush_period = flush_period
         self._flushed = time.monotonic()
+        self._params_written = False
         self.create_timer(flush_period, self._flush)
         self.report_pub = None
         if run is not None:
@@ -151,6 +152,11 @@ class RecorderNode(Node):
             self.ledger.background(frame_number(header_frame_id(data)))
         if time.monotonic() - self._flushed > self.flush_period:  # timers starve under floods
             self._flush()
+        elif self.run is not None and topic == self.run.params and not self._params_written:
+            # Written out at once: a bag cut short (a recorder killed) still says which run it
+            # holds, whatever chunk the parameters would have shared with later messages.
+            self._params_written = True
+            self._flush()
 
     def _account(self, topic: str, msg) -> None:
         """What the ledger must know of a run message: who sent it, in which round."""
@@ -160,7 +166,7 @@ class RecorderNode(Node):
             if setup is None:
                 self.get_logger().warning(f"{topic}: a message that is not the run's parameters")
             elif ledger.params is None:
-                ledger.set_run(setup.params, len(setup.backgrounds))
+                ledger.set_run(setup.params, len(setup.backgrounds), setup.protocol.continuous)
         elif topic == self.run.result:
             result = result_from(msg.data, self.run.run)
             if result is None:
@@ -199,7 +205,7 @@ class RecorderNode(Node):
             "complete": [len(ledger.complete(k)) for k in range(rounds)],
             "lacking": [ledger.lacking(k) for k in range(rounds)],
             # By round (its frame number), every round robots finished in: a continuous run's.
-            "rounds": {str(k): len(ledger.complete(k)) for k in sorted(ledger.done)},
+            "rounds": {str(k): ledger.complete_count(k) for k in sorted(ledger.done)},
         }
         changed = {k: v for k, v in report.items() if k != "messages"}
         if changed != self._reported or final:

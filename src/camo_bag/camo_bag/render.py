@@ -64,20 +64,12 @@ def load_run(path: str | Path | Bag) -> RecordedRun:
     notices_topic = background_topic.removesuffix("background") + "notices"
     decode_status = status_decoder(bag.summary, status_topic)
     setup = None
-    images = Backgrounds(keep=MAX_FRAMES)
     notices: dict[int, tuple[int, float, float]] = {}
     pending: list[tuple[object, BagMessage]] = []
-    topics = [params_topic, status_topic, background_topic, notices_topic]
-    for message in bag.messages(topics):
+    for message in bag.messages([params_topic, status_topic, notices_topic]):
         try:
             if message.topic == params_topic and setup is None:
                 setup = setup_in(message.data) or False
-            elif message.topic == background_topic:
-                msg = deserialize_message(message.data, Image)
-                stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
-                number = frame_number(msg.header.frame_id)
-                digest = pixels_sha256(msg)
-                images.add(stamp, lambda msg=msg: image_from_msg(msg), number, digest)
             elif message.topic == notices_topic:
                 first_notices(deserialize_message(message.data, Notices), notices)
             elif message.topic == status_topic:
@@ -107,12 +99,32 @@ def load_run(path: str | Path | Bag) -> RecordedRun:
             times.setdefault(index, []).append(message.log_time)
     if not rounds:
         raise BagError(f"{path} holds no robot status: nothing to render")
+    images = frames_of(bag, background_topic, set(rounds), setup.protocol.continuous)
     elapsed = {index: (max(t) - min(t)) / 1e9 for index, t in times.items()}
     bridged = frozenset(setup.bridged)
     return RecordedRun(params, list(setup.backgrounds), rounds, images, elapsed, bridged, notices)
 
 
-MAX_FRAMES = 100_000  # frames a render holds at most (a continuous run's bag holds many)
+def frames_of(bag: Bag, topic: str, rounds: set[int], continuous: bool) -> Backgrounds:
+    """The frames of the rounds (a second pass over the bag: a continuous run's holds many more
+    frames than rounds, and only those are decoded). A continuous run's frames are named by
+    their numbers; the others' k-th background is round k's."""
+    images = Backgrounds(keep=0 if continuous else len(rounds) + 1)
+    for number in rounds:
+        images.pin(number)
+    for message in bag.messages([topic]):
+        try:
+            msg = deserialize_message(message.data, Image)
+            number = frame_number(msg.header.frame_id) if continuous else None
+            if continuous and number not in rounds:
+                continue
+            stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+            images.add(stamp, lambda msg=msg: image_from_msg(msg), number, pixels_sha256(msg))
+        except CamoError:
+            raise
+        except Exception:  # noqa: BLE001 - bytes that do not decode as their recorded type
+            bag.reject(message)
+    return images
 
 
 def first_notices(msg: Notices, notices: dict[int, tuple[int, float, float]]) -> None:

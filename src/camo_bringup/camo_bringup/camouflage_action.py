@@ -11,6 +11,7 @@ a goal: it refuses goals with an image. Goals still open when the run ends are a
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import json
 import time
@@ -43,6 +44,8 @@ class OpenGoal:
     image: np.ndarray | None
     accepted: float = field(default_factory=time.monotonic)
     after: int | None = None  # the goal is met by a round on a frame later than this
+    sent: int | None = None  # its image went to the projector when this was the newest frame
+    digest: str = ""  # SHA-256 of its image's pixels, as the projector will publish them
     fed: float = 0.0
 
 
@@ -84,7 +87,7 @@ class CamouflageAction:
         return GoalResponse.ACCEPT
 
     def _problem(self, image) -> str | None:
-        if not image.width and not image.height:
+        if not image.width:
             return None
         if not self.continuous:
             return "this run has no --continuous: it camouflages its own backgrounds only"
@@ -100,8 +103,10 @@ class CamouflageAction:
 
     async def _execute(self, handle):
         image = handle.request.image
-        pixels = image_from_msg(image) if image.width or image.height else None
+        pixels = image_from_msg(image) if image.width else None
         goal = OpenGoal(handle, Future(), pixels)
+        if pixels is not None:
+            goal.digest = hashlib.sha256(np.ascontiguousarray(pixels).tobytes()).hexdigest()
         self.open.append(goal)
         result = await goal.future
         if handle.is_cancel_requested:
@@ -126,12 +131,12 @@ class CamouflageAction:
             if goal.handle.is_cancel_requested:
                 self._finish(goal, Camouflage.Result(success=False, message="cancelled"))
                 continue
-            if goal.image is not None and goal.after is None:
+            if goal.image is not None and goal.sent is None:
                 self._project(goal, monitor)
             met = self._round_for(goal)
             if met is not None:
                 self._finish(goal, result_of(*met))
-            elif now - goal.accepted > GOAL_WAIT:
+            elif now - goal.accepted > GOAL_WAIT and not self._under_way(goal):
                 message = f"no round began on the goal's scene within {GOAL_WAIT:g} s"
                 self._finish(goal, Camouflage.Result(success=False, message=message))
             elif now - goal.fed >= FEEDBACK_PERIOD:
@@ -152,16 +157,27 @@ class CamouflageAction:
     # ---- helpers ------------------------------------------------------------------------------
 
     def _project(self, goal: OpenGoal, monitor) -> None:
-        """Its image into the run's folder, and the projector told to project it."""
+        """Its image into the run's folder, and the projector told to project it (once it
+        listens: the load topic is volatile)."""
+        if not self.session.loader.get_subscription_count():
+            return
         self.folder.mkdir(exist_ok=True)
         path = self.folder / f"goal_{next(self._numbers)}.png"
         cv2.imwrite(str(path), goal.image)
-        goal.after = max(monitor.images, default=-1)  # the frames before the goal's
+        goal.sent = max(monitor.images, default=-1)
         self.session.loader.publish(String(data=str(path)))
+
+    def _under_way(self, goal: OpenGoal) -> bool:
+        """A round that will meet the goal has begun: it is waited for, however long it takes."""
+        return goal.after is not None and any(r > goal.after for r in self.session.monitor.heard)
 
     def _round_for(self, goal: OpenGoal) -> tuple[int, int, dict] | None:
         """The round that meets the goal, once it is written."""
         if goal.image is not None:
+            if goal.after is None and goal.sent is not None:  # its frame, once projected
+                digests = self.session.monitor.images.digests
+                frames = [n for n, d in digests.items() if d == goal.digest and n > goal.sent]
+                goal.after = min(frames) - 1 if frames else None
             if goal.after is None:
                 return None
             later = [d for d in self.done if d[1] > goal.after]

@@ -243,7 +243,13 @@ def check_bridge(values: dict) -> None:
         raise ParameterError("give the Droplet's serial port: -p port:=/dev/ttyUSB0")
     if bridge.port and not os.path.exists(bridge.port):
         raise ParameterError(f"no serial port {bridge.port} (is the Droplet plugged in?)")
-    beyond = firmware_lacks(robot_setup(values).params)
+    setup = robot_setup(values)
+    if setup.protocol.continuous:
+        raise ParameterError(
+            "a bridged Droplet does not watch for a changed scene (continuous): its process "
+            "reads projected frames, not the Droplet's sensor"
+        )
+    beyond = firmware_lacks(setup.params)
     if (bridge.monitor or bridge.transcript) and beyond:
         raise ParameterError(
             f"a Droplet's firmware cannot run {' or '.join(beyond)}: monitor mode shows the "

@@ -112,6 +112,10 @@ class Host:
         self._to_start = 0 if robots else None
         self._to_show: int | None = None
         self.shown = 0  # the number of the frame last projected
+        self._substituted = 0
+        # Frames are named by the projector's numbers only in a continuous run: elsewhere the
+        # k-th background taken is round k (a background the hosts refused counts for nothing).
+        self.numbered = protocol is not None and protocol.continuous
         transport.listen(
             Image, transport.topics.background, LATCHED_READER, self._on_background, 1
         )
@@ -137,6 +141,7 @@ class Host:
         if self.watch is not None:
             self._joins.append(index)
             self.idle[index] = False
+        self.projection.protected.add(round_)  # its frame is kept while a robot is in it
 
     def _read(self) -> None:
         """Continuous camouflage: every robot reads the newest frame; those that notice a change
@@ -176,7 +181,8 @@ class Host:
         by_round: dict[int, list[int]] = {}
         for index in robots:
             by_round.setdefault(self.robots[index].protocol.round, []).append(index)
-        self._joins = []
+        resetting = set(robots)
+        self._joins = [index for index in self._joins if index not in resetting]  # still to do
         for round_, indices in by_round.items():
             grid = self.projection.frames.get(round_) if round_ >= 0 else None
             if round_ >= 0 and grid is None and round_ > self.projection.newest:
@@ -185,17 +191,27 @@ class Host:
             self.watch.reset(indices, grid, round_)
 
     def _forget(self) -> None:
-        """Drop what was kept of rounds no hosted robot is in any more."""
-        earliest = min(robot.protocol.round for robot in self.robots)
+        """Drop what was kept of rounds no hosted robot is in any more; keep the frames of those
+        they are in; say once more a frame had to be read in place of one let go."""
+        rounds = {robot.protocol.round for robot in self.robots}
+        self.projection.protected = rounds
+        earliest = min(rounds)
         if earliest > 0:
             self.transport.forget_before(earliest)
+        if self.projection.substituted > self._substituted:
+            self._substituted = self.projection.substituted
+            self.node.get_logger().warning(
+                f"{self._substituted} readings were of a frame other than their round's (it "
+                "came before this process joined, or was let go): those rounds can differ "
+                "from ./camo sim on their frame"
+            )
 
     def _on_background(self, data: bytes, gid: bytes) -> None:
         msg = deserialize_message(data, Image)
         stamp = (msg.header.stamp.sec, msg.header.stamp.nanosec)
         if stamp in self._stamps:
             return
-        number = frame_number(msg.header.frame_id)
+        number = frame_number(msg.header.frame_id) if self.numbered else None
         try:
             image = image_from_msg(msg)
         except ImageEncodingError:
@@ -214,7 +230,7 @@ class Host:
         try:
             self.shown = self.projection.add(image, number, stamp[0] + stamp[1] * 1e-9)
         except ImageError as exc:
-            self.node.get_logger().error(f"background not used: {exc}")
+            self.node.get_logger().error(f"background not used: {exc}", throttle_duration_sec=5.0)
             return
         if self.watch is None:
             self._to_show = 0  # every robot is told, a batch a turn (`_work`)

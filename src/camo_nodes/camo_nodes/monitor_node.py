@@ -60,6 +60,8 @@ from camo_nodes.topics.runs import wait_for_run, wait_for_setup
 from camo_nodes.topics.startup import add_network_options, network_env, start_ros
 from camo_nodes.trust import BackgroundCheck, Hosts, Rejections, merged
 
+EARLY_NOTICES = 10_000  # notices kept until their robots' host is heard, at most
+
 
 class MonitorNode(Node):
     def __init__(
@@ -77,6 +79,8 @@ class MonitorNode(Node):
         self.closed: set[int] = set()  # rounds written or superseded: their records let go
         self.heard: set[int] = set()  # rounds robots reported in
         self._shown: tuple[int, RoundRecord | None] = (-1, None)  # the last closed round
+        self.continuous = setup is not None and setup.protocol.continuous
+        self._early_notices: list[tuple[tuple, bytes]] = []  # before their host's word
         self.offline = np.zeros(params.count, bool)
         self.statuses_heard = 0  # a recording of the run must hold at least these
         # Statuses count only from the process hosting their robot; a background only if it is
@@ -114,6 +118,9 @@ class MonitorNode(Node):
             unplaced, self._unplaced, self._unplaced_rows = self._unplaced, [], 0
             for rows, sender_gid, stamp in unplaced:
                 self._take_rows(rows, sender_gid, stamp)
+            early, self._early_notices = self._early_notices, []
+            for notice, sender_gid in early:
+                self._notice(*notice, sender_gid)
 
     def _on_background(self, data: bytes, gid: bytes) -> None:
         msg = deserialize_message(data, Image)
@@ -130,9 +137,10 @@ class MonitorNode(Node):
             if problem != BackgroundCheck.REPEAT:
                 self.rejected.refuse(problem, gid)
             return
-        self.images.add(
-            stamp, lambda: image, frame_number(msg.header.frame_id), pixels_sha256(msg)
-        )
+        # A continuous run's frames are named by the projector's numbers; elsewhere the k-th
+        # background taken is round k.
+        number = frame_number(msg.header.frame_id) if self.continuous else None
+        self.images.add(stamp, lambda: image, number, pixels_sha256(msg))
 
     def _on_notices(self, data: bytes, gid: bytes) -> None:
         msg = self.rejected.decoded(data, Notices, gid, "a notice")
@@ -142,15 +150,22 @@ class MonitorNode(Node):
         if len({len(c) for c in columns}) != 1:
             self.rejected.refuse("a notice whose columns disagree", gid, msg.name)
             return
-        for robot, round_, changed, noticed in zip(*columns, strict=True):
-            if not self.trusted.speaks_for(gid, int(robot)):
-                self.rejected.refuse(
-                    "not from the process hosting its sender", gid, f"robot {robot}"
-                )
-                continue
-            first = self.notices.get(int(round_))
-            if first is None or noticed < first[2]:
-                self.notices[int(round_)] = (int(robot), float(changed), float(noticed))
+        for notice in zip(*columns, strict=True):
+            self._notice(*notice, gid)
+
+    def _notice(self, robot: int, round_: int, changed: float, noticed: float, gid: bytes) -> None:
+        robot, round_ = int(robot), int(round_)
+        if 0 <= robot < self.params.count and self._owner[robot] < 0:
+            if len(self._early_notices) < EARLY_NOTICES:  # its host's word is still to come
+                self._early_notices.append(((robot, round_, changed, noticed), gid))
+            return
+        if not self.trusted.speaks_for(gid, robot):
+            self.rejected.refuse("not from the process hosting its sender", gid, f"robot {robot}")
+            return
+        self.images.pin(round_)  # the round's frame is kept for its figure from now on
+        first = self.notices.get(round_)
+        if first is None or noticed < first[2]:
+            self.notices[round_] = (robot, float(changed), float(noticed))
 
     def _on_status(self, data: bytes, gid: bytes) -> None:
         msg = self.rejected.decoded(data, StatusArray, gid, "a status array")
@@ -244,7 +259,7 @@ class MonitorNode(Node):
         record = self.rounds.pop(round_index, None)
         if record is not None and round_index >= self._shown[0]:
             self._shown = (round_index, record)  # the views show it until a later one begins
-        self.images.pinned.discard(round_index)
+        self.images.unpin(round_index)
 
     def progress_line(self, round_index: int = 0) -> str:
         record = self.rounds[round_index]

@@ -183,7 +183,11 @@ class ProjectorNode(Node):
         if self.values["snapshot"] and self.frame >= 0:
             return
         if self.source is not None:
-            image = self.source.frame(time.monotonic())
+            try:
+                image = self.source.frame(time.monotonic())
+            except CamoError as exc:  # a file of --images that broke since it was checked
+                self.get_logger().error(f"frame not projected: {exc}", throttle_duration_sec=5.0)
+                return
             if image is not None:
                 self.publish(image)
             return

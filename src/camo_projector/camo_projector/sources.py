@@ -10,7 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from camo_core.algorithm.sensing import ImageError, load_image
+from camo_core.algorithm.sensing import MAX_IMAGE_BYTES, ImageError, image_header, load_image
 from camo_core.inputs.files import checked_file, shown
 
 MAX_SEQUENCE = 10_000  # image files of one --images pattern at most
@@ -99,7 +99,9 @@ class ImagesSource(Source):
             raise ImageError(
                 f"--images {shown(pattern)}: {len(files)} files, more than {MAX_SEQUENCE}"
             )
-        self.images = [load_image(f) for f in files]  # each checked as --image is, at once
+        for file in files:  # each header checked as --image checks it, at once; decoded when due
+            image_header(checked_file(file, "image", MAX_IMAGE_BYTES, ImageError))
+        self.files = files
         self.period, self.loop = period, loop
         self.started: float | None = None
         self.shown = -1
@@ -108,13 +110,13 @@ class ImagesSource(Source):
         if self.started is None:
             self.started = now
         due = int((now - self.started) / self.period)
-        if not self.loop and due >= len(self.images):
+        if not self.loop and due >= len(self.files):
             self.ended = True
             return None
         if due == self.shown:
             return None
         self.shown = due
-        return self.images[due % len(self.images)]
+        return load_image(self.files[due % len(self.files)])  # ImageError: a file that broke
 
 
 class CameraSource(Source):

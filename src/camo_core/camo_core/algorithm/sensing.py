@@ -377,6 +377,8 @@ class Projection:
         self.frames: dict[int, np.ndarray] = {}
         self.stamps: dict[int, float] = {}  # when each frame was projected (ROS time, s)
         self.newest = -1
+        self.protected: set[int] = {0}  # frames robots' rounds still read: never let go
+        self.substituted = 0  # reads of a frame let go (or never held), answered with a later
 
     def add(self, image: np.ndarray, number: int | None = None, stamp: float = 0.0) -> int:
         """Frame `number` (by default the one after the newest); its number. Raises ImageError
@@ -385,9 +387,10 @@ class Projection:
         self.frames[number] = self.sample(image)
         self.stamps[number] = stamp
         self.newest = max(self.newest, number)
-        while len(self.frames) > FRAMES_KEPT:
-            oldest = min(self.frames)
-            del self.frames[oldest], self.stamps[oldest]
+        if len(self.frames) > FRAMES_KEPT:
+            loose = sorted(n for n in self.frames if n not in self.protected)
+            for oldest in loose[: len(self.frames) - FRAMES_KEPT]:
+                del self.frames[oldest], self.stamps[oldest]
         return number
 
     def grid(self, number: int) -> np.ndarray | None:
@@ -397,6 +400,7 @@ class Projection:
         if grid is None and number < self.newest:
             later = [n for n in self.frames if n > number]
             grid = self.frames[min(later)] if later else None
+            self.substituted += grid is not None
         return grid
 
     @property

@@ -8,6 +8,7 @@ or the message itself).
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -224,7 +225,8 @@ class Rounds(dict):
 
 class Backgrounds(dict):
     """The frames a run projected, by frame number (round r camouflaged self[r]), each kept once
-    (by its stamp): the newest `keep` of them, and those pinned (the frames of rounds)."""
+    (by its stamp): the newest `keep` of them, and those pinned (the frames of rounds). What is
+    known of a frame (stamp, digest, time) goes with it."""
 
     def __init__(self, keep: int = 64) -> None:
         super().__init__()
@@ -233,24 +235,47 @@ class Backgrounds(dict):
         self.digests: dict[int, str] = {}  # frame number -> SHA-256 of its pixels as published
         self.times: dict[int, float] = {}  # frame number -> when it was projected (s, ROS time)
         self.pinned: set[int] = set()
+        self._stamp_of: dict[int, tuple[int, int]] = {}
+        self._order: deque[int] = deque()  # frames held, oldest first
+        self._next = 0
 
     def add(
         self, stamp: tuple[int, int], decode, number: int | None = None, digest: str = ""
     ) -> int | None:
         """`decode()` gives the image; called only for a stamp not seen before. `number`: the
-        frame's (None: the one after the newest, as frames without numbers were counted)."""
+        frame's (None: the one after the newest, as frames without numbers are counted)."""
         if stamp in self.stamps:
             return None
+        number = self._next if number is None else number
+        if number in self:
+            return None  # a frame held, stamped anew
+        self._next = max(self._next, number + 1)
         self.stamps.add(stamp)
-        number = (max(self) + 1 if self else 0) if number is None else number
         self[number] = decode()
-        self.digests[number] = digest
-        self.times[number] = stamp[0] + stamp[1] * 1e-9
-        loose = sorted(n for n in self if n not in self.pinned)
-        for old in loose[: max(0, len(loose) - self.keep)]:
-            del self[old]
+        self.digests[number], self.times[number] = digest, stamp[0] + stamp[1] * 1e-9
+        self._stamp_of[number] = stamp
+        self._order.append(number)
+        self._let_go()
         return number
 
+    def _let_go(self) -> None:
+        """The oldest frames not pinned, beyond `keep` of them."""
+        loose = len(self._order) - sum(1 for n in self._order if n in self.pinned)
+        for _ in range(len(self._order)):
+            if loose <= self.keep:
+                return
+            oldest = self._order.popleft()
+            if oldest in self.pinned:
+                self._order.append(oldest)  # kept, looked at again later
+                continue
+            loose -= 1
+            del self[oldest], self.digests[oldest], self.times[oldest]
+            self.stamps.discard(self._stamp_of.pop(oldest))
+
     def pin(self, number: int) -> None:
-        """Keep frame `number` (a round's) whatever comes after it."""
+        """Keep frame `number` (a round's, perhaps still to come) whatever comes after it."""
         self.pinned.add(number)
+
+    def unpin(self, number: int) -> None:
+        self.pinned.discard(number)
+        self._let_go()
