@@ -139,9 +139,14 @@ def test_truncated_and_foreign_files_get_one_line_errors(recorded, tmp_path):
 
 @pytest.mark.slow(SWARM)
 def test_bag_info_of_a_bag_whose_messages_are_damaged_says_so_and_fails(recorded, tmp_path):
+    from mcap.reader import make_reader
+
     bag, _ = recorded
     data = bytearray((bag / "bag_0.mcap").read_bytes())
-    data[len(data) // 3] ^= 0xFF  # inside a chunk: the summary still reads, the messages not
+    with open(bag / "bag_0.mcap", "rb") as f:
+        largest = max(make_reader(f).get_summary().chunk_indexes, key=lambda c: c.chunk_length)
+    # Inside a chunk's records: the summary still reads, the messages not.
+    data[largest.chunk_start_offset + largest.chunk_length // 2] ^= 0xFF
     damaged = tmp_path / "damaged"
     damaged.mkdir()
     (damaged / "damaged_0.mcap").write_bytes(bytes(data))

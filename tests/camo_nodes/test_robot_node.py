@@ -82,10 +82,13 @@ def test_robots_started_alone_and_a_remote_worker_join_a_run_and_equal_the_simul
     try:
         _, err = finished(launcher, 180)
         assert launcher.returncode == 0, err[-2000:]
-        # Every one of them notices that the run has ended, and exits 0.
-        assert worker.wait(timeout=60) == 0
-        assert all(robot.wait(timeout=60) == 0 for robot in robots)
-        worker_said = worker.stderr.read()
+        # Every one of them notices that the run has ended, and exits 0 (their output read as
+        # they go: a pipe left full would hold a process up).
+        worker_said = worker.communicate(timeout=60)[1]
+        assert worker.returncode == 0, worker_said[-2000:]
+        for robot in robots:
+            said = robot.communicate(timeout=60)[1]
+            assert robot.returncode == 0, said[-2000:]
     finally:
         for proc in (launcher, worker, *robots):
             if proc.poll() is None:
