@@ -1,6 +1,7 @@
 """What a camo process does on signals: Ctrl-C as a flag, and on a crash or SIGUSR1 every
 thread's stack on stderr (what a hung or crashed process was doing is in its output)."""
 
+import os
 import signal
 import subprocess
 import sys
@@ -50,3 +51,41 @@ def test_a_crash_writes_the_stack_it_crashed_in():
     proc = subprocess.run(argv, capture_output=True, text=True, timeout=10)
     assert proc.returncode == -signal.SIGSEGV
     assert "Segmentation fault" in proc.stderr and "waiting_for_the_test" in proc.stderr
+
+
+@pytest.mark.slow(PROCESS)
+def test_a_module_interrupted_while_it_imports_ends_as_sigint_does_without_a_traceback(tmp_path):
+    """How a launcher starts its processes: one stopped before it set its own handlers (still
+    importing rclpy, say) says nothing and dies by SIGINT, as its launcher expects."""
+    (tmp_path / "slow_import.py").write_text(
+        "import sys, time\nprint('importing', flush=True)\ntime.sleep(30)\n"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_core.shutdown", "slow_import", "--an-argument"],
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": f"{tmp_path}:{os.environ.get('PYTHONPATH', '')}"},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout.readline() == "importing\n"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=10)
+    assert proc.returncode == -signal.SIGINT
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+
+
+@pytest.mark.slow(PROCESS)
+def test_a_module_run_through_shutdown_gets_its_arguments_and_exit_code(tmp_path):
+    (tmp_path / "echo_args.py").write_text(
+        "import sys\nif __name__ == '__main__':\n    print(sys.argv[1:])\n    sys.exit(3)\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-m", "camo_core.shutdown", "echo_args", "a", "--b"],
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": f"{tmp_path}:{os.environ.get('PYTHONPATH', '')}"},
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
+    assert proc.returncode == 3 and proc.stdout == "['a', '--b']\n"

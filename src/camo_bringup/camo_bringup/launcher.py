@@ -67,6 +67,7 @@ def run_round(session: Session, index: int, group: ProcessGroup) -> float:
         for robot in group.lost_cells():
             monitor.lost[robot] = True
     print(f"camo run: {monitor.progress_line(index)}", file=sys.stderr)
+    session.check_hosts(group.cells, final=True)
     session.recorders.views_matched()
     monitor.publish_views()  # the round's final scene, however short the round was
     return all_voted or time.monotonic()
@@ -179,6 +180,7 @@ def run_continuous(config: RunConfig, session: Session, group: ProcessGroup, ran
         session.spin_for(0.1)
         for round_ in sorted(monitor.heard - monitor.closed):
             if monitor.complete(round_):
+                session.check_hosts(group.cells, final=True)
                 summary = continuous_round(config, monitor, len(written), round_)
                 session.action.written(len(written), round_, summary)
                 ran.append({"round": round_, **round_ran(config, monitor, round_, summary)})

@@ -66,6 +66,11 @@ def robot_parameters(config: RunConfig, robot: int) -> list[str]:
     ]
 
 
+def module_of(proc: subprocess.Popen) -> str:
+    """The module a process of the group runs (ProcessGroup._start's command line)."""
+    return proc.args[3]
+
+
 class ProcessGroup:
     def __init__(self, env: dict[str, str]) -> None:
         self.env = env
@@ -82,7 +87,8 @@ class ProcessGroup:
         self, module: str, *args: str, on_orphan: int = signal.SIGKILL, quiet: bool = False
     ) -> subprocess.Popen:
         """`quiet`: its standard output to /dev/null (a tool's banner)."""
-        command = [sys.executable, "-m", module, *args]
+        # Through camo_core.shutdown: a process interrupted while it still imports ends quietly.
+        command = [sys.executable, "-m", "camo_core.shutdown", module, *args]
         proc = subprocess.Popen(
             command,
             env=self.env,
@@ -183,7 +189,7 @@ class ProcessGroup:
             if proc is self.recorder:
                 continue
             if proc.poll() is not None and proc.returncode > 0:
-                return f"a swarm process exited with code {proc.returncode}: {proc.args[2]}"
+                return f"a swarm process exited with code {proc.returncode}: {module_of(proc)}"
         return None
 
     def recording_failed(self) -> bool:
@@ -218,4 +224,4 @@ class ProcessGroup:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
-                self.killed.append(proc.args[2])
+                self.killed.append(module_of(proc))

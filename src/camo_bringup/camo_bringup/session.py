@@ -23,6 +23,7 @@ from camo_nodes.topics.qos import LATCHED
 # of the same id, or a stranger hosting its tiles (the code of bad input: nothing would change
 # by trying again as it is).
 EXIT_CONFLICT = 2
+HOSTS_SETTLE = 2.0  # s: a host the graph shows has its latched announcement taken by then
 
 
 class RunFailed(CamoError):
@@ -77,21 +78,34 @@ class Session:
                 )
             self.spin(0.05)
 
-    def check_hosts(self, started: Iterable[int]) -> None:
+    def check_hosts(self, started: Iterable[int], final: bool = False) -> None:
         """RunFailed (code 2) once a tile of the run's own processes (`started`: their pids) is
         announced by another process, first or not: every process that heard it first trusts it
         as the tile's host (trust.py) and never hears the run's own robots there, which no
         process can tell of another, so the run could only wait for good. Its own processes are
         told by the name they announce (host_node_name); cells left to remote workers are
         anyone's to take. Said once the run's own processes have announced theirs (they are
-        past their start, and stop cleanly), or after the discovery timeout."""
+        past their start, and stop cleanly), or after the discovery timeout.
+
+        `final`: before a round is written. A small run can finish before the stranger's
+        announcement is taken (the monitor may have heard the run's own host first, and its
+        robots each other), yet a process that heard the stranger first computed without the
+        run's robots there: the announcements of every host the graph shows are waited for
+        (at most HOSTS_SETTLE s), then any conflict ends the run."""
         ours = {host_node_name(pid) for pid in started}
         hosts = self.monitor.trusted
+        if final:
+            deadline = time.monotonic() + HOSTS_SETTLE
+            while (
+                self.node.count_publishers(self.topics.hosts) > len(hosts.names)
+                and time.monotonic() < deadline
+            ):
+                self.spin(0.05)
         conflict = hosts.held_by_others(self.setup.tiles, lambda p: hosts.names.get(p) in ours)
         if conflict is None:
             return
         waited = time.monotonic() - self.started
-        if ours <= set(hosts.names.values()) or waited > self.setup.discovery_timeout:
+        if final or ours <= set(hosts.names.values()) or waited > self.setup.discovery_timeout:
             raise RunFailed(
                 f"run {self.topics.run}: cells {conflict.cells} were announced by a process "
                 f"this run did not start ({conflict.process}): wherever it was heard first, the "

@@ -13,6 +13,8 @@ Ctrl-C (or a launcher's SIGINT) would not stop it.
 from __future__ import annotations
 
 import faulthandler
+import os
+import runpy
 import signal
 import sys
 
@@ -55,3 +57,23 @@ def interrupt_on_signals() -> None:
     stacks_on_faults()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.default_int_handler)
+
+
+def run_module(module: str, args: list[str]) -> None:
+    """`python -m module args`, but a Ctrl-C that reaches the module before it has set its own
+    handlers (while it imports rclpy, say) ends it as a SIGINT does, without Python's
+    KeyboardInterrupt traceback: a launcher stopping a run whose processes are still starting
+    leaves one line of its own, not a stack per process. The exit status stays death by SIGINT
+    (what a caller waiting for the process sees)."""
+    sys.argv = [module, *args]
+    try:
+        runpy.run_module(module, run_name="__main__", alter_sys=True)
+    except KeyboardInterrupt:
+        sys.stderr.flush()
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGINT)
+
+
+if __name__ == "__main__":
+    # python -m camo_core.shutdown MODULE ARGS...: how a launcher starts its processes.
+    run_module(sys.argv[1], sys.argv[2:])
