@@ -230,14 +230,18 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
 def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
     out_dir = tmp_path / "run"
     proc = start_run(
-        "--pattern", "forest", "--procs", "2", "--consensus-steps", "10000", "--out", str(out_dir)
+        *["--pattern", "forest", "--procs", "2", "--consensus-steps", "10000"],
+        *["--record", str(tmp_path / "bag"), "--foxglove", "0", "--out", str(out_dir)],
     )
     wait_for_line(proc, "consensus 64")
+    started = children_of(proc.pid)
+    assert len(started) == 5, started  # two workers, the projector, the recorder and the view
     time.sleep(1.0)
     proc.send_signal(2)
     _, err = finished(proc, 60)
     assert proc.returncode == 130, err
     assert "interrupted" in err and "Traceback" not in err
+    assert not [pid for pid in started if running(pid)]
     pids = [int(pid) for pid in json.loads((out_dir / "processes.json").read_text())]
     for pid in pids:
         assert (
@@ -922,6 +926,8 @@ def test_ctrl_c_stops_thousands_of_robots_within_seconds_and_keeps_what_they_rep
         *["--out", str(out_dir)],
     )
     wait_for_line(proc, "consensus 4096")
+    started = children_of(proc.pid)
+    assert len(started) == 3, started  # two workers and the projector
     # A few steps: as they stop, robots report what they did since their last report.
     time.sleep(1.0)
     interrupted = time.monotonic()
@@ -931,6 +937,7 @@ def test_ctrl_c_stops_thousands_of_robots_within_seconds_and_keeps_what_they_rep
     assert proc.returncode == 130, err[-2000:]
     assert stopped < 10, f"{stopped:.1f} s from Ctrl-C to exit"
     assert "did not stop" not in err and "Traceback" not in err
+    assert not [pid for pid in started if running(pid)]
     for pid in json.loads((out_dir / "processes.json").read_text()):
         assert (
             not os.path.exists(f"/proc/{pid}")
