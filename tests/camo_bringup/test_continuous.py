@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from support import (
     SWARM,
@@ -186,3 +187,118 @@ def test_ctrl_c_of_a_continuous_run_writes_the_round_under_way(tmp_path):
     summary = json.loads((tmp_path / "run" / "round_0" / "summary.json").read_text())
     assert "incomplete" in summary and summary["frame"] == 0
     assert len(summary["consensus_trace"]) >= 2
+
+
+class StoppedRun:
+    """The launcher's side of a continuous run of 2x3 robots, without processes: its monitor
+    given the robots' reports of rounds on frames 2, 5 and 8 as a run would take them, and the
+    rounds written as the launcher writes them (launcher.ContinuousRounds)."""
+
+    def __init__(self, tmp_path: Path, context) -> None:
+        from types import SimpleNamespace
+
+        from camo_bringup.launcher import ContinuousRounds
+        from camo_bringup.run_config import build_parser, config_from
+        from camo_nodes.monitor_node import MonitorNode
+
+        argv = ["--continuous", "--rows", "2", "--cols", "3", "--consensus-steps", "12"]
+        argv += ["--formation-steps", "6", "--out", str(tmp_path / "run")]
+        self.config = config_from(build_parser().parse_args(argv))
+        self.monitor = MonitorNode(self.config.params, self.config.topics, context=context)
+        self.goals: list[tuple] = []  # what the Camouflage action was told
+        action = SimpleNamespace(written=lambda *written: self.goals.append(written))
+        session = SimpleNamespace(monitor=self.monitor, action=action)
+        self.ran: list[dict] = []
+        self.rounds = ContinuousRounds(self.config, session, self.ran)
+
+    def round(self, frame: int, until_phase: int | None = None) -> None:
+        """Robots' reports of the round on `frame` (those up to `until_phase`: a round under
+        way), its frame projected at 100 + frame s and noticed by robot 4 half a second later."""
+        from support import Bus
+
+        from camo_core.algorithm.change import params_of_round
+
+        params = params_of_round(self.config.params, frame)
+        image = np.random.default_rng(frame).integers(0, 256, (20, 30), np.uint8)
+        self.monitor.images.add((100 + frame, 0), lambda: image, frame, f"sha-{frame}")
+        self.monitor.images.pin(frame)
+        self.monitor.notices[frame] = (4, 100.0 + frame, 100.5 + frame)
+        grid = np.random.default_rng(frame).uniform(0, 255, (2, 3))
+        bus = Bus(params, grid, seed=frame)
+        bus.run()
+        for report in bus.reports:
+            if until_phase is None or report.phase <= until_phase:
+                self.monitor.rounds[frame].add(report, 101.0 + frame)
+        self.monitor.heard.add(frame)
+        self.monitor.round_of[:] = frame
+
+
+def test_a_stopped_continuous_run_writes_its_finished_rounds_then_the_one_under_way(tmp_path):
+    # Ctrl-C (or --duration's end, or a failure) with round 0 written, the round of frame 5
+    # finished but not written yet and the round of frame 8 under way: frame 5's was dropped
+    # (only the latest round was written), and the one under way had no times, no line of
+    # rounds.csv and no place in run.gif.
+    from PIL import Image as PILImage
+    from support import ros_context
+
+    from camo_core.algorithm.robot_io import CONSENSUS
+
+    with ros_context() as context:
+        run = StoppedRun(tmp_path, context)
+        run.round(2)
+        run.rounds.collect()
+        run.round(5)
+        run.round(8, until_phase=CONSENSUS)
+        run.rounds.wrap_up()
+        run.monitor.destroy_node()
+    folder = run.config.folder
+    rows = rounds_of(folder)
+    assert [(r["round"], r["frame"], r["complete"]) for r in rows] == [
+        ("0", "2", "1"), ("1", "5", "1"), ("2", "8", "0"),
+    ]  # fmt: skip
+    finished = json.loads((folder / "round_1" / "summary.json").read_text())
+    assert "incomplete" not in finished and finished["done_at"] is not None
+    stopped = json.loads((folder / "round_2" / "summary.json").read_text())
+    assert "incomplete" in stopped and stopped["frame"] == 8 and stopped["done_at"] is None
+    assert (stopped["changed_at"], stopped["noticed_at"], stopped["noticed_by"]) == (108, 108.5, 4)
+    assert rows[2]["noticed_s"] == "0.5" and rows[2]["done_s"] == ""
+    assert (folder / "round_2" / "background.png").exists()
+    with PILImage.open(folder / "run.gif") as gif:
+        parts = []
+        for k in range(3):
+            with PILImage.open(folder / f"round_{k}" / "run.gif") as part:
+                parts.append(part.n_frames)
+        assert gif.n_frames == sum(parts) + 3  # each round after a card with its frame
+    assert [r["round"] for r in run.ran] == [2, 5, 8]
+    assert [g[:2] for g in run.goals] == [(0, 2), (1, 5)]  # goals are met by finished rounds
+
+
+def test_a_stopped_continuous_run_writes_a_round_its_last_reports_finished_in_full(tmp_path):
+    # The robots' last reports, taken after the stop, finish the round under way: it is a
+    # finished round (it was written "(incomplete)").
+    from support import ros_context
+
+    with ros_context() as context:
+        run = StoppedRun(tmp_path, context)
+        run.round(3)
+        run.rounds.wrap_up()
+        run.monitor.destroy_node()
+    (row,) = rounds_of(run.config.folder)
+    assert (row["frame"], row["complete"]) == ("3", "1")
+    summary = json.loads((run.config.folder / "round_0" / "summary.json").read_text())
+    assert "incomplete" not in summary
+
+
+@pytest.mark.slow(SWARM)
+def test_the_end_of_a_duration_writes_the_round_under_way_and_exits_0(tmp_path):
+    # It was dropped without a word.
+    out = camo_run(
+        "--continuous", "--duration", "12", "--consensus-steps", "30000",
+        "--out", str(tmp_path / "run"),
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "--duration 12 s is up" in out.stderr and "was under way" in out.stderr
+    (row,) = rounds_of(tmp_path / "run")
+    assert (row["round"], row["frame"], row["complete"]) == ("0", "0", "0")
+    summary = json.loads((tmp_path / "run" / "round_0" / "summary.json").read_text())
+    assert "incomplete" in summary and summary["noticed_by"] is not None
