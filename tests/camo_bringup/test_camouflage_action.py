@@ -75,3 +75,37 @@ def test_a_run_without_continuous_refuses_a_goal_with_an_image(tmp_path):
         proc.send_signal(2)
         _, err = finished(proc, 60)
     assert "no --continuous" in err
+
+
+def test_the_action_keeps_a_bounded_number_of_rounds_however_many_are_written(tmp_path):
+    # Every round's summary (grids of every robot's values) was kept for as long as the run went.
+    from types import SimpleNamespace
+
+    import numpy as np
+    import rclpy
+    from support import ros_context
+
+    from camo_bringup.camouflage_action import DONE_KEPT, CamouflageAction, OpenGoal
+    from camo_core.algorithm.params import CamoParams
+    from camo_core.results.record import Backgrounds
+    from camo_nodes.topics.names import RunTopics
+
+    with ros_context() as context:
+        node = rclpy.create_node("launcher", context=context)
+        config = SimpleNamespace(
+            continuous=True,
+            folder=tmp_path,
+            topics=RunTopics("bounded"),
+            params=CamoParams(rows=4, cols=4),
+        )
+        monitor = SimpleNamespace(images=Backgrounds(), heard=set(), closed=set())
+        session = SimpleNamespace(config=config, node=node, monitor=monitor)
+        action = CamouflageAction(session)
+        for frame in range(500):
+            monitor.images.add((frame, 0), lambda: np.zeros((8, 8), np.uint8), frame)
+            action.written(frame, frame, {"pattern": "vertical", "sensed": [[0.0] * 4] * 4})
+        assert len(action.done) == DONE_KEPT
+        late = OpenGoal(handle=None, future=None, image=None)  # no image: the latest round
+        assert action._round_for(late)[:2] == (499, 499)
+        action.close()
+        node.destroy_node()

@@ -15,6 +15,7 @@ import hashlib
 import itertools
 import json
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,6 +36,9 @@ from camo_nodes.topics.images import image_from_msg
 FEEDBACK_PERIOD = 0.5  # s
 SPINS = 8  # turns of the action's executor per turn of the launcher's loop
 GOAL_WAIT = 120.0  # s a goal's image may take to start a round before the goal is aborted
+# Rounds written that are kept for goals: a goal is met by the first round written after its
+# frame, found the turn it is written, or by the latest (a summary of 256x256 robots is MBs).
+DONE_KEPT = 16
 
 
 @dataclass
@@ -59,7 +63,8 @@ class CamouflageAction:
         self.continuous = config.continuous
         self.folder: Path = config.folder / "goals"
         self.open: list[OpenGoal] = []
-        self.done: list[tuple[int, int, dict]] = []  # (index, frame, summary) of rounds written
+        # (index, frame, summary) of the latest rounds written
+        self.done: deque[tuple[int, int, dict]] = deque(maxlen=DONE_KEPT)
         self._numbers = itertools.count()
         # A node and executor of its own: a result sent after its request's callback returned
         # fails from rclpy's EventsExecutor, which the launcher's other nodes spin ("Failed to
