@@ -3,7 +3,7 @@ has changed, and which round that starts.
 
 A watching robot reads its sensor every `sense_period` seconds, between rounds and during them.
 A reading is its cell's grey in the newest projected frame, after measurement error drawn anew
-for every reading (streams 9 and 10, keyed on the reading's number and the robot: with
+for every reading (streams 10 and 11, keyed on the reading's number and the robot: with
 probability rho_meas a uniform grey). Each robot judges its own readings only:
 
 - A *window* is its last `change_window` (m) readings. A window is *coherent* when at least
