@@ -173,7 +173,7 @@ class Watch:
         """A `read` of frame `frame`: a difference for the noise if the last was of another."""
         last, self._last = self._last, (frame, values)
         new = last is not None and last[0] != frame
-        if new:
+        if last is not None and new:
             self.differences[:, self._column] = np.abs(values - last[1])
             self.difference_at[self._column] = self.reads
             self._column = (self._column + 1) % NOISE_DIFFERENCES
