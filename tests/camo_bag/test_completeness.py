@@ -266,3 +266,55 @@ def test_a_continuous_runs_rounds_are_its_frames_and_its_result_names_them():
         "round 41: its background is not in the bag",
         "round 41: 1 robot lacks hellos, colours, votes, states, done reports: 0",
     ]
+
+
+def test_a_long_continuous_runs_ledger_holds_a_few_numbers_a_round():
+    # Every round's every robot's flags of every step were kept for as long as the run went, and
+    # the rounds a recorder reported grew with them, rebuilt four times a second.
+    import tracemalloc
+
+    from camo_bag.ledger import ACTIVE_ROUNDS, Ledger
+    from camo_core.algorithm.params import CamoParams
+    from camo_core.algorithm.robot_io import messages_per_round
+
+    params = CamoParams(rows=4, cols=4, consensus_steps=12, formation_steps=4)
+    ledger = Ledger()
+    ledger.set_run(params, 1, continuous=True)
+    wanted = messages_per_round(params)
+    finished = []
+
+    def rounds(first: int, last: int) -> None:
+        for round_ in range(first, last):
+            for frame in range(10 * round_, 10 * round_ + 10):  # a camera's frames
+                ledger.background(frame)
+            superseded = round_ % 3 == 2  # its robots left it half way for the next
+            for robot in range(params.count):
+                for kind, n in wanted.items():
+                    for step in range(n // 2 if superseded else n):
+                        ledger.message(kind, robot, 10 * round_, step)
+                if not superseded:
+                    ledger.reported_done(robot, 10 * round_)
+            if not superseded:
+                finished.append(10 * round_)
+
+    rounds(0, 100)
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    rounds(100, 400)
+    grown = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    assert grown < 300 * 400  # bytes a round: its number, where its whole robots are shared
+    assert len(ledger.steps) + len(ledger.counts) + len(ledger.done) <= 3 * ACTIVE_ROUNDS
+    assert ledger.latest_rounds() == finished[-ACTIVE_ROUNDS:]
+    assert ledger.complete_count(finished[-1]) == ledger.complete_count(finished[0]) == 16
+    result = [{"round": r, "finished": [[0, 15]]} for r in finished]
+    ledger.set_result({"run": "r", "ended": "finished", "rounds": result})
+    assert not ledger.gaps()
+    assert ledger.backgrounds == 4000 and 3990 in ledger.frames and 4000 not in ledger.frames
+    # A round the bag holds half of (superseded: not in a real result) says so, however old.
+    ledger.set_result(
+        {"run": "r", "ended": "finished", "rounds": [{"round": 20, "finished": [[0, 15]]}]}
+    )
+    assert ledger.gaps() == [
+        "round 20: 16 robots lack hellos, colours, votes, states, done reports: 0-15"
+    ]

@@ -115,4 +115,9 @@ def test_bench_dynamic_times_a_change_against_a_switch_and_counts_false_rounds(t
     (row,) = figures["following"]
     assert row["continuous"]["changes"] == row["then"]["changes"] == 2
     assert 0 < row["then"]["median_s"] < row["continuous"]["median_s"] < 5  # noticing costs
+    assert row["continuous"]["median_s"] <= row["continuous"]["max_s"] < 5
+    rounds = row["rounds"]  # one a change, on its frame, each equal to the simulator
+    assert rounds["frames"] == [0, 1, 2] and rounds["like_sim"] == 3, rounds
+    assert not (rounds["missed"] or rounds["other"] or rounds["incomplete"])
+    assert "3 rounds, 3 equal to ./camo sim" in out.stderr
     assert figures["static"]["rounds"] == 1 and figures["static"]["per_minute"] == 0

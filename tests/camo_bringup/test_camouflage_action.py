@@ -6,6 +6,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 from types import SimpleNamespace
 
 import cv2
@@ -143,3 +144,67 @@ def test_goals_images_are_written_and_projected_one_a_turn(tmp_path):
     assert sent == [1, 2, 3, 3]
     assert sorted(p.name for p in action.folder.iterdir()) == [f"goal_{k}.png" for k in range(3)]
     assert len(action.open) == 3 and all(goal.sent is not None for goal in action.open)
+
+
+def test_the_action_keeps_a_bounded_number_of_rounds_however_many_are_written(tmp_path):
+    # Every round's summary (grids of every robot's values) was kept for as long as the run went.
+    from types import SimpleNamespace
+
+    import numpy as np
+    import rclpy
+    from support import ros_context
+
+    from camo_bringup.camouflage_action import DONE_KEPT, CamouflageAction, OpenGoal
+    from camo_core.algorithm.params import CamoParams
+    from camo_core.results.record import Backgrounds
+    from camo_nodes.topics.names import RunTopics
+
+    with ros_context() as context:
+        node = rclpy.create_node("launcher", context=context)
+        config = SimpleNamespace(
+            continuous=True,
+            folder=tmp_path,
+            topics=RunTopics("bounded"),
+            params=CamoParams(rows=4, cols=4),
+        )
+        monitor = SimpleNamespace(images=Backgrounds(), heard=set(), closed=set())
+        session = SimpleNamespace(config=config, node=node, monitor=monitor)
+        action = CamouflageAction(session)
+        for frame in range(500):
+            monitor.images.add((frame, 0), lambda: np.zeros((8, 8), np.uint8), frame)
+            action.written(frame, frame, {"pattern": "vertical", "sensed": [[0.0] * 4] * 4})
+        assert len(action.done) == DONE_KEPT and len(action._grids) <= DONE_KEPT
+        late = OpenGoal(handle=None, future=None, image=None)  # no image: the latest round
+        assert action._round_for(late)[:2] == (499, 499)
+        action.close()
+        node.destroy_node()
+
+
+@pytest.mark.slow(SWARM)
+def test_a_goal_showing_the_scene_camouflaged_already_gets_its_round(tmp_path):
+    # No robot notices a frame that reads as its round's: the goal was aborted after 120 s.
+    domain_id = domain()
+    script = client_script(tmp_path)
+    forest = tmp_path / "forest.png"
+    cv2.imwrite(str(forest), background("forest"))  # the run's own scene, as bgr8
+    proc = start_run(
+        "--continuous", "--duration", "60", "--run-id", "same", "--out", str(tmp_path / "run"),
+        domain_id=domain_id,
+    )  # fmt: skip
+    try:
+        rounds = tmp_path / "run" / "rounds.csv"
+        deadline = time.monotonic() + 90
+        while not rounds.exists():  # round 0 written
+            assert time.monotonic() < deadline and proc.poll() is None, "no round 0"
+            time.sleep(0.2)
+        sent = time.monotonic()
+        goal = client(script, domain_id, "same", str(forest))
+        assert goal.returncode == 0, goal.stderr
+        assert re.search(r"^round 0 \(frame 0\): vertical \(", goal.stdout, re.M), goal.stdout
+        now = client(script, domain_id, "same")  # no image: the round of the scene shown
+        assert re.search(r"^round 0 \(frame 0\): vertical \(", now.stdout, re.M), now.stdout
+        assert time.monotonic() - sent < 30
+    finally:
+        proc.send_signal(2)
+        _, err = finished(proc, 60)
+    assert "superseded" not in err and "round 1" not in err

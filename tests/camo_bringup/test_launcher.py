@@ -143,6 +143,24 @@ def test_run_rejects_bad_options_in_one_line(tmp_path):
     )
 
 
+@pytest.mark.slow(PROCESS)
+@pytest.mark.parametrize(
+    "args, said",
+    [
+        (["--video", "missing.mp4"], "cannot read video missing.mp4: not found"),
+        (["--camera", "57"], "camera 57: there is none (OpenCV opened no device 57)"),
+        (["--images", "none/*.png", "--period", "1"], "--images none/*.png: no file matches it"),
+    ],
+)
+def test_a_run_whose_stream_is_not_there_is_one_line_before_anything_starts(tmp_path, args, said):
+    # The projector found out in a running swarm: its error, the launcher's, a refused status
+    # and exit code 1.
+    out = camo_run(*args, "--continuous", "--duration", "5", "--out", str(tmp_path / "run"))
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.strip() == f"camo: error: {said}"
+    assert not (tmp_path / "run").exists()
+
+
 @pytest.mark.slow(SWARM)
 def test_switching_the_background_makes_the_same_swarm_camouflage_again(tmp_path):
     out = camo_run(

@@ -14,10 +14,11 @@ from camo_core.algorithm.mailbox import Mailbox
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.protocol import StepProtocol
 from camo_core.algorithm.robot_io import DONE, NOTHING, SENSING, Message
+from camo_core.algorithm.run_setup import ProtocolParams
 from camo_core.algorithm.sensing import ProjectedSensor, Projection, sense_image
 from camo_core.algorithm.simulator import simulate
 
-WINDOW, THRESHOLD = 6, 24.0
+WINDOW, THRESHOLD = ProtocolParams().change_window, ProtocolParams().change_threshold  # a run's
 
 
 def watch_of(count: int, rho_meas: float = 0.0, seed: int = 0) -> Watch:
@@ -25,24 +26,33 @@ def watch_of(count: int, rho_meas: float = 0.0, seed: int = 0) -> Watch:
     return Watch(np.arange(count), params, WINDOW, THRESHOLD)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=300, deadline=None)
 @given(
     st.lists(
-        st.one_of(st.floats(0, 255), st.sampled_from([10.0, 11.0, 200.0, 201.0])),
+        st.tuples(
+            st.one_of(st.floats(0, 255), st.sampled_from([10.0, 11.0, 200.0, 201.0])),
+            st.booleans(),  # a new frame (else the last one read again)
+        ),
         min_size=0,
-        max_size=40,
+        max_size=48,
     ),
     st.booleans(),
 )
 def test_the_vectorised_watch_notices_where_the_plain_rule_does(readings, idle):
     watch = watch_of(1)
+    values, frames, frame, value = [], [], 0, 0.0
+    for new_value, new_frame in readings:
+        if new_frame or not frames:  # a frame read again reads the same
+            frame, value = frame + 1, new_value
+        values.append(value)
+        frames.append(frame)
     at = None
-    for k, value in enumerate(readings):
-        judged = watch.read(np.array([[value]]), k, np.array([idle]))
+    for k, (value, frame) in enumerate(zip(values, frames, strict=True)):
+        judged = watch.read(np.array([[value]]), frame, np.array([idle]))
         if len(judged.robots):
             at = k
             break
-    assert at == noticed(readings, WINDOW, THRESHOLD, idle)
+    assert at == noticed(values, WINDOW, THRESHOLD, idle, frames)
 
 
 def test_a_static_scene_with_sensor_noise_is_never_taken_for_a_change():
@@ -60,9 +70,89 @@ def test_a_camera_s_frame_noise_raises_the_threshold_and_is_not_a_change():
     watch = watch_of(256)
     base = np.linspace(20, 235, 256).reshape(1, 256)
     notices = sum(
-        len(watch.read(base + generator.normal(0, 8, base.shape), 0).robots) for _ in range(3000)
+        len(watch.read(base + generator.normal(0, 8, base.shape), k).robots) for k in range(3000)
     )
     assert notices == 0
+    assert 6 < np.median(watch.sigma()) < 10
+
+
+class NoisyCamera:
+    """A static scene through a camera whose frames each add noise of sigma `noise`, a new frame
+    every `every` readings, read by 256 robots with sensor noise (rho_meas 0.15)."""
+
+    def __init__(self, noise: float, every: int, seed: int) -> None:
+        self.generator = np.random.default_rng(seed)
+        self.watch = watch_of(256, rho_meas=0.15, seed=seed)
+        self.base = np.linspace(20, 235, 256).reshape(1, 256)
+        self.noise, self.every = noise, every
+        self.frame, self.grid = -1, self.base
+
+    def read(self, k: int) -> int:
+        """Reading k; the robots that noticed start a round on the newest frame (and take their
+        reference from it again): how many did."""
+        if k % self.every == 0:
+            self.frame += 1
+            self.grid = self.base + self.generator.normal(0, self.noise, self.base.shape)
+        judged = self.watch.read(self.grid, self.frame)
+        self.watch.reset(judged.robots, self.grid, self.frame)
+        return len(judged.robots)
+
+
+def test_frames_slower_than_the_readings_are_not_taken_for_a_change():
+    # Each frame read three times: two of three differences of successive readings were 0, the
+    # estimated noise fell to 0 and the threshold with it, under the frames' own noise.
+    camera = NoisyCamera(noise=8, every=3, seed=4)
+    assert sum(camera.read(k) for k in range(3000)) == 0
+    assert np.median(camera.watch.sigma()) > 6  # the threshold above the frames' noise
+
+
+def test_joining_rounds_leaves_the_noise_and_takes_no_false_alarm():
+    # A join reads the round's one frame a window's worth of times (8 to 64): those copies were
+    # taken for readings without noise, and the threshold fell after every join.
+    camera = NoisyCamera(noise=8, every=1, seed=6)
+    notices = 0
+    for k in range(3000):
+        notices += camera.read(k)
+        if k % 50 == 49:  # every robot joins a round of the newest frame
+            camera.watch.reset(np.arange(256), camera.grid, camera.frame)
+    assert notices == 0
+
+
+def test_a_round_s_one_frame_off_by_its_noise_is_not_kept_as_the_reference():
+    # Robots join a round on a frame 30 grey levels off the scene (within its camera's noise,
+    # sigma 10: threshold 60); later the camera's noise falls (threshold 24): the frames were a
+    # change against that one frame, and every robot started a false round.
+    generator = np.random.default_rng(7)
+    watch = watch_of(64)
+    scene = np.linspace(40, 200, 64).reshape(1, 64)
+    notices = 0
+    for k in range(400):
+        noisy = scene + generator.normal(0, 10 if k < 220 else 1, scene.shape)
+        judged = watch.read(noisy, k)
+        notices += len(judged.robots) if k >= 220 else 0  # once the noise has fallen
+        watch.reset(judged.robots, noisy, k)
+        if k == 199:  # the round of this frame, off by 30 everywhere
+            watch.reset(np.arange(64), scene + 30, k)
+    assert notices == 0 and np.median(watch.sigma()) < 2
+    assert np.abs(watch.reference - scene[0]).max() < 15  # the frames' level, not the one frame
+
+
+def test_a_still_image_s_frames_that_change_are_each_noticed():
+    # Frames only at changes, one a second (a still image, then another, as Camouflage goals or
+    # --images project them): they are the scene's changes, not its noise, however many come.
+    watch = watch_of(64)
+    levels = np.random.default_rng(3).uniform(20, 235, (60, 1, 64))
+    for frame in range(60):
+        reference, noticed_now = watch.reference.copy(), set()
+        for _ in range(10):
+            judged = watch.read(levels[frame], frame)
+            noticed_now |= set(judged.robots.tolist())
+            watch.reset(judged.robots, levels[frame], frame)
+        with np.errstate(invalid="ignore"):  # every robot whose cell moved beyond the threshold
+            moved = np.abs(levels[frame][0] - reference) > THRESHOLD
+        assert set(np.flatnonzero(moved).tolist()) <= noticed_now, frame
+    assert not watch.sigma().any()
+    assert not watch.sigma().any()
 
 
 @pytest.mark.parametrize("rho", [0.0, 0.15])

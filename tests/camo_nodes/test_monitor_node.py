@@ -3,6 +3,7 @@ before its host's word taken over several turns, in order."""
 
 import time
 
+import numpy as np
 import pytest
 from support import SWARM, domain, finished, ros_context, start_run
 
@@ -183,6 +184,31 @@ def test_monitor_counts_bridged_robots_whose_hardware_is_offline():
         assert "hardware offline 1" in monitor.progress_line()
         monitor._on_status(*status(sender_id=3, phase=2, alive=True))
         assert "offline" not in monitor.progress_line()
+        monitor.destroy_node()
+
+
+def test_a_noticed_round_superseded_before_any_robot_reported_lets_its_frame_go():
+    # Its frame, pinned at the notice, was kept for as long as the run went.
+    from camo_core.algorithm.params import CamoParams
+    from camo_nodes.monitor_node import MonitorNode
+    from camo_nodes.topics.names import RunTopics
+
+    with ros_context() as context:
+        monitor = MonitorNode(
+            CamoParams(rows=2, cols=2), RunTopics("monitor_test"), context=context
+        )
+        hosting_all(monitor, 4)
+        for frame in range(10):
+            monitor.images.add((frame, 0), lambda: np.zeros((8, 8), np.uint8), frame)
+        for robot, frame in ((1, 3), (2, 5), (3, 7)):  # notices: rounds of frames 3, 5 and 7
+            monitor._notice(robot, frame, 1.0, 2.0, HOST_GID)
+        for robot in range(4):  # only round 7 is reported in, and done
+            monitor._on_status(*status(sender_id=robot, phase=2, step=0, round=7))
+        monitor.close(7)
+        assert not monitor.notices and not monitor.images.pinned
+        for frame in range(10, 10 + monitor.images.keep):
+            monitor.images.add((frame, 0), lambda: np.zeros((8, 8), np.uint8), frame)
+        assert not {3, 5, 7} & set(monitor.images)
         monitor.destroy_node()
 
 

@@ -1,5 +1,6 @@
 """The projector started alone: its image is checked before it waits for a run."""
 
+import itertools
 import os
 import subprocess
 import sys
@@ -150,3 +151,70 @@ def test_a_frame_from_an_image_topic_gives_the_readings_the_same_picture_gives(
     sim = run_camo("sim", "--image", str(frames / frame), "--out", str(tmp_path / "sim"))
     assert sim.returncode == 0, sim.stderr
     assert_like_sim(tmp_path / "run", tmp_path / "sim")
+
+
+def projector_stream(domain_id: int, run_id: str, *args: str) -> subprocess.Popen:
+    """A projector of a stream, alone, for run `run_id` in `domain_id`."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "camo_projector.projector_node", *args,
+         "--ros-args", "-p", f"run_id:={run_id}"],
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain_id)},
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+
+
+def shown(frames: list) -> tuple[list[int], list[float]]:
+    """Each frame's grey (its pixels' mean, to the nearest 50) and its stamp (s)."""
+    import numpy as np
+
+    greys = [50 * round(np.frombuffer(bytes(f.data), np.uint8).mean() / 50) for f in frames]
+    return greys, [f.header.stamp.sec + f.header.stamp.nanosec * 1e-9 for f in frames]
+
+
+@pytest.mark.slow(SWARM)
+def test_a_projector_shows_images_in_name_order_each_for_its_period_again_and_again(tmp_path):
+    import cv2
+    import numpy as np
+
+    for name, grey in (("b.png", 100), ("a.png", 50), ("c.png", 150)):
+        cv2.imwrite(str(tmp_path / name), np.full((48, 64), grey, np.uint8))
+    domain_id = domain()
+    images = str(tmp_path / "*.png")
+    proc = projector_stream(domain_id, "shown", "--images", images, "--period", "0.4")
+    try:
+        frames = frames_of("shown", domain_id, 7)
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    greys, stamps = shown(frames)
+    assert greys == [50, 100, 150, 50, 100, 150, 50]  # by name, in turn, from the first again
+    gaps = np.diff(stamps)
+    assert 0.3 <= np.median(gaps) <= 0.5 and gaps.min() > 0.2, gaps  # one each 0.4 s
+
+
+@pytest.mark.slow(SWARM)
+def test_a_projector_plays_a_video_at_the_rate_given_and_loops_it(tmp_path):
+    import cv2
+    import numpy as np
+
+    video = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 25, (64, 48))
+    for grey in (0, 50, 100, 150, 200):
+        writer.write(np.full((48, 64, 3), grey, np.uint8))
+    writer.release()
+    domain_id = domain()
+    proc = projector_stream(
+        domain_id, "looped", "--video", str(video), "--fps", "5", "--loop", "--max-fps", "50"
+    )
+    try:
+        frames = frames_of("looped", domain_id, 12)
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    greys, stamps = shown(frames)
+    # To its end, then from its start (a frame whose time passed while the projector was held
+    # up is skipped, not shown late).
+    steps = [(b - a) % 250 for a, b in itertools.pairwise(greys)]
+    assert set(steps) <= {50, 100} and steps.count(50) >= 9 and greys.count(0) >= 2, greys
+    gaps = np.diff(stamps)
+    assert 0.15 <= np.median(gaps) <= 0.25, gaps  # 5 frames a second, not the file's 25

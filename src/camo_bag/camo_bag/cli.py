@@ -40,7 +40,7 @@ def run_verdict(bag: Bag) -> str:
     except BagError as exc:
         return f"Run:               none ({exc})"
     gaps = ledger.gaps()
-    held = f"Robot messages:    {sum(ledger.counts.values())} (each robot's step of a kind once)"
+    held = f"Robot messages:    {ledger.distinct} (each robot's step of a kind once)"
     if not gaps:
         whole = "complete (every robot's messages of every round it finished)"
         return f"{held}\nRun:               {whole}"

@@ -14,8 +14,12 @@ recorder and `bag info` feed it decoded fields.
 
 from __future__ import annotations
 
-from collections import Counter, defaultdict
+import bisect
+import math
+from collections import Counter
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import messages_per_round
@@ -38,20 +42,70 @@ SINGLE_KINDS = _kinds(MESSAGE_TYPES)
 ROBOT_KINDS = {**COLUMN_KINDS, **ARRAY_KINDS, **SINGLE_KINDS}
 
 
+ACTIVE_ROUNDS = 8  # a continuous run's rounds whose messages are counted robot by robot
+
+
+class Frames:
+    """Frame numbers as ranges of consecutive ones: a stream's frames, ten a second for as long
+    as a run goes, take a few numbers (a set of them took 60 MB a day)."""
+
+    def __init__(self) -> None:
+        self._ranges: list[list[int]] = []  # [first, last], in order
+        self._count = 0
+
+    def add(self, number: int) -> None:
+        if number in self:
+            return
+        self._count += 1
+        at = bisect.bisect(self._ranges, [number, math.inf])
+        before = self._ranges[at - 1] if at else None
+        after = self._ranges[at] if at < len(self._ranges) else None
+        if before is not None and before[1] == number - 1:
+            before[1] = number
+            if after is not None and after[0] == number + 1:
+                before[1] = after[1]
+                del self._ranges[at]
+        elif after is not None and after[0] == number + 1:
+            after[0] = number
+        else:
+            self._ranges.insert(at, [number, number])
+
+    def __contains__(self, number: object) -> bool:
+        if not isinstance(number, int):
+            return False
+        at = bisect.bisect(self._ranges, [number, math.inf])
+        return bool(at) and self._ranges[at - 1][1] >= number
+
+    def __len__(self) -> int:
+        return self._count
+
+
 @dataclass
 class Ledger:
     params: CamoParams | None = None
     rounds: int | None = None  # how many backgrounds the run was to camouflage
-    counts: Counter = field(default_factory=Counter)  # (round, robot, kind) -> distinct steps
-    steps: dict[tuple[int, int, str], bytearray] = field(default_factory=dict)
-    done: dict[int, set[int]] = field(default_factory=lambda: defaultdict(set))  # round -> robots
-    frames: set[int] = field(default_factory=set)  # the background frames recorded, by number
+    # Per round, per (robot, kind): the distinct steps recorded (flags) and how many. A robot
+    # whose round is whole (done reported, every message there) is let go of them and flagged
+    # in `whole`, a byte per robot; a continuous run's rounds older than its ACTIVE_ROUNDS
+    # latest keep those flags as ranges of robots: a long run's ledger grows by a few numbers
+    # a round.
+    counts: dict[int, Counter] = field(default_factory=dict)
+    steps: dict[int, dict[tuple[int, str], bytearray]] = field(default_factory=dict)
+    done: dict[int, set[int]] = field(default_factory=dict)  # round -> robots done, not whole
+    whole: dict[int, bytearray | tuple] = field(default_factory=dict)  # round -> whole robots
+    frames: Frames = field(default_factory=Frames)  # the background frames recorded, by number
     result: dict | None = None  # the launcher's /<run>/swarm/result, once recorded
     limits: dict[str, int] = field(default_factory=dict)  # kind -> steps a robot sends
     results_expected: bool = True  # bags of runs before run ids hold no result
     continuous: bool = False  # rounds named by the frames' numbers (set_run)
+    distinct: int = 0  # robot messages recorded, each robot's step of a kind once
+    # A continuous run's rounds older than its ACTIVE_ROUNDS latest are settled: robots not
+    # whole then stay so (the kinds they lacked kept, `_settled`), their messages ignored.
+    _settled: dict[int, frozenset[str]] = field(default_factory=dict)
+    _settled_below: int = 0
+    _alike: dict = field(default_factory=dict)
     # complete_count's answers, and the rounds whose counts changed since (a continuous run's
-    # recorder reports every round's, four times a second, for as long as the run goes).
+    # recorder reports its latest rounds', four times a second, for as long as the run goes).
     _counted: dict[int, int] = field(default_factory=dict)
     _changed: set[int] = field(default_factory=set)
 
@@ -61,20 +115,91 @@ class Ledger:
         self.params, self.rounds, self.continuous = params, rounds, continuous
         self.limits = messages_per_round(params)
         self._counted.clear()  # what a round must hold is known now
+        for round_index, robots in list(self.done.items()):  # those whole already
+            for robot in list(robots):
+                self._check_whole(round_index, robot)
 
     def message(self, kind: str, robot: int, round_index: int, step: int = 0) -> None:
         if not 0 <= step < self.limits.get(kind, MAX_STEP) or round_index < 0:
             return  # no robot of the run sends that
-        key = (round_index, robot, kind)
-        flags = self.steps.get(key)
-        if flags is None:
-            flags = self.steps[key] = bytearray()
+        if not self._open(round_index, robot):
+            return
+        flags = self.steps.setdefault(round_index, {}).setdefault((robot, kind), bytearray())
         if step >= len(flags):
             flags.extend(bytes(step + 1 - len(flags)))
         if not flags[step]:
             flags[step] = 1
-            self.counts[key] += 1
+            self.distinct += 1
+            counts = self.counts.setdefault(round_index, Counter())
+            counts[(robot, kind)] += 1
+            self._mark(round_index)
+            if counts[(robot, kind)] == self.limits.get(kind):
+                self._check_whole(round_index, robot)
+
+    def _open(self, round_index: int, robot: int) -> bool:
+        """Whether a message of this robot in this round still counts: not once its round is
+        whole or settled. A round not seen before may settle the oldest."""
+        if round_index in self._settled or (self.continuous and round_index < self._settled_below):
+            return False
+        if self._whole(round_index, robot) or isinstance(self.whole.get(round_index), tuple):
+            return False  # whole, or a round settled with its flags packed
+        if self.continuous and round_index not in self.counts and round_index not in self.done:
+            active = set(self.counts) | set(self.done)
+            while len(active) >= ACTIVE_ROUNDS:
+                oldest = min(active)
+                if oldest > round_index:
+                    return False  # older than every round counted: settled already
+                self._settle(oldest)
+                active.discard(oldest)
+            latest = sorted(active | set(self.whole) | {round_index})[-ACTIVE_ROUNDS:]
+            for old, flags in list(self.whole.items()):
+                if old < latest[0] and isinstance(flags, bytearray):
+                    robots = np.flatnonzero(np.frombuffer(flags, np.uint8)).tolist()
+                    self.whole[old] = self._shared(tuple(contiguous(robots)))
+            for old in [k for k in self._counted if k < latest[0]]:
+                del self._counted[old]
+        return True
+
+    def _check_whole(self, round_index: int, robot: int) -> None:
+        """The robot's round is whole: its flags and counts are let go."""
+        if self.params is None or not self._holds(round_index, robot):
+            return
+        whole = self.whole.setdefault(round_index, bytearray(self.params.count))
+        if 0 <= robot < len(whole):
+            whole[robot] = 1
+        for kind in self.limits:
+            self.steps.get(round_index, {}).pop((robot, kind), None)
+            self.counts.get(round_index, Counter()).pop((robot, kind), None)
+        self.done.get(round_index, set()).discard(robot)
+        for table in (self.steps, self.counts, self.done):
+            if round_index in table and not table[round_index]:
+                del table[round_index]
+        self._mark(round_index)
+
+    def _shared(self, value):
+        """One object for what many rounds hold alike (all robots whole, the same kinds lacked)."""
+        return self._alike.setdefault(value, value)
+
+    def _mark(self, round_index: int) -> None:
+        """The round's complete_count is to be worked out again (if it was)."""
+        if round_index in self._counted:
             self._changed.add(round_index)
+
+    def _settle(self, round_index: int) -> None:
+        """A continuous run's round that is no longer counted robot by robot: what its robots
+        that are not whole lacked, by kind (for `gaps`), and nothing else."""
+        wanted = messages_per_round(self.params) if self.params is not None else {}
+        counts = self.counts.pop(round_index, Counter())
+        robots = {robot for robot, _ in counts} | self.done.get(round_index, set())
+        lacked = {k for k, n in wanted.items() for r in robots if counts[(r, k)] < n}
+        if any(r not in self.done.get(round_index, ()) for r in robots):
+            lacked.add("done reports")
+        self._settled[round_index] = self._shared(frozenset(lacked))
+        self.steps.pop(round_index, None)
+        self.done.pop(round_index, None)
+        self._settled_below = max(self._settled_below, round_index + 1)
+        self._counted.pop(round_index, None)
+        self._changed.discard(round_index)
 
     def background(self, number: int | None = None) -> None:
         """A background frame is recorded: a continuous run's by its number, the others' (and a
@@ -82,15 +207,22 @@ class Ledger:
         numbered = number is not None and self.continuous
         frame = number if numbered else len(self.frames)
         self.frames.add(frame)
-        self._changed.add(frame)
+        self._mark(frame)
 
     @property
     def backgrounds(self) -> int:
         return len(self.frames)
 
     def reported_done(self, robot: int, round_index: int) -> None:
-        self.done[round_index].add(robot)
-        self._changed.add(round_index)
+        if not self._open(round_index, robot):
+            return
+        self.done.setdefault(round_index, set()).add(robot)
+        self._mark(round_index)
+        self._check_whole(round_index, robot)
+
+    def latest_rounds(self, most: int = ACTIVE_ROUNDS) -> list[int]:
+        """The `most` latest rounds robots reported done in (what a recorder reports)."""
+        return sorted(set(self.done) | set(self.whole))[-most:]
 
     def complete_count(self, round_index: int) -> int:
         """len(complete(round_index)), worked out again only when the round's messages changed."""
@@ -102,27 +234,47 @@ class Ledger:
     def set_result(self, result: dict) -> None:
         self.result = result
 
+    def _whole(self, round_index: int, robot: int) -> bool:
+        whole = self.whole.get(round_index)
+        if whole is None:
+            return False
+        if isinstance(whole, bytearray):
+            return 0 <= robot < len(whole) and bool(whole[robot])
+        at = bisect.bisect(whole, (robot, math.inf))
+        return bool(at) and whole[at - 1][1] >= robot
+
+    def _whole_robots(self, round_index: int) -> set[int]:
+        whole = self.whole.get(round_index, b"")
+        if isinstance(whole, bytearray | bytes):
+            return set(np.flatnonzero(np.frombuffer(whole, np.uint8)).tolist())
+        return {r for first, last in whole for r in range(first, last + 1)}
+
     def _holds(self, round_index: int, robot: int) -> bool:
+        if self._whole(round_index, robot):
+            return True
+        counts = self.counts.get(round_index, Counter())
         wanted = messages_per_round(self.params)
         return robot in self.done.get(round_index, ()) and all(
-            self.counts[(round_index, robot, k)] >= n for k, n in wanted.items()
+            counts[(robot, k)] >= n for k, n in wanted.items()
         )
 
     def complete(self, round_index: int) -> set[int]:
         """Robots whose whole round is recorded (done reported and every message there)."""
         if self.params is None or round_index not in self.frames:
             return set()
-        return {r for r in self.done.get(round_index, ()) if self._holds(round_index, r)}
+        held = self._whole_robots(round_index)
+        return held | {r for r in self.done.get(round_index, ()) if self._holds(round_index, r)}
 
     def lacking(self, round_index: int) -> dict[str, int]:
         """Messages missing from robots that reported done in this round, by kind."""
         if self.params is None:
             return {}
         wanted = messages_per_round(self.params)
+        counts = self.counts.get(round_index, Counter())
         short: Counter = Counter()
         for robot in self.done.get(round_index, ()):
             for kind, n in wanted.items():
-                short[kind] += max(0, n - self.counts[(round_index, robot, kind)])
+                short[kind] += max(0, n - counts[(robot, kind)])
         return {kind: n for kind, n in short.items() if n}
 
     # ---- what a finished recording lacks ------------------------------------------------
@@ -157,13 +309,19 @@ class Ledger:
             missing = sorted(r for r in robots if not self._holds(k, r))
             if not missing:
                 continue
-            kinds = [
-                kind
-                for kind, n in wanted.items()
-                if any(self.counts[(k, r, kind)] < n for r in missing)
-            ]
-            if any(r not in self.done.get(k, ()) for r in missing):
-                kinds.append("done reports")
+            counts = self.counts.get(k, Counter())
+            if k in self._settled:  # what its robots lacked when it was settled
+                kinds = [kind for kind in wanted if kind in self._settled[k]]
+                kinds += ["done reports"] if "done reports" in self._settled[k] else []
+                kinds = kinds or [*wanted, "done reports"]  # robots it never heard of
+            else:
+                kinds = [
+                    kind
+                    for kind, n in wanted.items()
+                    if any(counts[(r, kind)] < n for r in missing)
+                ]
+                if any(r not in self.done.get(k, ()) for r in missing):
+                    kinds.append("done reports")
             lines.append(
                 f"round {k}: {robots_lack(len(missing))} {', '.join(map(plural, kinds))}: "
                 f"{ranges_text(missing)}"

@@ -204,8 +204,9 @@ class RecorderNode(Node):
             "messages": self.bag.message_count,
             "complete": [len(ledger.complete(k)) for k in range(rounds)],
             "lacking": [ledger.lacking(k) for k in range(rounds)],
-            # By round (its frame number), every round robots finished in: a continuous run's.
-            "rounds": {str(k): ledger.complete_count(k) for k in sorted(ledger.done)},
+            # By round (its frame number), the latest rounds robots finished in (a continuous
+            # run's: the launcher waits for its last one; all of them made the report grow).
+            "rounds": {str(k): ledger.complete_count(k) for k in ledger.latest_rounds()},
         }
         changed = {k: v for k, v in report.items() if k != "messages"}
         if changed != self._reported or final:

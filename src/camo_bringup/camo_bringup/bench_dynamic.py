@@ -2,11 +2,14 @@
 launcher switching the same scenes (`--then`), measured in the same run; and how often a static
 noisy scene starts a round it should not.
 
-Following: the projector shows forest and desert in turn (`--images`, one frame per scene),
-`--changes` times; each change is timed from the projection of its frame to the moment its
-round's last robot was done (`rounds.csv`: done_at - changed_at). The baseline is a run whose
-launcher switches the same scenes with `--then` once each round is done, timed the same way
-(`timing.json`: done_at - projected_at): the continuous swarm's extra cost is noticing.
+Following: the projector shows forest and desert in turn (`--images`, one frame per scene:
+frame k is scene k), `--changes` times; each change is timed from the projection of its frame to
+the moment its round's last robot was done (`rounds.csv`: done_at - changed_at). Every round
+must be on a frame of its own, finished, and equal `./camo sim` on its frame with its seed: a
+change missed or a round on another frame is said (and its change not timed), not taken for
+another's. The baseline is a run whose launcher switches the same scenes with `--then` once each
+round is done, timed the same way (`timing.json`: done_at - projected_at): the continuous
+swarm's extra cost is noticing.
 
 False rounds: a continuous run on a static scene streamed like a camera (frame noise, at 15
 frames a second) with measurement noise on every reading, for `--static-s` seconds: rounds
@@ -28,9 +31,13 @@ import cv2
 import numpy as np
 
 from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.sensing import load_image, sense_image
+from camo_core.algorithm.simulator import simulate
 from camo_core.cli.options import Parser
 from camo_core.exceptions import EXIT_USAGE, CamoError
 from camo_core.inputs.numeric import integer
+from camo_core.results.summary import summary_bytes
 
 SCENES = ("forest", "desert")
 
@@ -61,22 +68,47 @@ def period_for(side: int) -> float:
     return 2.5 + side * side / 1000.0
 
 
-def following(side: int, changes: int, domain: int, out: Path, rho: float) -> list[float]:
-    """Seconds from each change's frame to its round's last robot done (continuous)."""
+def like_sim(folder: Path, side: int, rho: float) -> bool:
+    """Whether a continuous round (its folder) equals `./camo sim` on its frame with its seed."""
+    live = json.loads((folder / "summary.json").read_text())
+    params = CamoParams(rows=side, cols=side, rho_meas=rho, seed=live["seed"])
+    grid = sense_image(load_image(str(folder / "background.png")), side, side, params.profile)
+    sim = json.loads(summary_bytes(simulate(params, grid).summary(arrays=True)))
+    return all(live.get(key) == value for key, value in sim.items() if key != "elapsed_s")
+
+
+def following(
+    side: int, changes: int, domain: int, out: Path, rho: float
+) -> tuple[list[float], dict]:
+    """Seconds from each change's frame to its round's last robot done (continuous), and what
+    the rounds were: their frames, the changes without a round of their own, the rounds on no
+    change's frame or unfinished, how many equal the simulator."""
     scenes = out / "scenes"
     scenes.mkdir(parents=True, exist_ok=True)
     for k in range(changes + 1):  # forest, desert, forest, ...: each image a frame of its own
         cv2.imwrite(str(scenes / f"{k:03d}.png"), background(SCENES[k % 2]))
     period = period_for(side)
     argv = [
-        "--continuous", "--rounds", str(changes + 1), "--images", str(scenes / "*.png"),
-        "--period", str(period), "--rows", str(side), "--cols", str(side),
+        # Its length, not a number of rounds: a change missed (or a round too many) is seen.
+        "--continuous", "--duration", f"{period * (changes + 2):g}",
+        "--images", str(scenes / "*.png"), "--period", str(period),
+        "--rows", str(side), "--cols", str(side),
         "--rho-meas", str(rho), "--out", str(out / "run"),
     ]  # fmt: skip
     launch(argv, domain, timeout=120 + period * (changes + 4))
     with open(out / "run" / "rounds.csv") as file:
         rows = list(csv.DictReader(file))
-    return [float(r["done_s"]) for r in rows[1:]]  # round 0: the first scene, not a change
+    frames = [int(r["frame"]) for r in rows]
+    checks = {
+        "frames": frames,
+        "missed": sorted(set(range(1, changes + 1)) - set(frames)),  # frame k: change k
+        "other": [f for f in frames if not 0 <= f <= changes or frames.count(f) > 1],
+        "incomplete": [int(r["frame"]) for r in rows if r["complete"] != "1"],
+        "like_sim": sum(like_sim(out / "run" / f"round_{k}", side, rho) for k in range(len(rows))),
+        "rounds": len(rows),
+    }
+    done = {int(r["frame"]): float(r["done_s"]) for r in rows if r["complete"] == "1"}
+    return [done[f] for f in range(1, changes + 1) if f in done], checks  # round 0: no change
 
 
 def switched(side: int, changes: int, domain: int, out: Path, rho: float) -> list[float]:
@@ -119,11 +151,30 @@ def false_rounds(side: int, seconds: float, domain: int, out: Path, rho: float) 
 
 
 def quantiles(values: list[float]) -> dict:
+    if not values:
+        return {"median_s": None, "p90_s": None, "max_s": None, "changes": 0}
     return {
         "median_s": statistics.median(values),
         "p90_s": float(np.percentile(values, 90)),
+        "max_s": max(values),
         "changes": len(values),
     }
+
+
+def checks_said(checks: dict, changes: int) -> str:
+    """What the continuous run's rounds were, in a line."""
+    rounds, equal = checks["rounds"], checks["like_sim"]
+    said = f"{rounds} rounds, {equal} equal to ./camo sim on their frames with their seeds"
+    problems = []
+    if checks["missed"]:
+        problems.append(f"changes without a round of their own: frames {checks['missed']}")
+    if checks["other"]:
+        problems.append(f"rounds on no change's frame: {checks['other']}")
+    if checks["incomplete"]:
+        problems.append(f"unfinished: frames {checks['incomplete']}")
+    if rounds == changes + 1 and not problems:
+        return f"{said}; one round a change (frames 0-{changes})"
+    return f"{said}; WARNING: {'; '.join(problems) or 'not one round a change'} (not timed)"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -167,13 +218,22 @@ def measure(args, domain: int) -> tuple[list[dict], dict | None]:
     for side in args.sides:
         out = args.out / f"{side}"
         print(f"camo bench dynamic: {side}x{side}, {args.changes} changes", file=sys.stderr)
-        noticed = quantiles(
-            following(side, args.changes, domain, out / "continuous", args.rho_meas)
+        delays, checks = following(side, args.changes, domain, out / "continuous", args.rho_meas)
+        print(
+            f"camo bench dynamic: {side}x{side}: {checks_said(checks, args.changes)}",
+            file=sys.stderr,
         )
+        noticed = quantiles(delays)
         then = quantiles(switched(side, args.changes, domain, out / "then", args.rho_meas))
-        ratio = noticed["median_s"] / then["median_s"]
+        ratio = noticed["median_s"] / then["median_s"] if delays else None
         rows.append(
-            {"robots": f"{side}x{side}", "continuous": noticed, "then": then, "ratio": ratio}
+            {
+                "robots": f"{side}x{side}",
+                "continuous": noticed,
+                "then": then,
+                "ratio": ratio,
+                "rounds": checks,
+            }
         )
     static = None
     if args.static_s:
@@ -188,14 +248,18 @@ def report(args, rows: list[dict], static: dict | None) -> None:
         print(json.dumps({"following": rows, "static": static}))
         return
     print(f"scene change to every robot done (rho_meas {args.rho_meas}), seconds:")
-    print("| robots | continuous median | p90 | --then median | p90 | ratio |")
-    print("|---|---|---|---|---|---|")
+    print("| robots | continuous median | p90 | max | --then median | p90 | max | ratio |")
+    print("|---|---|---|---|---|---|---|---|")
+
+    def figure(value) -> str:
+        return "-" if value is None else f"{value:.2f}"
+
     for r in rows:
         c, t = r["continuous"], r["then"]
-        print(
-            f"| {r['robots']} | {c['median_s']:.2f} | {c['p90_s']:.2f} | {t['median_s']:.2f} | "
-            f"{t['p90_s']:.2f} | {r['ratio']:.2f} |"
-        )
+        cells = [c["median_s"], c["p90_s"], c["max_s"], t["median_s"], t["p90_s"], t["max_s"]]
+        print(f"| {r['robots']} | {' | '.join(map(figure, cells))} | {figure(r['ratio'])} |")
+    for r in rows:
+        print(f"{r['robots']} continuous: {checks_said(r['rounds'], args.changes)}")
     if static:
         print(
             f"static noisy scene, {static['robots']}, {static['seconds']:g} s: {static['rounds']} "

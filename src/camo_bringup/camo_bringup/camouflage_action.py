@@ -3,7 +3,8 @@
 A goal with an image: the launcher writes it into the run's folder (goals/goal_<n>.png) and has
 the projector load it (/<run>/camo/projector/load, as a --then switch does); the swarm
 notices the change by itself (--continuous) and the goal's result is the first round written
-on a frame projected after it. A goal without an image: the round under way, or if none is,
+on a frame projected after it; an image that reads as the latest round's frame (no robot would
+notice it) gets that round. A goal without an image: the round under way, or if none is,
 the latest one written. Feedback, twice a second: the robots per phase of the round being
 followed and the slowest robot's consensus step. A run without --continuous starts no round for
 a goal: it refuses goals with an image. Goals still open when the run ends are aborted.
@@ -20,6 +21,7 @@ import hashlib
 import itertools
 import json
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,6 +43,9 @@ FEEDBACK_PERIOD = 0.5  # s
 SPINS = 8  # turns of the action's executor per turn of the launcher's loop
 GOAL_WAIT = 120.0  # s a goal's image may take to start a round before the goal is aborted
 MAX_OPEN = 16  # goals open at once
+# Rounds written that are kept for goals: a goal is met by the first round written after its
+# frame, found the turn it is written, or by the latest (a summary of 256x256 robots is MBs).
+DONE_KEPT = 16
 
 
 @dataclass
@@ -65,7 +70,9 @@ class CamouflageAction:
         self.continuous = config.continuous
         self.folder: Path = config.folder / "goals"
         self.open: list[OpenGoal] = []
-        self.done: list[tuple[int, int, dict]] = []  # (index, frame, summary) of rounds written
+        # (index, frame, summary) of the latest rounds written
+        self.done: deque[tuple[int, int, dict]] = deque(maxlen=DONE_KEPT)
+        self._grids: dict[int, np.ndarray | None] = {}  # frame -> its greys, of rounds in `done`
         self._numbers = itertools.count()
         # A node and executor of its own: a result sent after its request's callback returned
         # fails from rclpy's EventsExecutor, which the launcher's other nodes spin ("Failed to
@@ -133,6 +140,11 @@ class CamouflageAction:
 
     def written(self, index: int, frame: int, summary: dict) -> None:
         self.done.append((index, frame, summary))
+        # Its frame as the robots read it, for goals that show its scene again (the frame is let
+        # go once the round is written).
+        self._grids[frame] = self._grid(self.session.monitor.images.get(frame))
+        for old in [r for r in self._grids if r not in {d[1] for d in self.done}]:
+            del self._grids[old]
 
     def update(self) -> None:
         for _ in range(SPINS):  # the goals' requests, their execution, feedback and results
@@ -195,6 +207,9 @@ class CamouflageAction:
                 digests = self.session.monitor.images.digests
                 frames = [n for n, d in digests.items() if d == goal.digest and n > goal.sent]
                 goal.after = min(frames) - 1 if frames else None
+                if frames:  # the scene it shows may be on already: no robot notices it then
+                    same = self._scene_round(min(frames))
+                    goal.after = goal.after if same is None else same - 1
             if goal.after is None:
                 return None
             later = [d for d in self.done if d[1] > goal.after]
@@ -207,6 +222,29 @@ class CamouflageAction:
             )
         later = [d for d in self.done if d[1] > goal.after]
         return later[0] if later else None
+
+    def _scene_round(self, frame: int) -> int | None:
+        """The round on the scene a goal's frame (number `frame`) shows already, if there is one:
+        the latest round begun or written before it, when its frame reads the same grey in every
+        cell (no robot notices a frame that reads as its round's)."""
+        monitor = self.session.monitor
+        rounds = [r for r in monitor.heard - monitor.closed if r < frame]
+        rounds += [r for _, r, _ in self.done if r < frame]
+        latest = max(rounds, default=None)
+        if latest is None:
+            return None
+        grid = self._grids.get(latest)
+        if grid is None:
+            grid = self._grid(monitor.images.get(latest))
+        shown = self._grid(monitor.images.get(frame))
+        same = grid is not None and shown is not None and np.array_equal(grid, shown)
+        return latest if same else None
+
+    def _grid(self, image: np.ndarray | None) -> np.ndarray | None:
+        if image is None:
+            return None
+        params = self.session.config.params
+        return sense_image(image, params.rows, params.cols, params.profile)
 
     def _finish(self, goal: OpenGoal, result) -> None:
         self.open.remove(goal)

@@ -26,14 +26,10 @@ import rclpy
 from rclpy.signals import SignalHandlerOptions
 
 from camo_bringup.processes import ProcessGroup
-from camo_bringup.round_report import (
-    continuous_partial,
-    continuous_round,
-    report_round,
-    write_partial,
-)
+from camo_bringup.round_report import continuous_round, report_round, write_partial
 from camo_bringup.run_config import RunConfig, build_parser, config_from
 from camo_bringup.session import Interrupted, RunFailed, Session
+from camo_core.algorithm.robot_io import CONSENSUS
 from camo_core.algorithm.run_setup import contiguous
 from camo_core.cli.params_file import write_params_file
 from camo_core.exceptions import EXIT_USAGE, CamoError
@@ -166,34 +162,82 @@ def run_rounds(
         ran.append(round_ran(config, session.monitor, index, summary))
 
 
-def run_continuous(config: RunConfig, session: Session, group: ProcessGroup, ran: list[dict]):
-    """--continuous: the rounds the robots start by themselves, each written once every live
-    robot has finished it, until --rounds of them or --duration seconds (or Ctrl-C). A round
-    that robots left for a later one before all finished it was superseded: said, not written."""
-    monitor = session.monitor
-    started = last_print = time.monotonic()
-    written: list[int] = []
-    finished: dict[int, int] = {}  # round -> robots that finished it
-    while config.until_rounds is None or len(written) < config.until_rounds:
-        if config.until_seconds is not None and time.monotonic() - started >= config.until_seconds:
-            break
-        session.spin_for(0.1)
+class ContinuousRounds:
+    """The rounds of a continuous run, written as their live robots finish them (round_0/,
+    round_1/, ...: what the result will say of each appended to `ran`); when the run stops,
+    the finished ones not written yet, then the round under way as far as the swarm had
+    reported it."""
+
+    def __init__(self, config: RunConfig, session: Session, ran: list[dict]) -> None:
+        self.config, self.session, self.ran = config, session, ran
+        self.written: list[int] = []  # the frames of the rounds written, in order
+        self.finished: dict[int, int] = {}  # round -> robots that finished it
+
+    def collect(self, check=lambda: None, most: int | None = None) -> None:
+        """Every round its live robots have finished is written (`check()` first; `most`
+        rounds in all at most); one no robot is in any more is superseded: said, not written."""
+        monitor = self.session.monitor
         for round_ in sorted(monitor.heard - monitor.closed):
+            if most is not None and len(self.written) >= most:
+                return
             if monitor.complete(round_):
-                session.check_hosts(group.cells, final=True)
-                summary = continuous_round(config, monitor, len(written), round_)
-                session.action.written(len(written), round_, summary)
-                ran.append({"round": round_, **round_ran(config, monitor, round_, summary)})
-                written.append(round_)
-                finished[round_] = int(monitor.record(round_).finished.sum())
-                monitor.close(round_)
+                check()
+                self._write(round_)
             elif monitor.superseded(round_):
                 print(f"camo run: the round of frame {round_} was superseded", file=sys.stderr)
                 monitor.close(round_)
+
+    def _write(self, round_: int, partial: bool = False) -> None:
+        monitor = self.session.monitor
+        index = len(self.written)
+        summary = continuous_round(self.config, monitor, index, round_, partial)
+        if not partial:  # a goal is met by a finished round only
+            self.session.action.written(index, round_, summary)
+        self.ran.append({"round": round_, **round_ran(self.config, monitor, round_, summary)})
+        self.written.append(round_)
+        self.finished[round_] = int(monitor.record(round_).finished.sum())
+        monitor.close(round_)
+
+    def wrap_up(self) -> None:
+        """The run stops (Ctrl-C, --duration, a failure), its robots' last reports taken: every
+        finished round not written yet, then the latest round robots were in, as it stood."""
+        self.collect()
+        monitor = self.session.monitor
+        *earlier, latest = sorted(monitor.heard - monitor.closed) or [None]
+        for round_ in earlier:
+            print(
+                f"camo run: the round of frame {round_} was not finished (a later one had begun)",
+                file=sys.stderr,
+            )
+        if latest is None:
+            return
+        if not np.any(monitor.record(latest).phase >= CONSENSUS):
+            print(
+                f"camo run: nothing to write of the round under way (frame {latest}): no robot "
+                "had voted",
+                file=sys.stderr,
+            )
+            return
+        self._write(latest, partial=True)
+
+
+def run_continuous(config: RunConfig, session: Session, group: ProcessGroup, rounds):
+    """--continuous: the rounds the robots start by themselves, each written once every live
+    robot has finished it (`rounds`: ContinuousRounds), until --rounds of them or --duration
+    seconds (or Ctrl-C). A round that robots left for a later one before all finished it was
+    superseded: said, not written."""
+    monitor = session.monitor
+    started = last_print = time.monotonic()
+    while config.until_rounds is None or len(rounds.written) < config.until_rounds:
+        if config.until_seconds is not None and time.monotonic() - started >= config.until_seconds:
+            print(f"camo run: --duration {config.until_seconds:g} s is up", file=sys.stderr)
+            break
+        session.spin_for(0.1)
+        rounds.collect(lambda: session.check_hosts(group.cells, final=True), config.until_rounds)
         if time.monotonic() - last_print > 1.0:
             latest = max(monitor.heard - monitor.closed, default=None)
             line = monitor.progress_line(latest) if latest is not None else "watching"
-            print(f"camo run: {len(written)} rounds done; {line}", file=sys.stderr)
+            print(f"camo run: {len(rounds.written)} rounds done; {line}", file=sys.stderr)
             last_print = time.monotonic()
             group.sample_memory()
         problem = group.failed()
@@ -202,8 +246,9 @@ def run_continuous(config: RunConfig, session: Session, group: ProcessGroup, ran
         session.check_hosts(group.cells)
         for robot in group.lost_cells():
             monitor.lost[robot] = True
-    if written and session.recorders.present():
-        session.recorders.hold(written[-1], group, finished=finished[written[-1]])
+    last = rounds.written[-1] if rounds.written else None
+    if last is not None and session.recorders.present():
+        session.recorders.hold(last, group, finished=rounds.finished[last])
     group.interrupt(keep=lambda proc: proc in (group.recorder, group.server))
 
 
@@ -223,10 +268,11 @@ def run(config: RunConfig) -> int:
         return exc.code
     code, ended = 0, "failed"
     ran: list[dict] = []  # per round written: who finished, who died, refusals
+    rounds = ContinuousRounds(config, session, ran)
     try:
         start_processes(config, group, session)
         if config.continuous:
-            run_continuous(config, session, group, ran)
+            run_continuous(config, session, group, rounds)
         else:
             run_rounds(config, session, group, launched, ran)
         ended = "finished"
@@ -245,13 +291,8 @@ def run(config: RunConfig) -> int:
             summary = write_partial(config, session.monitor, len(ran))
             if summary is not None:
                 ran.append(round_ran(config, session.monitor, len(ran), summary))
-        elif config.continuous and ended == "interrupted":
-            summary = continuous_partial(config, session.monitor, len(ran))
-            if summary is not None:
-                round_ = summary["frame"]
-                ran.append(
-                    {"round": round_, **round_ran(config, session.monitor, round_, summary)}
-                )
+        elif config.continuous and (ended != "finished" or config.until_rounds is None):
+            rounds.wrap_up()  # Ctrl-C, a failure, or --duration's end: nothing finished is lost
         session.recorders.publish_result({"run": config.topics.run, "ended": ended, "rounds": ran})
         group.stop()  # the recorder last: it closes the bag on SIGINT
         remove_stale()  # the shared-memory files of workers that exited without tearing down

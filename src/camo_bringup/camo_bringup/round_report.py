@@ -101,21 +101,25 @@ def write_partial(config: RunConfig, monitor: MonitorNode, index: int) -> dict |
 
 ROUNDS_CSV = (
     "round", "frame", "seed", "pattern", "background_sha256", "changed_at", "noticed_at",
-    "noticed_by", "done_at", "noticed_s", "done_s",
+    "noticed_by", "done_at", "noticed_s", "done_s", "complete",
 )  # fmt: skip
 
 
-def continuous_round(config: RunConfig, monitor: MonitorNode, index: int, round_: int) -> dict:
-    """A finished round of a continuous run (the `index`-th, on frame `round_`): round_<index>/
-    with summary.json (its seed, the SHA-256 of its frame, when the scene changed, when and by
-    whom that was noticed, when every robot was done: ROS time, s since the epoch), figure.png,
-    run.gif and background.png; its line of rounds.csv. The summary."""
+def continuous_round(
+    config: RunConfig, monitor: MonitorNode, index: int, round_: int, partial: bool = False
+) -> dict:
+    """A round of a continuous run (the `index`-th, on frame `round_`): round_<index>/ with
+    summary.json (its seed, the SHA-256 of its frame, when the scene changed, when and by whom
+    that was noticed, when every robot was done: ROS time, s since the epoch), figure.png,
+    run.gif and background.png; its line of rounds.csv; run.gif of the rounds so far. `partial`:
+    a round the run stopped in, as far as the swarm had reported it (its line says complete 0).
+    The summary."""
     folder = config.folder / f"round_{index}"
     folder.mkdir(exist_ok=True)
     record = monitor.record(round_)
     noticed = monitor.notices.get(round_)
     clocks = record.timing()
-    done_at = clocks[1] if clocks is not None else None
+    done_at = clocks[1] if clocks is not None and not partial else None
     extra = {
         "round": index,
         "frame": round_,
@@ -125,12 +129,13 @@ def continuous_round(config: RunConfig, monitor: MonitorNode, index: int, round_
         "noticed_by": noticed[0] if noticed else None,
         "done_at": done_at,
     }
-    label = f"{config.labels[0]}, frame {round_}"
-    summary = monitor.write(round_, folder, label, extra=extra)
+    label = f"{config.labels[0]}, frame {round_}" + (" (incomplete)" if partial else "")
+    summary = monitor.write(round_, folder, label, partial=partial, extra=extra)
     image = monitor.images.get(round_)
     if image is not None:
         cv2.imwrite(str(folder / "background.png"), image)  # lossless: `sim --image` takes it
     row = {key: summary.get(key) for key in ROUNDS_CSV}
+    row["complete"] = int(not partial)
     changed = summary["changed_at"]
     for key, at in (("noticed_s", summary["noticed_at"]), ("done_s", done_at)):
         row[key] = None if at is None or changed is None else round(at - changed, 3)
@@ -147,37 +152,15 @@ def continuous_round(config: RunConfig, monitor: MonitorNode, index: int, round_
     notes = f"; {len(dead)} dead robots" if dead else ""
     by = f"noticed by robot {noticed[0]}" if noticed else "noticed"
     after = f" {row['noticed_s']:.2f} s after the change" if row["noticed_s"] is not None else ""
-    print(
-        f"round {index} (frame {round_}, {by}{after}): pattern {pattern_said(summary)}{notes}; "
-        f"wrote {folder}/"
-    )
-    return summary
-
-
-def continuous_partial(config: RunConfig, monitor: MonitorNode, index: int) -> dict | None:
-    """A stopped continuous run: what the swarm had reported of the round under way (the
-    latest one robots reported in), as round_<index>/."""
-    under_way = sorted(monitor.heard - monitor.closed)
-    if not under_way:
-        return None
-    round_ = under_way[-1]
-    if not np.any(monitor.record(round_).phase >= CONSENSUS):
+    if partial:
         print(
-            "camo run: nothing to write of the round under way (no robot had voted)",
+            f"camo run: round {index} (frame {round_}, {by}{after}) was under way: wrote what "
+            f"the swarm had reported of it to {folder}/ (incomplete)",
             file=sys.stderr,
         )
-        return None
-    folder = config.folder / f"round_{index}"
-    folder.mkdir(exist_ok=True)
-    label = f"{config.labels[0]}, frame {round_} (incomplete)"
-    extra = {
-        "round": index,
-        "frame": round_,
-        "background_sha256": monitor.images.digests.get(round_),
-    }
-    summary = monitor.write(round_, folder, label, partial=True, extra=extra)
-    print(
-        f"camo run: wrote what the swarm had reported of frame {round_}'s round to {folder}/",
-        file=sys.stderr,
-    )
+    else:
+        print(
+            f"round {index} (frame {round_}, {by}{after}): pattern {pattern_said(summary)}"
+            f"{notes}; wrote {folder}/"
+        )
     return summary

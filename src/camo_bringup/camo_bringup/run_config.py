@@ -36,7 +36,7 @@ from camo_core.results.folders import new_folder_problem
 from camo_nodes.topics.names import RunTopics, check_run_id, new_run_id
 from camo_nodes.topics.parameters import ros_arguments
 from camo_nodes.topics.startup import add_network_options, network_env, use_camo_dds_settings
-from camo_projector.projector_node import ProjectorParams
+from camo_projector.projector_node import ProjectorParams, open_source
 
 # The projector's stream options `./camo run` takes (camo_projector: what it projects).
 STREAM_OPTIONS = (
@@ -283,13 +283,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
             f"--continuous and {given} do not go together: a continuous swarm starts its own "
             "rounds, on projected frames only"
         )
-    sources = [n for n in ("background_topic", "video", "images") if stream.get(n)]
-    sources += ["camera"] if stream.get("camera", -1) >= 0 else []
-    if len(sources) > 1 or (sources and args.image is not None):
-        given = [*(["image"] if args.image is not None else []), *sources]
-        raise UsageError(f"one background source: {' and '.join(given)} were given")
-    if sources and args.then:
-        raise UsageError("--then switches still backgrounds: not with a stream")
+    sources = stream_sources(args, stream)
     image, label = image_from(args)
     sense_image(image, params.rows, params.cols, params.profile)  # a too-small image fails here
     images = [image]
@@ -339,6 +333,23 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         until_rounds=until_rounds,
         until_seconds=until_seconds,
     )
+
+
+def stream_sources(args: argparse.Namespace, stream: dict) -> list[str]:
+    """The stream the run projects (one at most, with neither --image nor --then), its file or
+    device opened as the projector will open it: a missing video or camera is one line before
+    anything starts, not a projector that fails in a running swarm."""
+    sources = [n for n in ("background_topic", "video", "images") if stream.get(n)]
+    sources += ["camera"] if stream.get("camera", -1) >= 0 else []
+    if len(sources) > 1 or (sources and args.image is not None):
+        given = [*(["image"] if args.image is not None else []), *sources]
+        raise UsageError(f"one background source: {' and '.join(given)} were given")
+    if sources and args.then:
+        raise UsageError("--then switches still backgrounds: not with a stream")
+    opened = open_source(stream) if sources != ["background_topic"] else None
+    if opened is not None:
+        opened.close()
+    return sources
 
 
 def continuous_ends(args: argparse.Namespace, protocol: ProtocolParams):

@@ -310,6 +310,12 @@ class MonitorNode(Node):
         record = self.rounds.pop(round_index, None)
         if record is not None and round_index >= self._shown[0]:
             self._shown = (round_index, record)  # the views show it until a later one begins
+        # Its notice is written, and so are those of earlier rounds no robot reported in (a later
+        # one superseded them first): their frames, pinned at the notice, are let go too.
+        for noticed in [r for r in self.notices if r <= round_index]:
+            if noticed == round_index or noticed not in self.heard:
+                del self.notices[noticed]
+                self.images.unpin(noticed)
         self.images.unpin(round_index)
 
     def progress_line(self, round_index: int = 0) -> str:

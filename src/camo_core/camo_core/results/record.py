@@ -225,12 +225,15 @@ class Rounds(dict):
 
 class Backgrounds(dict):
     """The frames a run projected, by frame number (round r camouflaged self[r]), each kept once
-    (by its stamp): the newest `keep` of them, and those pinned (the frames of rounds). What is
-    known of a frame (stamp, digest, time) goes with it."""
+    (by its stamp): those pinned (the frames of rounds), and of the others the newest `keep`,
+    at most `budget` bytes of them beyond the newest `least` (a camera's 1080p frames are 6 MB
+    each: 64 of them were 400 MB). A round names the newest frame its robots read, so the
+    newest frames are those a notice or a report still to come can name. What is known of a
+    frame (stamp, digest, time) goes with it."""
 
-    def __init__(self, keep: int = 64) -> None:
+    def __init__(self, keep: int = 64, budget: int = 128 << 20, least: int = 4) -> None:
         super().__init__()
-        self.keep = keep
+        self.keep, self.budget, self.least = keep, budget, least
         self.stamps: set[tuple[int, int]] = set()
         self.digests: dict[int, str] = {}  # frame number -> SHA-256 of its pixels as published
         self.times: dict[int, float] = {}  # frame number -> when it was projected (s, ROS time)
@@ -259,16 +262,15 @@ class Backgrounds(dict):
         return number
 
     def _let_go(self) -> None:
-        """The oldest frames not pinned, beyond `keep` of them."""
-        loose = len(self._order) - sum(1 for n in self._order if n in self.pinned)
-        for _ in range(len(self._order)):
-            if loose <= self.keep:
-                return
-            oldest = self._order.popleft()
-            if oldest in self.pinned:
-                self._order.append(oldest)  # kept, looked at again later
-                continue
-            loose -= 1
+        """The oldest frames not pinned, beyond `keep` of them or `budget` bytes."""
+        loose = [n for n in self._order if n not in self.pinned]
+        held = sum(getattr(self[n], "nbytes", 0) for n in loose)
+        for oldest in loose[: max(0, len(loose) - self.least)]:
+            if len(loose) <= self.keep and held <= self.budget:
+                break
+            loose.pop(0)
+            held -= getattr(self[oldest], "nbytes", 0)
+            self._order.remove(oldest)
             del self[oldest], self.digests[oldest], self.times[oldest]
             self.stamps.discard(self._stamp_of.pop(oldest))
 
