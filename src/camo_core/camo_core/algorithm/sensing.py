@@ -323,11 +323,47 @@ def sense_image(image: np.ndarray, rows: int, cols: int, profile: str) -> np.nda
     return block_means(to_gray(image, profile), rows, cols)
 
 
+def to_rgb(image: np.ndarray) -> np.ndarray:
+    """An image's sRGB channels (H x W x 3, float64, 0..255); a grey image is that grey."""
+    if image.ndim == 2:
+        return np.repeat(image.astype(np.float64)[:, :, None], 3, axis=2)
+    return image[:, :, ::-1].astype(np.float64)  # OpenCV's BGR
+
+
+def sense_colours(image: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """The mean colour of the image block each robot covers (rows x cols x 3, sRGB float64),
+    as block_means takes the mean grey."""
+    return block_means(to_rgb(image), rows, cols)
+
+
 def noisy_value(seed: int, robot: int, value: float, rho_meas: float) -> float:
     """One robot's sensed value after measurement error (scalar)."""
     if rho_meas > 0.0 and rng.uniform(seed, rng.STREAM_SENSOR_REPLACED, 0, robot, 0) < rho_meas:
         return float(math.floor(256 * rng.uniform(seed, rng.STREAM_SENSOR_VALUE, 0, robot, 0)))
     return float(value)
+
+
+def noisy_colour(
+    seed: int, robot: int, rgb: tuple[float, float, float], rho_meas: float
+) -> tuple[float, float, float]:
+    """One robot's sensed colour after measurement error: a reading replaced by noise is the
+    noise's grey (the draws of noisy_value: a robot's grey and colour are replaced together)."""
+    if rho_meas > 0.0 and rng.uniform(seed, rng.STREAM_SENSOR_REPLACED, 0, robot, 0) < rho_meas:
+        grey = float(math.floor(256 * rng.uniform(seed, rng.STREAM_SENSOR_VALUE, 0, robot, 0)))
+        return grey, grey, grey
+    return float(rgb[0]), float(rgb[1]), float(rgb[2])
+
+
+def _replaced(shape: tuple[int, ...], seed: int, rho_meas: float, exempt: np.ndarray | None):
+    """Which robots' readings measurement error replaces (bool, `shape`), and the greys they
+    read instead."""
+    ids = np.arange(math.prod(shape), dtype=np.uint64).reshape(shape)
+    zero = np.uint64(0)
+    replaced = rng.uniform_array(seed, rng.STREAM_SENSOR_REPLACED, 0, ids, zero) < rho_meas
+    if exempt is not None:
+        replaced &= ~exempt
+    noise = np.floor(256 * rng.uniform_array(seed, rng.STREAM_SENSOR_VALUE, 0, ids, zero))
+    return replaced, noise
 
 
 def apply_noise(
@@ -340,13 +376,20 @@ def apply_noise(
     out = np.array(sensed, dtype=np.float64, copy=True)
     if rho_meas <= 0.0:
         return out
-    ids = np.arange(out.size, dtype=np.uint64).reshape(out.shape)
-    zero = np.uint64(0)
-    replaced = rng.uniform_array(seed, rng.STREAM_SENSOR_REPLACED, 0, ids, zero) < rho_meas
-    if exempt is not None:
-        replaced &= ~exempt
-    noise = np.floor(256 * rng.uniform_array(seed, rng.STREAM_SENSOR_VALUE, 0, ids, zero))
+    replaced, noise = _replaced(out.shape, seed, rho_meas, exempt)
     out[replaced] = noise[replaced]
+    return out
+
+
+def apply_colour_noise(
+    colours: np.ndarray, seed: int, rho_meas: float, exempt: np.ndarray | None = None
+) -> np.ndarray:
+    """apply_noise for sensed colours (rows x cols x 3): a replaced reading is its noise grey."""
+    out = np.array(colours, dtype=np.float64, copy=True)
+    if rho_meas <= 0.0:
+        return out
+    replaced, noise = _replaced(out.shape[:-1], seed, rho_meas, exempt)
+    out[replaced] = noise[replaced][:, None]
     return out
 
 

@@ -15,7 +15,7 @@ import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 
-from camo_core.algorithm import levels
+from camo_core.algorithm import colours, levels
 from camo_core.algorithm.orientation import CODES, COHERENCE_MIN, ORIENTED, STEP_DEG
 from camo_core.algorithm.result import RunResult
 from camo_core.algorithm.rules import MOTTLED
@@ -97,12 +97,14 @@ def run_plot(
         shown = shown if shown.ndim == 2 else shown[:, :, ::-1]
         axes[0].imshow(shown, cmap="gray", vmin=0, vmax=255, **extent)
     axes[0].set_title("background")
+    coloured = result.params.colours and result.colours is not None
+    sensed = result.sensed_rgb if coloured else result.sensed
     if result.positions is not None:
-        draw_discs(axes[1], result.positions, result.sensed)
+        draw_discs(axes[1], result.positions, sensed)
     else:
-        shown, extent = _shown(result.sensed, nearest=True)
-        axes[1].imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
-    axes[1].set_title(f"sensed grey ({result.params.rows}x{result.params.cols} robots)")
+        _grid_panel(axes[1], sensed)
+    what = "colour" if coloured else "grey"
+    axes[1].set_title(f"sensed {what} ({result.params.rows}x{result.params.cols} robots)")
     _consensus_panel(axes[2], result)
     for ax, states, label in (
         (axes[3], result.initial, "initial state (dark: sensed < 127)"),
@@ -115,13 +117,18 @@ def run_plot(
                 label = f"shown greys ({result.majority_label}), {result.params.levels} levels"
             else:
                 label = "initial greys (each robot's class)"
+        elif coloured:  # --colours: the colours shown, from the pattern's state
+            shown = colours.shown_grid(states, result.shades, result.colours).astype(float)
+            if ax is axes[4]:
+                label = f"shown colours ({result.majority_label}), {result.params.colours} colours"
+            else:
+                label = "initial colours (dark: sensed grey < 127)"
         if result.alive is not None:
             shown[~result.alive] = 128
         if result.positions is not None:
             draw_discs(ax, result.positions, shown)
         else:
-            shown, extent = _shown(shown, nearest=True)
-            ax.imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
+            _grid_panel(ax, shown)
         ax.set_title(label)
     if result.orientation_deg is not None:
         if result.positions is not None:
@@ -147,16 +154,30 @@ def run_plot(
     return fig
 
 
+def _grid_panel(ax, values: np.ndarray) -> None:
+    """A grid of greys (rows x cols) or colours (rows x cols x 3, sRGB), 0..255, a cell each."""
+    shown, extent = _shown(np.asarray(values, dtype=float), nearest=True)
+    if shown.ndim == 3:
+        ax.imshow(np.clip(shown / 255.0, 0, 1), interpolation="nearest", **extent)
+    else:
+        ax.imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
+
+
 def draw_discs(ax, positions: np.ndarray, greys: np.ndarray):
-    """--layout: each robot a disc at its position, in its grey (y down, as on the grid); the
-    discs' collection."""
+    """--layout: each robot a disc at its position, in its grey or (robots x 3) colour (y down,
+    as on the grid); the discs' collection."""
+    values = np.asarray(greys, dtype=float)
+    coloured = values.shape[-1:] == (3,) and values.size == 3 * len(positions)
     discs = matplotlib.collections.PatchCollection(
         [matplotlib.patches.Circle((x, y), 0.45) for x, y in positions],
-        cmap="gray",
+        cmap=None if coloured else "gray",
         edgecolor="none",
     )
-    discs.set_array(np.asarray(greys, dtype=float).ravel())
-    discs.set_clim(0, 255)
+    if coloured:
+        discs.set_facecolor(np.clip(values.reshape(-1, 3) / 255.0, 0, 1))
+    else:
+        discs.set_array(values.ravel())
+        discs.set_clim(0, 255)
     ax.add_collection(discs)
     low, high = positions.min(axis=0) - 0.6, positions.max(axis=0) + 0.6
     ax.set_xlim(low[0], high[0])
