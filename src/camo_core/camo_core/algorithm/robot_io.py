@@ -110,6 +110,11 @@ class Report:
     state_from: int = 0
     state_trace: tuple[int, ...] = ()
     palette: tuple[int, ...] = ()  # --levels: the greys it can show, darkest first
+    sensed_rgb: tuple[float, ...] = ()  # the colour it sensed (sRGB), once it has
+    # --colours: its palette (sRGB triples, darkest first, flattened) and the two of them it
+    # shows (palette indices: where its pattern is on, where it is off).
+    colours: tuple[int, ...] = ()
+    shades: tuple[int, ...] = ()
 
 
 @dataclass

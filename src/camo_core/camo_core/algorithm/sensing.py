@@ -403,6 +403,7 @@ class Reading:
 
     value: float
     real: bool = False
+    rgb: tuple[float, float, float] | None = None  # its colour (sRGB); None: the grey's
 
 
 FRAMES_KEPT = 256  # a process keeps the sensed grids of this many frames (a few seconds of video)
@@ -412,12 +413,17 @@ class Projection:
     """The frames projected so far, by the projector's frame number, as sensed grids (one resize
     per frame, shared by all the robots of a process); the latest FRAMES_KEPT of them."""
 
-    def __init__(self, rows: int, cols: int, profile: str, sample=None) -> None:
+    def __init__(
+        self, rows: int, cols: int, profile: str, sample=None, sample_colours=None
+    ) -> None:
         self.rows, self.cols, self.profile = rows, cols, profile
         # How an image becomes the robots' greys (rows x cols, by robot id): block means, or
-        # on a --layout the means round the robots' positions (layout.sense_at).
+        # on a --layout the means round the robots' positions (layout.sense_at); and their
+        # colours (rows x cols x 3) likewise.
         self.sample = sample or (lambda image: sense_image(image, rows, cols, profile))
+        self.sample_colours = sample_colours or (lambda image: sense_colours(image, rows, cols))
         self.frames: dict[int, np.ndarray] = {}
+        self.colours: dict[int, np.ndarray] = {}
         self.stamps: dict[int, float] = {}  # when each frame was projected (ROS time, s)
         self.newest = -1
         self.protected: set[int] = {0}  # frames robots' rounds still read: never let go
@@ -428,23 +434,36 @@ class Projection:
         for an image smaller than the grid."""
         number = self.newest + 1 if number is None else number
         self.frames[number] = self.sample(image)
+        self.colours[number] = self.sample_colours(image)
         self.stamps[number] = stamp
         self.newest = max(self.newest, number)
         if len(self.frames) > FRAMES_KEPT:
             loose = sorted(n for n in self.frames if n not in self.protected)
             for oldest in loose[: len(self.frames) - FRAMES_KEPT]:
-                del self.frames[oldest], self.stamps[oldest]
+                del self.frames[oldest], self.stamps[oldest], self.colours[oldest]
         return number
 
     def grid(self, number: int) -> np.ndarray | None:
         """Frame `number`'s grid; None while it has not come. A frame let go already (a round
         its process joined very late) is read as the oldest frame kept after it."""
-        grid = self.frames.get(number)
-        if grid is None and number < self.newest:
+        kept = self.kept(number)
+        return None if kept is None else self.frames[kept]
+
+    def colour_grid(self, number: int) -> np.ndarray | None:
+        """Frame `number`'s colours (rows x cols x 3), as grid reads its greys."""
+        kept = self.kept(number)
+        return None if kept is None else self.colours[kept]
+
+    def kept(self, number: int) -> int | None:
+        """The frame read for frame `number` (itself, or the oldest kept after it), or None."""
+        if number in self.frames:
+            return number
+        if number < self.newest:
             later = [n for n in self.frames if n > number]
-            grid = self.frames[min(later)] if later else None
-            self.substituted += grid is not None
-        return grid
+            if later:
+                self.substituted += 1
+                return min(later)
+        return None
 
     @property
     def latest(self) -> np.ndarray | None:
@@ -459,8 +478,12 @@ class ProjectedSensor:
         self.frame = 0
 
     def read(self) -> Reading | None:
-        grid = self.projection.grid(self.frame)
-        return None if grid is None else Reading(float(grid[self.row, self.col]))
+        kept = self.projection.kept(self.frame)
+        if kept is None:
+            return None
+        grey = float(self.projection.frames[kept][self.row, self.col])
+        r, g, b = self.projection.colours[kept][self.row, self.col].tolist()
+        return Reading(grey, rgb=(r, g, b))
 
     def next_round(self, frame: int) -> None:
         self.frame = frame  # a round camouflages against the frame it is named after

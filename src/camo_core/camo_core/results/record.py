@@ -48,6 +48,11 @@ class RoundRecord:
         # that hears a report late still times the swarm right.
         # --levels: each robot's palette (the K greys it can show), as it reported it.
         self.palette = np.zeros((n, max(self.params.levels, 1)), np.int64)
+        # The colours robots sensed (sRGB), and with --colours their palettes (K colours) and
+        # the two of them each shows (where its pattern is on, where it is off).
+        self.sensed_rgb = np.full((n, 3), np.nan)
+        self.colours = np.zeros((n, max(self.params.colours, 1), 3), np.int64)
+        self.shades = np.zeros((n, 2), np.int64)
         self.voted_at = np.full(n, np.nan)
         self.done_at = np.full(n, np.nan)
 
@@ -87,6 +92,7 @@ class RoundRecord:
             if full.any():
                 mine = np.repeat(full, rows.palette_count)
                 self.palette[i[full]] = rows.palette[mine].reshape(-1, self.params.levels)
+        self._colours(rows)
         # The steps since each robot's last report (statuses of an older camo have none: they
         # came one a step).
         self._traces(rows)
@@ -94,6 +100,23 @@ class RoundRecord:
         self.state_trace[step[done], i[done]] = rows.state[done]
         self.selected[i[done]] = rows.pattern[done]
         self.finished[i[done]] = True
+
+    def _colours(self, rows: StatusRows) -> None:
+        """The colours sensed, and with --colours the palettes and the shades shown."""
+        i = rows.sender_id
+        sensed = rows.sensed_rgb_count == 1
+        if sensed.any():
+            self.sensed_rgb[i[sensed]] = rows.sensed_rgb[np.repeat(sensed, rows.sensed_rgb_count)]
+        k = self.params.colours
+        if not k:
+            return
+        full = rows.colours_count == k
+        if full.any():
+            mine = np.repeat(full, rows.colours_count)
+            self.colours[i[full]] = rows.colours[mine].reshape(-1, k, 3)
+        paired = rows.shades_count == 1
+        if paired.any():
+            self.shades[i[paired]] = rows.shades[np.repeat(paired, rows.shades_count)]
 
     def _given_up(self, rows: StatusRows) -> None:
         """Who each reporter has given up on, at its latest report (a few rows have any)."""
@@ -207,6 +230,12 @@ class RoundRecord:
             palette=self.palette.reshape((*shape, -1)) if self.params.levels else None,
             positions=layout_for(self.params).positions if self.params.layout else None,
             consensus_range=np.array(spread).reshape(-1, 3, 2) if spread else None,
+            # Known only where every robot that took part said what it sensed.
+            sensed_rgb=self.sensed_rgb.reshape((*shape, 3))
+            if not np.isnan(self.sensed_rgb[alive]).any()
+            else None,
+            colours=self.colours.reshape((*shape, -1, 3)) if self.params.colours else None,
+            shades=self.shades.reshape((*shape, 2)) if self.params.colours else None,
         )
 
 
