@@ -128,7 +128,7 @@ def row_bytes(report: Report) -> int:
     """A report's size in a StatusArray, about."""
     traces = 8 * len(report.p_trace) + len(report.state_trace)
     lists = 4 * len(report.silent) + len(report.palette) + 8 * len(report.sensed_rgb)
-    return STATUS_ROW_BYTES + traces + lists + len(report.colours) + len(report.shades)
+    return STATUS_ROW_BYTES + traces + lists + len(report.palette_rgb) + len(report.shades)
 
 
 class Statuses:

@@ -37,13 +37,13 @@ RGB = tuple[int, int, int]
 Lab = tuple[float, float, float]
 
 
-def bin_of(rgb: Sequence[float]) -> int:
+def bin_of(rgb: Sequence[float] | np.ndarray) -> int:
     """The histogram bin of an sRGB colour (channels 0..255)."""
     r, g, b = (min(LEVELS_PER_CHANNEL - 1, math.floor(c / BIN_WIDTH)) for c in rgb)
     return (r * LEVELS_PER_CHANNEL + g) * LEVELS_PER_CHANNEL + b
 
 
-def lab_of(rgb: Sequence[float]) -> Lab:
+def lab_of(rgb: Sequence[float] | np.ndarray) -> Lab:
     """CIELAB (D65) of one sRGB colour (channels 0..255), by scikit-image, converted alone."""
     from skimage.color import rgb2lab  # only --colours and the colour distance need it
 
@@ -57,7 +57,7 @@ def labs_of(rgb: np.ndarray) -> np.ndarray:
     return np.array([lab_of(c) for c in flat]).reshape(np.shape(rgb))
 
 
-def start_vector(rgb: Sequence[float]) -> tuple[float, ...]:
+def start_vector(rgb: Sequence[float] | np.ndarray) -> tuple[float, ...]:
     """What a robot averages: the one-hot of its colour's bin, then its L*, a*, b* there."""
     vector = [0.0] * SIZE
     b = bin_of(rgb)
@@ -190,7 +190,7 @@ def palette_lab(vector, k):
     return chosen[np.argsort(chosen[:, 0], kind="mergesort")].copy()
 
 
-def palette(vector: Sequence[float], k: int) -> np.ndarray:
+def palette(vector: Sequence[float] | np.ndarray, k: int) -> np.ndarray:
     """palette_lab of one robot's vector (any sequence of floats)."""
     return palette_lab(np.asarray(vector, dtype=np.float64), k)
 
@@ -224,12 +224,13 @@ def palette_rgb(palette: np.ndarray) -> tuple[RGB, ...]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # out-of-gamut means are clipped, and said to be
         rgb = lab2rgb(np.asarray(palette, dtype=np.float64).reshape(1, -1, 3))[0] * 255.0
-    out = []
+    out: list[RGB] = []
     for r, g, b in rgb.tolist():
         if max(r, g, b) - min(r, g, b) < GREY_TOLERANCE:
             r = g = b = (r + g + b) / 3.0
-        out.append(tuple(int(min(255, max(0, math.floor(c + 0.5)))) for c in (r, g, b)))
-    return tuple(out)  # type: ignore[return-value]
+        red, green, blue = (int(min(255, max(0, math.floor(c + 0.5)))) for c in (r, g, b))
+        out.append((red, green, blue))
+    return tuple(out)
 
 
 def shown(state: int, shades: Sequence[int], colours: Sequence[Sequence[int]]) -> RGB:
@@ -244,7 +245,9 @@ def shown_grid(states: np.ndarray, shades: np.ndarray, colours: np.ndarray) -> n
     return np.take_along_axis(colours, index[..., None, None], axis=-2)[..., 0, :]
 
 
-def robot_palette(vector: Sequence[float], own: Sequence[float], k: int):
+def robot_palette(
+    vector: Sequence[float] | np.ndarray, own: Sequence[float] | np.ndarray, k: int
+) -> tuple[tuple[RGB, ...], tuple[int, int]]:
     """One robot's palette as it shows it: (its K colours, sRGB, darkest first; its two
     brackets), from its averaged vector and its own colour (sRGB)."""
     lab = palette(vector, k)

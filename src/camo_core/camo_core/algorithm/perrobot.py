@@ -117,6 +117,6 @@ def _colour_fields(params: CamoParams, robots: list[RobotCore], known: bool) -> 
     if known:
         fields["sensed_rgb"] = np.array([r.sensed_rgb for r in robots]).reshape(rows, cols, 3)
     if params.colours:
-        fields["colours"] = np.array([r.colours for r in robots]).reshape(rows, cols, -1, 3)
+        fields["palette_rgb"] = np.array([r.colours for r in robots]).reshape(rows, cols, -1, 3)
         fields["shades"] = np.array([r.shades for r in robots]).reshape(rows, cols, 2)
     return fields

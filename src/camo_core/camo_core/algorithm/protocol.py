@@ -597,7 +597,7 @@ class StepProtocol:
                 silent=tuple(sorted(self._neighbor(s) for s in self.silent)),
                 palette=core.palette,
                 sensed_rgb=() if math.isnan(core.sensed) else core.sensed_rgb,
-                colours=tuple(c for colour in core.colours for c in colour),
+                palette_rgb=tuple(c for colour in core.colours for c in colour),
                 shades=core.shades if core.colours else (),
                 **self.traces.unreported(),
             )

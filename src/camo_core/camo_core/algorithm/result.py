@@ -89,7 +89,7 @@ class RunResult:
     sensed_rgb: np.ndarray | None = None
     # --colours: rows x cols x K x 3, each robot's palette (sRGB, darkest first), and rows x
     # cols x 2, the two of it the robot shows (where its pattern is on, where it is off).
-    colours: np.ndarray | None = None
+    palette_rgb: np.ndarray | None = None
     shades: np.ndarray | None = None
 
     @property
@@ -104,9 +104,9 @@ class RunResult:
     def display_rgb(self) -> np.ndarray:
         """rows x cols x 3, the colour (sRGB 0-255) each robot shows: with --colours its
         palette's, else its grey."""
-        if self.colours is None or self.shades is None:
+        if self.palette_rgb is None or self.shades is None:
             return np.repeat(self.display[..., None], 3, axis=-1)
-        return colours.shown_grid(self.final, self.shades, self.colours)
+        return colours.shown_grid(self.final, self.shades, self.palette_rgb)
 
     @property
     def colour_distance(self) -> float | None:
@@ -124,7 +124,7 @@ class RunResult:
         """How far the greys shown are from the greys sensed: the Wasserstein-1 distance between
         the two sets (the mean gap between them sorted), over the robots that took part."""
         shown, sensed = self.display, np.asarray(self.sensed, dtype=np.float64)
-        if self.params.colours and self.colours is not None:  # the greys of the colours shown
+        if self.params.colours and self.palette_rgb is not None:  # greys of the colours shown
             shown = to_gray(self.display_rgb[..., ::-1].astype(np.uint8), self.params.profile)
         took_part = np.isfinite(sensed)  # a partial run's robots that never sensed hold NaN
         if self.alive is not None:
@@ -198,10 +198,9 @@ class RunResult:
         distance = self.colour_distance
         if distance is not None:
             summary["colour_distance"] = round(distance, 6)
-        if params.colours and self.colours is not None:
-            summary["colours"] = params.colours
+        if params.colours and self.palette_rgb is not None:
             summary["sensed_rgb"] = grid(np.asarray(self.sensed_rgb, dtype=np.float64))
-            summary["palette"] = grid(np.asarray(self.colours).astype(np.int64))
+            summary["palette"] = grid(np.asarray(self.palette_rgb).astype(np.int64))
         if params.layout:  # where the robots stood (summary.json's grids are by robot id)
             summary["layout"] = params.layout
             summary["positions"] = [list(xy) for xy in layout_for(params).positions.tolist()]

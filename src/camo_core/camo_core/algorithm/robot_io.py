@@ -113,7 +113,7 @@ class Report:
     sensed_rgb: tuple[float, ...] = ()  # the colour it sensed (sRGB), once it has
     # --colours: its palette (sRGB triples, darkest first, flattened) and the two of them it
     # shows (palette indices: where its pattern is on, where it is off).
-    colours: tuple[int, ...] = ()
+    palette_rgb: tuple[int, ...] = ()
     shades: tuple[int, ...] = ()
 
 

@@ -108,6 +108,7 @@ def simulate(
     if params.levels:  # the grey histogram is averaged with p, in the same messages
         p0 = np.concatenate([p0, levels.start_vectors(sensed)], axis=-1)
     elif params.colours:  # the colour histogram likewise
+        assert sensed_rgb is not None  # --colours was given the colours (checked above)
         p0 = np.concatenate([p0, colours.start_vectors(sensed_rgb)], axis=-1)
 
     # Phase 2: consensus.
@@ -121,6 +122,7 @@ def simulate(
         for k in range(params.levels - 1):
             initial |= (sensed < cuts[..., k]).astype(np.uint8) << np.uint8(k)
     elif params.colours:
+        assert sensed_rgb is not None
         shown_colours = colours.palettes(histogram, sensed_rgb, params.colours)
 
     # Phase 3: pattern formation.
@@ -141,7 +143,7 @@ def simulate(
         consensus_range=spread,
         palette=greys,
         sensed_rgb=sensed_rgb,
-        colours=None if shown_colours is None else shown_colours[0],
+        palette_rgb=None if shown_colours is None else shown_colours[0],
         shades=None if shown_colours is None else shown_colours[1],
     )
 

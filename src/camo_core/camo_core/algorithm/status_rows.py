@@ -42,7 +42,7 @@ LISTS: dict[str, tuple[str, Any, int]] = {
     "state_trace": ("state_trace_count", np.int64, 1),
     "palette": ("palette_count", np.int64, 1),
     "sensed_rgb": ("sensed_rgb_count", np.float64, 3),
-    "colours": ("colours_count", np.int64, 3),
+    "palette_rgb": ("palette_rgb_count", np.int64, 3),
     "shades": ("shades_count", np.int64, 2),
 }
 
@@ -79,8 +79,8 @@ class StatusRows:
     palette: np.ndarray
     sensed_rgb_count: np.ndarray
     sensed_rgb: np.ndarray  # (colours, 3)
-    colours_count: np.ndarray
-    colours: np.ndarray  # (colours, 3)
+    palette_rgb_count: np.ndarray
+    palette_rgb: np.ndarray  # (colours, 3)
     shades_count: np.ndarray
     shades: np.ndarray  # (pairs, 2)
     wrong_cell: np.ndarray  # a RobotStatus whose row and column are not its sender's cell

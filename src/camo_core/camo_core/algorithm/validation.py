@@ -226,7 +226,7 @@ def _colours_bad(rows: StatusRows, params: CamoParams) -> np.ndarray:
     """Rows whose colours do not fit the run: a sensed colour that is not one (0..255), a
     palette of other than --colours' K colours, shades that are not two of its indices."""
     bad = (rows.sensed_rgb_count > 1) | (rows.shades_count > 1)
-    bad |= (rows.colours_count != 0) & (rows.colours_count != params.colours)
+    bad |= (rows.palette_rgb_count != 0) & (rows.palette_rgb_count != params.colours)
     if len(rows.sensed_rgb):
         with np.errstate(invalid="ignore"):
             rgb = rows.sensed_rgb

@@ -98,7 +98,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     marks = None if exempt is None else {"real reading": exempt}
     figures.run_figure(result, image, folder / "figure.png", title=title, marks=marks)
     dead = np.zeros(params.count, bool)  # the simulator loses messages, never robots
-    sensed = result.sensed_rgb if params.colours else result.sensed
+    sensed = (
+        result.sensed_rgb if params.colours and result.sensed_rgb is not None else result.sensed
+    )
     write_animation(snapshots, sensed, dead, folder / "run.gif", title, marks)
     how = "robot by robot " if params.layout else ""
     print(

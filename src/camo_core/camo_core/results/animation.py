@@ -110,7 +110,7 @@ class Snapshots:
                 shown = levels.shown_grid(np.maximum(states, 0), record.palette)
                 states = np.where(states < 0, -1, shown)
             elif record.params.colours:
-                shown = colours.shown_grid(np.maximum(states, 0), record.shades, record.colours)
+                shown = colours.shown_grid(np.maximum(states, 0), record.shades, record.palette_rgb)
                 states = np.where(states[..., None] < 0, -1, shown)
             snapshots("formation", step, states)
         return snapshots

@@ -97,8 +97,9 @@ def run_plot(
         shown = shown if shown.ndim == 2 else shown[:, :, ::-1]
         axes[0].imshow(shown, cmap="gray", vmin=0, vmax=255, **extent)
     axes[0].set_title("background")
-    coloured = result.params.colours and result.colours is not None
-    sensed = result.sensed_rgb if coloured else result.sensed
+    palette, shades, sensed_rgb = result.palette_rgb, result.shades, result.sensed_rgb
+    coloured = bool(result.params.colours) and palette is not None and shades is not None
+    sensed = sensed_rgb if coloured and sensed_rgb is not None else result.sensed
     if result.positions is not None:
         draw_discs(axes[1], result.positions, sensed)
     else:
@@ -117,8 +118,8 @@ def run_plot(
                 label = f"shown greys ({result.majority_label}), {result.params.levels} levels"
             else:
                 label = "initial greys (each robot's class)"
-        elif coloured:  # --colours: the colours shown, from the pattern's state
-            shown = colours.shown_grid(states, result.shades, result.colours).astype(float)
+        elif palette is not None and shades is not None:  # --colours: the colours shown
+            shown = colours.shown_grid(states, shades, palette).astype(float)
             if ax is axes[4]:
                 label = f"shown colours ({result.majority_label}), {result.params.colours} colours"
             else:
@@ -174,7 +175,7 @@ def draw_discs(ax, positions: np.ndarray, greys: np.ndarray):
         edgecolor="none",
     )
     if coloured:
-        discs.set_facecolor(np.clip(values.reshape(-1, 3) / 255.0, 0, 1))
+        discs.set_facecolor(np.clip(values.reshape(-1, 3) / 255.0, 0, 1).tolist())
     else:
         discs.set_array(values.ravel())
         discs.set_clim(0, 255)

@@ -51,7 +51,7 @@ class RoundRecord:
         # The colours robots sensed (sRGB), and with --colours their palettes (K colours) and
         # the two of them each shows (where its pattern is on, where it is off).
         self.sensed_rgb = np.full((n, 3), np.nan)
-        self.colours = np.zeros((n, max(self.params.colours, 1), 3), np.int64)
+        self.palette_rgb = np.zeros((n, max(self.params.colours, 1), 3), np.int64)
         self.shades = np.zeros((n, 2), np.int64)
         self.voted_at = np.full(n, np.nan)
         self.done_at = np.full(n, np.nan)
@@ -110,10 +110,10 @@ class RoundRecord:
         k = self.params.colours
         if not k:
             return
-        full = rows.colours_count == k
+        full = rows.palette_rgb_count == k
         if full.any():
-            mine = np.repeat(full, rows.colours_count)
-            self.colours[i[full]] = rows.colours[mine].reshape(-1, k, 3)
+            mine = np.repeat(full, rows.palette_rgb_count)
+            self.palette_rgb[i[full]] = rows.palette_rgb[mine].reshape(-1, k, 3)
         paired = rows.shades_count == 1
         if paired.any():
             self.shades[i[paired]] = rows.shades[np.repeat(paired, rows.shades_count)]
@@ -234,7 +234,7 @@ class RoundRecord:
             sensed_rgb=self.sensed_rgb.reshape((*shape, 3))
             if not np.isnan(self.sensed_rgb[alive]).any()
             else None,
-            colours=self.colours.reshape((*shape, -1, 3)) if self.params.colours else None,
+            palette_rgb=self.palette_rgb.reshape((*shape, -1, 3)) if self.params.colours else None,
             shades=self.shades.reshape((*shape, 2)) if self.params.colours else None,
         )
 
