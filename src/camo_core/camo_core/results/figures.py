@@ -270,21 +270,29 @@ PAPER_RANDOM_8X8 = 32  # "a random 8x8 pattern differs by 32 on average"
 
 
 def errors_figure(
-    rows: list[dict], random_level: float, path: str | Path, title: str = "", cells: int = 64
+    rows: list[dict],
+    random_level: float,
+    path: str | Path,
+    title: str = "",
+    cells: int = 64,
+    colours: bool = False,
 ) -> Path:
     """errors.png: errors_plot's figure, saved."""
-    return _save(errors_plot(rows, random_level, title, cells), path)
+    return _save(errors_plot(rows, random_level, title, cells, colours), path)
 
 
 def errors_plot(
-    rows: list[dict], random_level: float, title: str = "", cells: int = 64
+    rows: list[dict], random_level: float, title: str = "", cells: int = 64, colours: bool = False
 ) -> matplotlib.figure.Figure:
     """Left: the mean total absolute difference to the error-free pattern against the error
     probability, with the 10th-90th percentile band of the trials (a count: never below zero);
     right: the rate of trials that chose the error-free run's pattern. What the paper reports is
-    overlaid (its random-pattern level only for an 8x8 swarm, `cells` = 64)."""
+    overlaid (its random-pattern level only for an 8x8 swarm, `cells` = 64). Then the grey
+    distance, and with `colours` (a --colours sweep) the colour distance, against it."""
     greys = all("mean_grey_distance" in r for r in rows)
-    fig, axes = plt.subplots(1, 3 if greys else 2, figsize=(18 if greys else 12, 4.8))
+    colours = colours and all("mean_colour_distance" in r for r in rows)
+    panels = 2 + greys + colours
+    fig, axes = plt.subplots(1, panels, figsize=(6 * panels, 4.8))
     diff_ax, rate_ax = axes[0], axes[1]
     for mode, label, color in ERROR_MODES:
         data = sorted((r for r in rows if r["mode"] == mode), key=lambda r: r["rho"])
@@ -304,6 +312,15 @@ def errors_plot(
         if greys:
             shown = [r["mean_grey_distance"] for r in data]
             axes[2].plot(rho, shown, marker="o", color=color, label=label)
+        if colours:
+            shown = [r["mean_colour_distance"] for r in data]
+            axes[-1].plot(rho, shown, marker="o", color=color, label=label)
+    if colours:
+        axes[-1].set_ylim(bottom=0)
+        axes[-1].set_xlabel("error probability")
+        axes[-1].set_ylabel("CIEDE2000 (mean over robots and trials)")
+        axes[-1].set_title("colour distance: colours shown to colours sensed")
+        axes[-1].legend(fontsize=7.5)
     if greys:
         axes[2].set_ylim(bottom=0)
         axes[2].set_xlabel("error probability")
