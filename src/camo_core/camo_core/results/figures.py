@@ -376,7 +376,8 @@ def timeline_figure(
 
     Consensus frames hold 0/1/2 (horizontal/vertical/mottled) or, with --orientation any, the
     stripe codes (orientation.ORIENTED + k, in their direction's colour); formation frames 0/1
-    (off/on); -1 is a robot that did not report that step (grey).
+    (off/on), or with --colours the colours shown (rows x cols x 3); -1 is a robot that did not
+    report that step (grey).
     """
     consensus = [f for f in frames if f[0].startswith("c")]
     formation = [f for f in frames if f[0].startswith("f")]
@@ -391,10 +392,16 @@ def timeline_figure(
     angles = [tensor_rgb(np.array(tensor_at(k * STEP_DEG))) for k in range(CODES - ORIENTED)]
     colors = np.array([*paper, *angles, (0.5, 0.5, 0.5)])
     grey = {0: 1.0, 1: 0.0, -1: 0.5}
+
+    def shown(g: np.ndarray) -> np.ndarray:  # states, or (--colours) the colours shown
+        if g.ndim == 3:
+            return np.where(g < 0, 0.5, g / 255.0)
+        return np.vectorize(grey.get)(g).astype(float)[..., None].repeat(3, -1)
+
     row = 0
     for group, paint in (
         (consensus, lambda g: colors[np.where(g < 0, CODES, g)]),
-        (formation, lambda g: np.vectorize(grey.get)(g).astype(float)[..., None].repeat(3, -1)),
+        (formation, shown),
     ):
         for k, (label, grid) in enumerate(group):
             ax = axes[row + k // per_row, k % per_row]

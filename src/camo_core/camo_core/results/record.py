@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from camo_core.algorithm import colours
 from camo_core.algorithm.change import params_of_round
 from camo_core.algorithm.layout import layout_for
 from camo_core.algorithm.orientation import selector
@@ -177,15 +178,26 @@ class RoundRecord:
 
     def timeline(self) -> list[tuple[str, np.ndarray]]:
         """The swarm at each consensus step (selected pattern, -1 unknown) and formation step
-        (state)."""
+        (state; with --colours the colour shown, rows x cols x 3, -1 unknown)."""
         shape = (self.params.rows, self.params.cols)
         frames = []
         for step, p in enumerate(self.p_trace):
             unknown = np.isnan(p).any(axis=1)
             chosen = self.select(np.nan_to_num(p))
             frames.append((f"c{step}", np.where(unknown, -1, chosen).reshape(shape)))
-        frames += [(f"f{step}", s.reshape(shape)) for step, s in enumerate(self.state_trace)]
+        for step, states in enumerate(self.state_trace):
+            if self.params.colours:
+                shown = colours.shown_grid(np.maximum(states, 0), self.shades, self.palette_rgb)
+                frame = np.where(states[:, None] < 0, -1, shown).reshape((*shape, 3))
+            else:
+                frame = states.reshape(shape)
+            frames.append((f"f{step}", frame))
         return frames
+
+    @property
+    def sensed_shown(self) -> np.ndarray:
+        """What a GIF shows as sensed: the robots' colours with --colours, else their greys."""
+        return self.sensed_rgb if self.params.colours else self.sensed
 
     def result(self, dead: np.ndarray, partial: bool = False) -> RunResult:
         """What the swarm computed, in the reference simulator's form; dead robots masked out.
