@@ -575,7 +575,7 @@ class StepProtocol:
         carrying every p and state since the last report."""
         core = self.core
         if self.phase >= FORMATION:
-            self.display.show(core.state)
+            self.display.show(core.state, core.display_rgb if core.colours else None)
         if not forced and now - self.last_report < self.report_period:
             return
         self.last_report = now

@@ -165,7 +165,9 @@ class Sensor(Protocol):
 
 
 class Display(Protocol):
-    def show(self, state: int) -> None: ...
+    def show(self, state: int, colour: tuple[int, int, int] | None = None) -> None:
+        """Show the formation state; `colour`: what it shows as (--colours), if not the
+        display's own colour for the state."""
 
     def ready(self) -> bool:
         """It shows the last state it was given."""
@@ -176,7 +178,7 @@ class Display(Protocol):
 class NoDisplay:
     """A simulated robot shows nothing."""
 
-    def show(self, state: int) -> None:
+    def show(self, state: int, colour: tuple[int, int, int] | None = None) -> None:
         pass
 
     def ready(self) -> bool:
