@@ -28,6 +28,7 @@ SUMMARY_KEYS = (
     "final",
     "display",
     "grey_distance",
+    "colour_distance",
     "consensus_trace",
     "elapsed_s",
 )
@@ -181,6 +182,7 @@ class RunResult:
             grid = np.ascontiguousarray
         else:
             grid = np.ndarray.tolist
+        distance = self.colour_distance  # None where the colours sensed are not known
         summary = {
             **values(params, "summary"),
             "pattern": self.majority_pattern,
@@ -192,12 +194,10 @@ class RunResult:
             "final": grid(self.final.astype(int)),
             "display": grid(self.display_rgb if params.colours else self.display),
             "grey_distance": round(self.grey_distance, 6),
+            "colour_distance": None if distance is None else round(distance, 6),
             "consensus_trace": self.consensus_trace.tolist(),
             "elapsed_s": round(float(self.elapsed_s), 6),
         }
-        distance = self.colour_distance
-        if distance is not None:
-            summary["colour_distance"] = round(distance, 6)
         if params.colours and self.palette_rgb is not None:
             summary["sensed_rgb"] = grid(np.asarray(self.sensed_rgb, dtype=np.float64))
             summary["palette"] = grid(np.asarray(self.palette_rgb).astype(np.int64))
