@@ -145,11 +145,10 @@ class StatusRows:
             raise RowsError("a status array's p is not 3 values a row")
         columns["p"] = p.reshape(n, 3)
         for name, (count, dtype, width) in LISTS.items():
-            if not hasattr(msg, count):  # an array of an older camo (a bag's): none of them
-                counts, values = np.zeros(n, np.int64), np.zeros(0, dtype)
-            else:
-                counts = np.asarray(getattr(msg, count), np.int64)
-                values = np.asarray(getattr(msg, name), dtype)
+            counts = np.asarray(getattr(msg, count, ()), np.int64)
+            values = np.asarray(getattr(msg, name, ()), dtype)
+            if len(counts) == 0 and len(values) == 0:  # an array of an older camo: none
+                counts = np.zeros(n, np.int64)
             if len(counts) != n or int(counts.sum()) * width != len(values):
                 raise RowsError(f"a status array's {name} does not match its counts")
             columns[count] = counts
