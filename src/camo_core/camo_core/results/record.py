@@ -180,12 +180,13 @@ class RoundRecord:
         """The swarm at each consensus step (selected pattern, -1 unknown) and formation step
         (state; with --colours the colour shown, rows x cols x 3, -1 unknown)."""
         shape = (self.params.rows, self.params.cols)
-        frames = []
+        frames: list[tuple[str, np.ndarray]] = []
         for step, p in enumerate(self.p_trace):
             unknown = np.isnan(p).any(axis=1)
             chosen = self.select(np.nan_to_num(p))
             frames.append((f"c{step}", np.where(unknown, -1, chosen).reshape(shape)))
         for step, states in enumerate(self.state_trace):
+            frame: np.ndarray
             if self.params.colours:
                 shown = colours.shown_grid(np.maximum(states, 0), self.shades, self.palette_rgb)
                 frame = np.where(states[:, None] < 0, -1, shown).reshape((*shape, 3))
