@@ -184,7 +184,9 @@ def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 120.0) -> 
     raise AssertionError(f"the process ended before a line with {text!r}:\n{''.join(seen[-30:])}")
 
 
-SCALAR_FIELDS = ("sender_id", "phase", "step", "round", "sensed", "pattern", "state", "alive")
+SCALAR_FIELDS = (
+    "sender_id", "phase", "step", "round", "sensed", "pattern", "state", "alive", "deadlines",
+)  # fmt: skip
 
 
 class StatusListener:
@@ -215,17 +217,20 @@ class StatusListener:
         return self
 
     def _take(self, msg) -> None:
-        """Each row of a process's status array, as a report with RobotStatus's fields."""
+        """Each row of a process's status array, as a report with RobotStatus's fields, and
+        `taken`: when the listener took it (time.monotonic())."""
         from types import SimpleNamespace
 
         from camo_core.algorithm.status_rows import StatusRows
 
         rows = StatusRows.from_message(msg)
+        taken = time.monotonic()
         for k in range(len(rows)):
             self.got.append(
                 SimpleNamespace(
                     **{name: getattr(rows, name)[k].item() for name in SCALAR_FIELDS},
                     p=rows.p[k].tolist(),
+                    taken=taken,
                 )
             )
 

@@ -122,6 +122,21 @@ def test_a_view_started_first_serves_at_once_and_follows_runs_as_they_come(
 
 
 @pytest.mark.slow(SWARM)
+def test_clients_subscription_changes_are_taken_a_bounded_number_a_turn():
+    from camo_bag.view_node import CHANGES_PER_TURN, Subscribers, ViewNode
+
+    view = object.__new__(ViewNode)  # no server: what follow_clients reads, a topic not offered
+    view.listener, view.watchers, view.taken, view.offered = Subscribers(), {}, {}, {}
+    channel = type("Channel", (), {"topic": "/run/swarm/status"})()
+    for _ in range(2 * CHANGES_PER_TURN + 3):
+        view.listener.on_subscribe(None, channel)
+    counted = []
+    for _ in range(4):
+        view.follow_clients()
+        counted.append(view.watchers["/run/swarm/status"])
+    assert counted == [CHANGES_PER_TURN, 2 * CHANGES_PER_TURN, *[2 * CHANGES_PER_TURN + 3] * 2]
+
+
 def test_a_port_in_use_is_one_line(tmp_path):
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))

@@ -50,6 +50,23 @@ def test_the_cost_of_a_live_view_with_no_client_is_measured_against_plain_runs(t
     assert (tmp_path / "added_0" / "summary.json").exists()
 
 
+@pytest.mark.slow(SWARM)
+def test_a_large_run_is_timed_weighed_per_process_and_compared_with_the_simulator(tmp_path):
+    """bench ros's large runs, on a small grid: the swarm's times, each process's peak memory
+    (launcher, projector, workers) and whether it equals ./camo sim, in the table too."""
+    from camo_bringup.bench import format_large, large_run
+
+    row = large_run(6, domain(), tmp_path)
+    assert row["robots"] == "6x6" and row["equals_sim"] is True and row["deadlines"] == 0
+    assert 0 < row["setup_s"] < row["wall_s"] and row["steps_per_s"] > 0
+    processes = row["peak_mib"]["processes"]
+    assert {"launcher", "projector_node", "worker 1"} <= set(processes)
+    assert all(mib > 10 for mib in processes.values())  # a Python process with rclpy, at least
+    assert row["peak_mib"]["all"] >= sum(processes.values()) - 1
+    table = format_large([row, {**row, "equals_sim": False}]).splitlines()
+    assert table[1].split()[-1] == "yes" and table[2].split()[-1] == "NO"
+
+
 def test_grid_sides_take_a_list_where_0_or_nothing_means_none():
     import argparse
 

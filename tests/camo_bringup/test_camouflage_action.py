@@ -1,16 +1,22 @@
 """The run's Camouflage action, driven by the client docs/ros.md shows: a goal without an image
-gets the round the swarm has done, one with an image makes a continuous swarm camouflage it."""
+gets the round the swarm has done, one with an image makes a continuous swarm camouflage it.
+Driven without ROS: how many goals it keeps open, and what it does for them in a turn."""
 
 import os
 import re
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import cv2
+import numpy as np
 import pytest
 from support import ROOT, SWARM, domain, finished, start_run, wait_for_line
 
+from camo_bringup.camouflage_action import MAX_OPEN, CamouflageAction, OpenGoal
 from camo_core.algorithm.backgrounds import background
+from camo_core.results.record import Backgrounds
+from camo_nodes.topics.images import image_to_msg
 
 
 def client_script(tmp_path) -> str:
@@ -75,3 +81,65 @@ def test_a_run_without_continuous_refuses_a_goal_with_an_image(tmp_path):
         proc.send_signal(2)
         _, err = finished(proc, 60)
     assert "no --continuous" in err
+
+
+class Handle:
+    """rclpy's ServerGoalHandle, as far as the action uses it."""
+
+    def __init__(self, image=None) -> None:
+        from sensor_msgs.msg import Image
+
+        self.request = SimpleNamespace(image=image or Image())
+        self.is_cancel_requested = False
+        self.ended = None
+
+    def abort(self) -> None:
+        self.ended = "aborted"
+
+    def publish_feedback(self, feedback) -> None:
+        pass
+
+
+def action_of(tmp_path) -> CamouflageAction:
+    """The action with what its callbacks and update() use: a projector listening on the load
+    topic (the paths it was sent in `loaded`), a monitor that has heard no round."""
+    action = object.__new__(CamouflageAction)
+    action.loaded = []
+    loader = SimpleNamespace(get_subscription_count=lambda: 1, publish=action.loaded.append)
+    monitor = SimpleNamespace(images=Backgrounds(), heard=set(), closed=set())
+    node = SimpleNamespace(get_logger=lambda: SimpleNamespace(warning=lambda text: None))
+    action.session = SimpleNamespace(loader=loader, monitor=monitor, node=node)
+    action.executor = SimpleNamespace(spin_once=lambda timeout_sec: None)
+    action.folder, action.open, action.done = tmp_path / "goals", [], []
+    action._numbers = iter(range(100))
+    return action
+
+
+def test_a_goal_beyond_the_open_ones_is_aborted_at_once_saying_why(tmp_path):
+    from rclpy.action import GoalResponse
+
+    action = action_of(tmp_path)
+    action.open = [OpenGoal(Handle(), None, None) for _ in range(MAX_OPEN)]
+    handle = Handle(image=image_to_msg(np.full((16, 16), 90, np.uint8)))
+    action.continuous = False  # a goal with an image would be refused, which says nothing
+    assert action._goal(handle.request) == GoalResponse.ACCEPT  # to be aborted with a message
+    execution = action._execute(handle)
+    with pytest.raises(StopIteration) as ended:  # it never waits: its result is there at once
+        execution.send(None)
+    result = ended.value.value
+    assert handle.ended == "aborted" and not result.success
+    assert f"{MAX_OPEN} goals are open already" in result.message
+    assert len(action.open) == MAX_OPEN
+
+
+def test_goals_images_are_written_and_projected_one_a_turn(tmp_path):
+    action = action_of(tmp_path)
+    image = np.full((16, 16), 90, np.uint8)
+    action.open = [OpenGoal(Handle(), None, image) for _ in range(3)]
+    sent = []
+    for _ in range(4):
+        action.update()
+        sent.append(len(action.loaded))
+    assert sent == [1, 2, 3, 3]
+    assert sorted(p.name for p in action.folder.iterdir()) == [f"goal_{k}.png" for k in range(3)]
+    assert len(action.open) == 3 and all(goal.sent is not None for goal in action.open)

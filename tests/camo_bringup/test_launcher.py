@@ -17,6 +17,7 @@ from support import (
     PROCESS,
     ROOT,
     SWARM,
+    StatusListener,
     assert_like_sim,
     bad_value_outcomes,
     bag_tool,
@@ -32,6 +33,7 @@ from support import (
 )
 
 from camo_bringup import launcher, run_config, worker
+from camo_core.algorithm.robot_io import CONSENSUS
 
 
 def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:
@@ -177,22 +179,43 @@ def test_two_runs_on_different_domains_do_not_disturb_each_other(tmp_path):
         assert sum(summary["votes"].values()) == 64 and "dead" not in summary
 
 
+KILLED_TIMEOUT = 2.0  # s: the step timeout of the run whose robots are killed
+
+
 @pytest.mark.slow(SWARM)
 def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     out_dir = tmp_path / "run"
-    proc = start_run(
-        *["--pattern", "forest", "--procs", "1", "--own-process", "2,3", "--own-process", "5,6"],
-        *["--step-timeout", "2", "--discovery-timeout", "20", "--consensus-steps", "4000"],
-        *["--out", str(out_dir)],
-    )
-    seen = wait_for_line(proc, "consensus 64")  # every robot has voted and is in consensus
-    processes = json.loads((out_dir / "processes.json").read_text())
-    victims = [int(pid) for pid, cells in processes.items() if cells in ([19], [46])]
-    for pid in victims:
-        os.kill(pid, 9)
-    assert len(victims) == 2, "".join(seen[-30:])
-    rest, _ = finished(proc, 240)
+    domain_id = domain()
+    with StatusListener(domain_id, "killed") as statuses:
+        proc = start_run(
+            *["--pattern", "forest", "--procs", "1", "--own-process", "2,3"],
+            *["--own-process", "5,6", "--step-timeout", str(KILLED_TIMEOUT)],
+            *["--discovery-timeout", "20", "--consensus-steps", "4000", "--run-id", "killed"],
+            *["--out", str(out_dir)],
+            domain_id=domain_id,
+        )
+        seen = wait_for_line(proc, "consensus 64")  # every robot has voted and is in consensus
+        processes = json.loads((out_dir / "processes.json").read_text())
+        victims = [int(pid) for pid, cells in processes.items() if cells in ([19], [46])]
+        killed = time.monotonic()
+        for pid in victims:
+            os.kill(pid, 9)
+        assert len(victims) == 2, "".join(seen[-30:])
+        statuses.spin_until(lambda: proc.poll() is not None, 240)
+        rest, _ = finished(proc, 60)
     assert proc.returncode == 0, rest
+    # Found dead within one step timeout: the robots waiting for them at the kill (in
+    # consensus) gave up on them, and said so in a status, within one timeout of it; those that
+    # came to need them only once those gave up, within two. (Their neighbours in formation
+    # only wait a timeout for them once formation begins.) A margin for reports to come.
+    gave_up = {}
+    for row in statuses.got:
+        if row.deadlines and row.phase == CONSENSUS:
+            gave_up.setdefault(row.sender_id, row.taken - killed)
+    assert gave_up and not {19, 46} & set(gave_up)
+    first, last = min(gave_up.values()), max(gave_up.values())
+    assert first < KILLED_TIMEOUT + 1.5, f"the first gave up {first:.1f} s after the kill"
+    assert last < 2 * KILLED_TIMEOUT + 1.5, f"the last gave up {last:.1f} s after the kill"
     summary = json.loads((out_dir / "summary.json").read_text())
     assert sorted(summary["dead"]) == [[2, 3], [5, 6]]
     assert summary["final"][2][3] is None and summary["final"][5][6] is None
@@ -207,14 +230,18 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
 def test_ctrl_c_stops_every_process_and_keeps_what_was_reported(tmp_path):
     out_dir = tmp_path / "run"
     proc = start_run(
-        "--pattern", "forest", "--procs", "2", "--consensus-steps", "10000", "--out", str(out_dir)
+        *["--pattern", "forest", "--procs", "2", "--consensus-steps", "10000"],
+        *["--record", str(tmp_path / "bag"), "--foxglove", "0", "--out", str(out_dir)],
     )
     wait_for_line(proc, "consensus 64")
+    started = children_of(proc.pid)
+    assert len(started) == 5, started  # two workers, the projector, the recorder and the view
     time.sleep(1.0)
     proc.send_signal(2)
     _, err = finished(proc, 60)
     assert proc.returncode == 130, err
     assert "interrupted" in err and "Traceback" not in err
+    assert not [pid for pid in started if running(pid)]
     pids = [int(pid) for pid in json.loads((out_dir / "processes.json").read_text())]
     for pid in pids:
         assert (
@@ -922,6 +949,8 @@ def test_ctrl_c_stops_thousands_of_robots_within_seconds_and_keeps_what_they_rep
         *["--out", str(out_dir)],
     )
     wait_for_line(proc, "consensus 4096")
+    started = children_of(proc.pid)
+    assert len(started) == 3, started  # two workers and the projector
     # A few steps: as they stop, robots report what they did since their last report.
     time.sleep(1.0)
     interrupted = time.monotonic()
@@ -931,6 +960,7 @@ def test_ctrl_c_stops_thousands_of_robots_within_seconds_and_keeps_what_they_rep
     assert proc.returncode == 130, err[-2000:]
     assert stopped < 10, f"{stopped:.1f} s from Ctrl-C to exit"
     assert "did not stop" not in err and "Traceback" not in err
+    assert not [pid for pid in started if running(pid)]
     for pid in json.loads((out_dir / "processes.json").read_text()):
         assert (
             not os.path.exists(f"/proc/{pid}")

@@ -1,4 +1,5 @@
-"""The monitor: the swarm's pattern image, one record per round, offline hardware."""
+"""The monitor: the swarm's pattern image, one record per round, offline hardware, and what came
+before its host's word taken over several turns, in order."""
 
 import time
 
@@ -106,6 +107,65 @@ def test_monitor_keeps_one_record_per_round_whatever_the_number_of_statuses(coun
                     )
         assert monitor.record(1).step.tolist() == [4, 4, 4, 4]
         assert len(made) == 2 and monitor.statuses_heard == 40
+        monitor.destroy_node()
+
+
+def notices(noticed: float, gid: bytes = HOST_GID, robot: int = 0, round_: int = 5):
+    """A process's Notices message that `robot` started round `round_` at `noticed` (s), as
+    polled."""
+    from rclpy.serialization import serialize_message
+
+    from camo_msgs.msg import Notices
+
+    msg = Notices(name="w", robot=[robot], round=[round_], changed_at=[0.5], noticed_at=[noticed])
+    return serialize_message(msg), gid
+
+
+def test_statuses_that_came_before_their_host_are_taken_a_bounded_number_a_turn_in_order():
+    from camo_core.algorithm.params import CamoParams
+    from camo_nodes.monitor_node import REPLAY_PER_TURN, MonitorNode
+    from camo_nodes.topics.names import RunTopics
+
+    with ros_context() as context:
+        params = CamoParams(rows=2, cols=2, consensus_steps=2000)
+        monitor = MonitorNode(params, RunTopics("monitor_test"), context=context)
+        for step in range(2 * REPLAY_PER_TURN + 5):
+            monitor._on_status(*status(sender_id=0, phase=2, step=step, round=0))
+        assert not monitor.heard  # nothing taken before its host's word
+        hosting_all(monitor, 4)
+        monitor._on_status(*status(sender_id=0, phase=2, step=1000, round=0))  # came after them
+        steps = []
+        while monitor._replay:
+            monitor.turn()
+            steps.append(int(monitor.record(0).step[0]))
+        assert steps == [REPLAY_PER_TURN - 1, 2 * REPLAY_PER_TURN - 1, 1000]
+        assert monitor.statuses_heard == 2 * REPLAY_PER_TURN + 6 and not monitor.rejected.counts
+        monitor.destroy_node()
+
+
+def test_notices_that_came_before_their_host_are_taken_over_turns_the_first_of_a_round_kept():
+    from camo_core.algorithm.params import CamoParams
+    from camo_nodes.monitor_node import REPLAY_PER_TURN, MonitorNode
+    from camo_nodes.topics.names import RunTopics
+
+    with ros_context() as context:
+        monitor = MonitorNode(
+            CamoParams(rows=2, cols=2), RunTopics("monitor_test"), context=context
+        )
+        waited = 2 * REPLAY_PER_TURN + 1
+        for k in range(waited):  # each noticed earlier than the one before
+            monitor._on_notices(*notices(100.0 - k, robot=k % 4))
+        assert monitor.notices == {}
+        hosting_all(monitor, 4)
+        monitor._on_notices(*notices(1.0, gid=bytes(16)))  # not its robot's host: refused
+        firsts = []
+        while monitor._replay:
+            monitor.turn()
+            firsts.append(monitor.notices[5][2])
+        latest = [REPLAY_PER_TURN - 1, 2 * REPLAY_PER_TURN - 1, waited - 1]  # taken by each turn
+        assert firsts == [100.0 - k for k in latest]
+        assert monitor.notices[5] == ((waited - 1) % 4, 0.5, 100.0 - (waited - 1))
+        assert monitor.rejected.counts == {"not from the process hosting its sender": 1}
         monitor.destroy_node()
 
 

@@ -1,9 +1,10 @@
 """Robots started alone with `robot_node`, and a worker started by hand: one-line errors, and a
-run of them equals the simulator."""
+run of them equals the simulator. And how often a process's robots report."""
 
 import os
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import pytest
 from support import SWARM, assert_like_sim, domain, finished, ros_node, run_camo, start_run
@@ -32,6 +33,33 @@ def test_robot_with_cell_outside_grid_exits_with_one_line():
     )
     assert out.returncode == 2
     assert "outside the 4x4 grid" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+
+
+def test_a_processs_robots_report_about_2000_times_a_second_at_most_however_many(monkeypatch):
+    """Between phase changes a robot reports once a period at most (tests/camo_core/
+    test_protocol.py): the periods host_robots gives a process's robots, as many as it hosts."""
+    import camo_nodes.robot_node as robot_node
+    from camo_core.algorithm.params import CamoParams
+    from camo_core.algorithm.run_setup import ProtocolParams
+    from camo_nodes.topics.names import RunTopics
+
+    def transport(node, params, topics, tiles, *args):  # what host_robots asks of it, no DDS
+        hosted = {cell for first, last in tiles for cell in range(first, last + 1)}
+        return SimpleNamespace(hosted=hosted, alive=lambda robot: True, mailbox=None)
+
+    monkeypatch.setattr(robot_node, "host_node", lambda topics: SimpleNamespace(context=None))
+    monkeypatch.setattr(robot_node, "Transport", transport)
+    monkeypatch.setattr(robot_node, "Participants", lambda context: SimpleNamespace(next=object))
+    monkeypatch.setattr(robot_node, "RobotNode", lambda steps, *args, **kwargs: steps)
+    monkeypatch.setattr(robot_node, "Host", lambda node, transport, projection, robots, *a: robots)
+    rates = {}
+    for tile in ((0, 0), (0, 4095)):
+        robots = robot_node.host_robots(
+            CamoParams(rows=64, cols=64), ProtocolParams(), RunTopics("rates"), [tile]
+        )
+        rates[len(robots)] = sum(1 / robot.report_period for robot in robots)
+    # A robot alone: 4 reports a second. 4096 robots: not 16384, about 2000.
+    assert rates == {1: pytest.approx(4.0), 4096: pytest.approx(2000.0)}
 
 
 @pytest.mark.slow(SWARM)

@@ -131,3 +131,24 @@ def test_a_robot_the_process_does_not_host_or_one_left_out_is_refused():
         transport.check_hosted()
         transport.close()
         node.destroy_node()
+
+
+def test_a_message_taken_twice_counts_once_until_its_round_is_forgotten():
+    from camo_msgs.msg import Host
+
+    with ros_context() as context:
+        node = rclpy.create_node("seen_test", context=context)
+        transport = Transport(node, CamoParams(rows=2, cols=2), RunTopics("seen_test"), [(0, 1)])
+        other = bytes(range(16))  # the process hosting robots 2 and 3
+        transport.trusted.learn(Host(name="other", first=[2], last=[3]), other)
+        vote = lambda round_, p: Message("vote", 2, round_, 0, (p, 3))  # noqa: E731
+        for round_ in (1, 2):
+            transport._robot_message(vote(round_, (1.0, 0.0, 0.0)), other)
+            transport._robot_message(vote(round_, (1.0, 0.0, 0.0)), other)  # again: nothing said
+        assert transport.rejected.counts == {}
+        transport.forget_before(2)
+        transport._robot_message(vote(1, (0.0, 1.0, 0.0)), other)  # round 1 is let go
+        transport._robot_message(vote(2, (0.0, 1.0, 0.0)), other)  # round 2 is not
+        assert transport.rejected.counts == {"a second, different message for the same step": 1}
+        transport.close()
+        node.destroy_node()

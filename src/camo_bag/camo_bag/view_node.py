@@ -34,6 +34,9 @@ from camo_nodes.topics.runs import run_ended
 from camo_nodes.topics.startup import add_network_options, network_env, start_ros
 
 DEFAULT_PORT = 8765
+# Clients' subscription changes taken per turn of the 50 ms timer at most: clients that come and
+# go faster than that do not keep the node's thread from its other work.
+CHANGES_PER_TURN = 256
 
 
 class Subscribers:
@@ -124,8 +127,9 @@ class ViewNode(Node):
             self.destroy_subscription(self.taken.pop(name))
 
     def follow_clients(self) -> None:
-        """Take a topic from ROS while a client is subscribed to it, and only then."""
-        while True:
+        """Take a topic from ROS while a client is subscribed to it, and only then (what clients
+        changed: CHANGES_PER_TURN changes a turn at most, the rest the next turns)."""
+        for _ in range(CHANGES_PER_TURN):
             try:
                 topic, change = self.listener.changes.get_nowait()
             except queue.Empty:

@@ -201,25 +201,46 @@ def large_run(side: int, domain: int, out: Path) -> dict:
     cv2.imwrite(str(image), cv2.resize(forest(), (size, size), interpolation=cv2.INTER_NEAREST))
     procs = default_procs(side * side)
     row = swarm_run(side, None, domain, out / "run", extra=["--image", str(image)])
+    same = equals_sim(out / "run", image, side)
+    peaks = ", ".join(f"{k} {v:.0f}" for k, v in row["peak_mib"].get("processes", {}).items())
     print(
         f"{side}x{side}: set-up {row['setup_s']:.1f} s, {row['steps_per_s']:.2f} steps/s, "
-        f"launch to exit {row['wall_s']:.1f} s, {procs} workers",
+        f"launch to exit {row['wall_s']:.1f} s, {procs} workers, equal to ./camo sim: {same}; "
+        f"peak MiB per process: {peaks}",
         file=sys.stderr,
     )
-    return {"robots": f"{side}x{side}", "procs": procs, **row}
+    return {"robots": f"{side}x{side}", "procs": procs, "equals_sim": same, **row}
+
+
+def equals_sim(run: Path, image: Path, side: int) -> bool:
+    """The run's summary says what `./camo sim` on its image does, key by key (but the time)."""
+    sim = run.parent / "sim"
+    done = subprocess.run(
+        [sys.executable, "-m", "camo_core.cli", "sim", "--image", str(image)]
+        + ["--rows", str(side), "--cols", str(side), "--out", str(sim), "--force"],
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"camo sim {side}x{side} failed: {done.stderr.strip()[-300:]}")
+    ran = json.loads((run / "summary.json").read_text())
+    expected = json.loads((sim / "summary.json").read_text())
+    return all(ran.get(k) == v for k, v in expected.items() if k != "elapsed_s")
 
 
 def format_large(rows: list[dict]) -> str:
     lines = [
         f"{'robots':>8} {'workers':>7} {'set-up s':>9} {'steps/s':>8} {'launch to exit s':>17} "
-        f"{'peak MiB: a worker / all':>25} {'deadlines':>9}"
+        f"{'peak MiB: a worker / all':>25} {'deadlines':>9} {'equals sim':>10}"
     ]
     for r in rows:
         peak = r["peak_mib"]
         memory = f"{peak.get('worker_max', 0):>8.0f} / {peak.get('all', 0):<6.0f}"
         lines.append(
             f"{r['robots']:>8} {r['procs']:>7} {r['setup_s']:>9.1f} {r['steps_per_s']:>8.2f} "
-            f"{r['wall_s']:>17.1f} {memory:>25} {r['deadlines']:>9}"
+            f"{r['wall_s']:>17.1f} {memory:>25} {r['deadlines']:>9} "
+            f"{'yes' if r.get('equals_sim') else 'NO':>10}"
         )
     return "\n".join(lines)
 

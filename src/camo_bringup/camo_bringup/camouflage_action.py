@@ -7,6 +7,11 @@ on a frame projected after it. A goal without an image: the round under way, or 
 the latest one written. Feedback, twice a second: the robots per phase of the round being
 followed and the slowest robot's consensus step. A run without --continuous starts no round for
 a goal: it refuses goals with an image. Goals still open when the run ends are aborted.
+
+At most MAX_OPEN goals are open at once: one more is accepted and aborted at once, its result's
+message saying why (a refused goal tells its client nothing). What a turn of the launcher's loop
+does for the goals is bounded with them: one goal's image written and sent to the projector a
+turn at most (a large image takes a while to write).
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ from camo_nodes.topics.images import image_from_msg
 FEEDBACK_PERIOD = 0.5  # s
 SPINS = 8  # turns of the action's executor per turn of the launcher's loop
 GOAL_WAIT = 120.0  # s a goal's image may take to start a round before the goal is aborted
+MAX_OPEN = 16  # goals open at once
 
 
 @dataclass
@@ -80,6 +86,8 @@ class CamouflageAction:
     # ---- the server's callbacks ------------------------------------------------------------
 
     def _goal(self, request) -> GoalResponse:
+        if len(self.open) >= MAX_OPEN:
+            return GoalResponse.ACCEPT  # aborted at once, saying why (`_execute`), not decoded
         problem = self._problem(request.image)
         if problem:
             self.session.node.get_logger().warning(f"Camouflage goal refused: {problem}")
@@ -102,6 +110,10 @@ class CamouflageAction:
         return None
 
     async def _execute(self, handle):
+        if len(self.open) >= MAX_OPEN:
+            handle.abort()
+            message = f"{MAX_OPEN} goals are open already: send it again once one has its result"
+            return Camouflage.Result(success=False, message=message)
         image = handle.request.image
         pixels = image_from_msg(image) if image.width else None
         goal = OpenGoal(handle, Future(), pixels)
@@ -127,12 +139,14 @@ class CamouflageAction:
             self.executor.spin_once(timeout_sec=0.0)
         monitor = self.session.monitor
         now = time.monotonic()
+        projected = False  # one image a turn: the next goal's waits for the next turn
+        feedback = None  # the same for every goal: computed once a turn at most
         for goal in list(self.open):
             if goal.handle.is_cancel_requested:
                 self._finish(goal, Camouflage.Result(success=False, message="cancelled"))
                 continue
-            if goal.image is not None and goal.sent is None:
-                self._project(goal, monitor)
+            if goal.image is not None and goal.sent is None and not projected:
+                projected = self._project(goal, monitor)
             met = self._round_for(goal)
             if met is not None:
                 self._finish(goal, result_of(*met))
@@ -141,7 +155,9 @@ class CamouflageAction:
                 self._finish(goal, Camouflage.Result(success=False, message=message))
             elif now - goal.fed >= FEEDBACK_PERIOD:
                 goal.fed = now
-                goal.handle.publish_feedback(feedback_of(monitor))
+                if feedback is None:
+                    feedback = feedback_of(monitor)
+                goal.handle.publish_feedback(feedback)
 
     def close(self) -> None:
         """The run ends: goals its last rounds met get their results, the others are aborted."""
@@ -156,16 +172,17 @@ class CamouflageAction:
 
     # ---- helpers ------------------------------------------------------------------------------
 
-    def _project(self, goal: OpenGoal, monitor) -> None:
+    def _project(self, goal: OpenGoal, monitor) -> bool:
         """Its image into the run's folder, and the projector told to project it (once it
-        listens: the load topic is volatile)."""
+        listens: the load topic is volatile); whether it was."""
         if not self.session.loader.get_subscription_count():
-            return
+            return False
         self.folder.mkdir(exist_ok=True)
         path = self.folder / f"goal_{next(self._numbers)}.png"
         cv2.imwrite(str(path), goal.image)
         goal.sent = max(monitor.images, default=-1)
         self.session.loader.publish(String(data=str(path)))
+        return True
 
     def _under_way(self, goal: OpenGoal) -> bool:
         """A round that will meet the goal has begun: it is waited for, however long it takes."""

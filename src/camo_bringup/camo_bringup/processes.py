@@ -171,15 +171,24 @@ class ProcessGroup:
                     kib = int(line.split()[1])
                     self.peak_kib[proc.pid] = max(kib, self.peak_kib.get(proc.pid, 0))
 
-    def peak_mib(self) -> dict[str, float]:
-        """The largest resident sets (MiB): of a worker, of this process, and all together."""
+    def peak_mib(self) -> dict:
+        """The largest resident sets (MiB): of a worker, of this process, and all together, and
+        per process (`processes`: the launcher, then each process it started, by its module,
+        workers numbered in the order started)."""
         mine = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB on Linux
         workers = [self.peak_kib.get(p.pid, 0) for p in self.workers]
         total = mine + sum(self.peak_kib.values())
+        processes = {"launcher": round(mine / 1024, 1)}
+        for proc in self.procs:
+            name = module_of(proc).rsplit(".", 1)[-1]
+            if proc in self.workers:
+                name = f"worker {self.workers.index(proc) + 1}"
+            processes[name] = round(self.peak_kib.get(proc.pid, 0) / 1024, 1)
         return {
             "worker_max": round(max(workers, default=0) / 1024, 1),
             "launcher": round(mine / 1024, 1),
             "all": round(total / 1024, 1),
+            "processes": processes,
         }
 
     def failed(self) -> str | None:

@@ -6,14 +6,15 @@ owns one node of its own, which holds the transport's DDS endpoints
 (`transport.py`, with the process's heartbeat), the background subscription and
 the one timer that ticks the robots whose deadline is due; its loop spins the
 executor and polls the transport. Each turn of the loop does a bounded amount of
-work (a batch of robots started or shown a new background, a bounded take, 20
-ms of handing messages over), so that its timers and stop flag keep up whatever
-the number of robots.
+work (a batch of robots started, shown a new background or told they noticed a
+change, a bounded take, 20 ms of handing messages over), so that its timers and
+stop flag keep up whatever the number of robots.
 """
 
 from __future__ import annotations
 
 import gc
+import itertools
 import os
 import socket
 import time
@@ -50,8 +51,8 @@ POLL_BUSY = 0.0002
 POLL_IDLE = 0.005
 IDLE = 0.05
 SPIN_EVERY = 0.02  # s between turns of the executor while messages keep coming
-# Robots started, or shown a new background, per turn of the loop; robots ticked per tick at
-# most: each costs tens of microseconds, and a turn stays short.
+# Robots started, shown a new background or told they noticed a change, per turn of the loop;
+# robots ticked per tick at most: each costs tens of microseconds, and a turn stays short.
 BATCH = 256
 TICKS_PER_TURN = 2048
 STAMPS_KEPT = 1024  # backgrounds remembered by stamp (a frame heard again is not new)
@@ -130,6 +131,12 @@ class Host:
             self.watch = Watch(ids, params, protocol.change_window, protocol.change_threshold)
             self.idle = np.array([robot.protocol.round < 0 for robot in robots])
             self._joins: list[int] = []
+            # Robots that noticed a change, still to be told (a batch a turn, `_work`), in the
+            # order they noticed: index -> (the frame they read it in, when the change was
+            # first seen, when they noticed); `_notice`: those told so far that started a
+            # round, for the monitor once all are told.
+            self._noticing: dict[int, tuple[int, float, float]] = {}
+            self._notice = Notices(name=node.get_name())
             self.notices = node.create_publisher(
                 Notices, transport.topics.notices, history_qos(NOTICES_KEPT)
             )
@@ -145,7 +152,7 @@ class Host:
 
     def _read(self) -> None:
         """Continuous camouflage: every robot reads the newest frame; those that notice a change
-        start its round (and are told to the monitor)."""
+        are told so a batch a turn (`_notice_batch`), each with the frame of this reading."""
         grid = self.projection.latest
         if grid is None or self.watch is None:
             return
@@ -155,24 +162,40 @@ class Host:
         judged = self.watch.read(grid, frame, self.idle)
         if not len(judged.robots):
             return
-        now, wall = time.monotonic(), self.node.get_clock().now().nanoseconds * 1e-9
-        notice = Notices(name=self.node.get_name())
+        wall = self.node.get_clock().now().nanoseconds * 1e-9
+        stamps, noticing = self.projection.stamps, self._noticing
         for index, changed in zip(
             judged.robots.tolist(), judged.changed_frames.tolist(), strict=True
         ):
+            # A robot not told yet keeps its first notice: its watch still holds the reference
+            # it noticed against, and judges it again until it is told.
+            if index not in noticing:
+                noticing[index] = (frame, stamps.get(changed, wall), wall)
+        self.projection.protected.add(frame)  # read off by those robots once they are told
+
+    def _notice_batch(self) -> None:
+        """A batch of the robots that noticed a change told so: each starts the round of the
+        frame it noticed it in (unless it is in that round or a later one by now), and its watch
+        takes a new reference. Once all are told, who started a round goes to the monitor."""
+        now = time.monotonic()
+        noticing, notice = self._noticing, self._notice
+        batch = list(itertools.islice(noticing, BATCH))
+        for index in batch:
+            frame, changed_at, noticed_at = noticing.pop(index)
             robot = self.robots[index]
             before = robot.protocol.round
             robot.notice(frame, now)
             if robot.protocol.round != before:
                 notice.robot.append(robot.protocol.id)
                 notice.round.append(frame)
-                notice.changed_at.append(self.projection.stamps.get(changed, wall))
-                notice.noticed_at.append(wall)
-        self._reset(judged.robots.tolist())  # noticed: a new reference, joined or not
-        if notice.robot:
+                notice.changed_at.append(changed_at)
+                notice.noticed_at.append(noticed_at)
+        self._reset(batch)  # noticed: a new reference, joined or not
+        if not noticing and notice.robot:
             notice.header.stamp = self.node.get_clock().now().to_msg()
             notice.header.frame_id = "camo"
             self.notices.publish(notice)
+            self._notice = Notices(name=self.node.get_name())
 
     def _reset(self, robots: list[int]) -> None:
         """New references for these robots, from their rounds' frames; those whose frame has not
@@ -194,7 +217,7 @@ class Host:
         """Drop what was kept of rounds no hosted robot is in any more; keep the frames of those
         they are in; say once more a frame had to be read in place of one let go."""
         rounds = {robot.protocol.round for robot in self.robots}
-        self.projection.protected = rounds
+        self.projection.protected = rounds | {f for f, _, _ in self._noticing.values()}
         earliest = min(rounds)
         if earliest > 0:
             self.transport.forget_before(earliest)
@@ -236,7 +259,12 @@ class Host:
             self._to_show = 0  # every robot is told, a batch a turn (`_work`)
 
     def _work(self) -> bool:
-        """A batch of robots started or shown the new background; whether any is left."""
+        """A batch of robots told they noticed a change, started or shown the new background;
+        whether any is left. Those that noticed go first: a robot not started when it noticed
+        is not started when it is told, as if told at once."""
+        if self.watch is not None and self._noticing:
+            self._notice_batch()
+            return True
         now = time.monotonic()
         if self._to_start is not None:
             first, self._to_start = self._to_start, self._to_start + BATCH

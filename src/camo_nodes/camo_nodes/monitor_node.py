@@ -15,9 +15,13 @@ round's summary.json and figure.png to --out.
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import os
 import sys
 import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -61,6 +65,9 @@ from camo_nodes.topics.startup import add_network_options, network_env, start_ro
 from camo_nodes.trust import BackgroundCheck, Hosts, Rejections, merged
 
 EARLY_NOTICES = 10_000  # notices kept until their robots' host is heard, at most
+# Messages that waited for their host's word taken again per turn of the monitor's timer (20 ms)
+# at most: twice the status arrays a poll takes, so that what waits shrinks while more comes.
+REPLAY_PER_TURN = 32
 
 
 class MonitorNode(Node):
@@ -80,7 +87,9 @@ class MonitorNode(Node):
         self.heard: set[int] = set()  # rounds robots reported in
         self._shown: tuple[int, RoundRecord | None] = (-1, None)  # the last closed round
         self.continuous = setup is not None and setup.protocol.continuous
-        self._early_notices: list[tuple[tuple, bytes]] = []  # before their host's word
+        # Notices (columns) before their host's word, and how many: (arrival, columns, gid).
+        self._early_notices: list[tuple[int, tuple[np.ndarray, ...], bytes]] = []
+        self._early_rows = 0
         self.offline = np.zeros(params.count, bool)
         self.statuses_heard = 0  # a recording of the run must hold at least these
         # Statuses count only from the process hosting their robot; a background only if it is
@@ -88,8 +97,13 @@ class MonitorNode(Node):
         self.rejected = Rejections(self.get_logger())
         self.trusted = Hosts(params.count, self.rejected, setup)
         self.backgrounds = BackgroundCheck(setup)
-        self._unplaced: list[tuple[StatusRows, bytes, float]] = []  # before their host's word
+        # Status rows before their host's word (arrival, rows, gid, stamp), and how many.
+        self._unplaced: list[tuple[int, StatusRows, bytes, float]] = []
         self._unplaced_rows = 0
+        # What waited for its host's word, taken again a bounded number a turn (`turn`) in the
+        # order it came, and statuses that came since: (arrival, how to take it).
+        self._replay: list[tuple[int, Callable[[], None]]] = []
+        self._arrivals = itertools.count()
         # Robot -> the index of its host's GUID prefix (-1: none yet), for a table's rows at once.
         self._owner = np.full(params.count, -1, np.int64)
         self._prefixes: dict[bytes, int] = {}
@@ -101,7 +115,7 @@ class MonitorNode(Node):
         self.polled.listen(StatusArray, topics.status, LATCHED_READER, self._on_status, 16)
         self.polled.listen(Image, topics.background, LATCHED_READER, self._on_background)
         self.polled.listen(Notices, topics.notices, LATCHED_READER, self._on_notices)
-        self.create_timer(0.02, self.polled.poll)
+        self.create_timer(0.02, self.turn)
         self.pattern_pub = self.create_publisher(Image, topics.pattern, 10)
         self.create_timer(0.2, self._publish_pattern)
         self.bridged = set(setup.bridged if setup is not None else ())
@@ -109,18 +123,30 @@ class MonitorNode(Node):
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.diagnostics, 1)
         self.create_timer(0.5, self.publish_views)
 
+    def turn(self) -> int:
+        """A turn of the monitor's timer: REPLAY_PER_TURN of the messages that waited for their
+        host's word at most, then a poll; how many messages the poll took."""
+        for _ in range(min(REPLAY_PER_TURN, len(self._replay))):
+            _, take = heapq.heappop(self._replay)
+            take()
+        return self.polled.poll()
+
     def _on_host(self, data: bytes, gid: bytes) -> None:
         tiles = self.trusted.learn(deserialize_message(data, Host), gid)
         if tiles:
             index = self._prefixes.setdefault(gid[:PREFIX], len(self._prefixes))
             for first, last in tiles:
                 self._owner[first : last + 1] = index
-            unplaced, self._unplaced, self._unplaced_rows = self._unplaced, [], 0
-            for rows, sender_gid, stamp in unplaced:
-                self._take_rows(rows, sender_gid, stamp)
-            early, self._early_notices = self._early_notices, []
-            for notice, sender_gid in early:
-                self._notice(*notice, sender_gid)
+            # What waited is taken again over the next turns, in the order it came (a robot's
+            # later report after its earlier ones): a bounded number a turn.
+            for arrival, rows, sender_gid, stamp in self._unplaced:
+                take = partial(self._take_rows, rows, sender_gid, stamp, arrival)
+                heapq.heappush(self._replay, (arrival, take))
+            for arrival, notices, sender_gid in self._early_notices:
+                take = partial(self._notice_rows, notices, sender_gid, arrival)
+                heapq.heappush(self._replay, (arrival, take))
+            self._unplaced, self._unplaced_rows = [], 0
+            self._early_notices, self._early_rows = [], 0
 
     def _on_background(self, data: bytes, gid: bytes) -> None:
         msg = deserialize_message(data, Image)
@@ -150,22 +176,40 @@ class MonitorNode(Node):
         if len({len(c) for c in columns}) != 1:
             self.rejected.refuse("a notice whose columns disagree", gid, msg.name)
             return
-        for notice in zip(*columns, strict=True):
-            self._notice(*notice, gid)
+        notices = (
+            np.asarray(msg.robot, np.int64),
+            np.asarray(msg.round, np.int64),
+            np.asarray(msg.changed_at, np.float64),
+            np.asarray(msg.noticed_at, np.float64),
+        )
+        self._notice_rows(notices, gid, next(self._arrivals))
 
-    def _notice(self, robot: int, round_: int, changed: float, noticed: float, gid: bytes) -> None:
-        robot, round_ = int(robot), int(round_)
-        if 0 <= robot < self.params.count and self._owner[robot] < 0:
-            if len(self._early_notices) < EARLY_NOTICES:  # its host's word is still to come
-                self._early_notices.append(((robot, round_, changed, noticed), gid))
-            return
-        if not self.trusted.speaks_for(gid, robot):
-            self.rejected.refuse("not from the process hosting its sender", gid, f"robot {robot}")
-            return
-        self.images.pin(round_)  # the round's frame is kept for its figure from now on
-        first = self.notices.get(round_)
-        if first is None or noticed < first[2]:
-            self.notices[round_] = (robot, float(changed), float(noticed))
+    def _notice_rows(self, notices: tuple[np.ndarray, ...], gid: bytes, arrival: int) -> None:
+        """A process's notices (robot, round, changed_at, noticed_at columns): the first notice
+        of each round is kept, from the process hosting its robot."""
+        robot, round_, changed, noticed = notices
+        count = self.params.count
+        inside = (robot >= 0) & (robot < count)
+        owner = np.where(inside, self._owner[np.clip(robot, 0, count - 1)], -1)
+        early = inside & (owner < 0)  # its host's word is still to come
+        if early.any():
+            keep = np.flatnonzero(early)[: max(0, EARLY_NOTICES - self._early_rows)]
+            if len(keep):
+                self._early_notices.append((arrival, tuple(c[keep] for c in notices), gid))
+                self._early_rows += len(keep)
+            robot, round_, changed, noticed = (c[~early] for c in notices)
+            owner = owner[~early]
+        stranger = owner != self._prefixes.get(gid[:PREFIX], -2)
+        for sender in robot[stranger].tolist():
+            self.rejected.refuse("not from the process hosting its sender", gid, f"robot {sender}")
+        robot, round_, changed, noticed = (c[~stranger] for c in (robot, round_, changed, noticed))
+        for index in np.unique(round_).tolist():
+            self.images.pin(index)  # the round's frame is kept for its figure from now on
+            rows = np.flatnonzero(round_ == index)
+            k = rows[np.argmin(noticed[rows])]
+            first = self.notices.get(index)
+            if first is None or noticed[k] < first[2]:
+                self.notices[index] = (int(robot[k]), float(changed[k]), float(noticed[k]))
 
     def _on_status(self, data: bytes, gid: bytes) -> None:
         msg = self.rejected.decoded(data, StatusArray, gid, "a status array")
@@ -177,17 +221,24 @@ class MonitorNode(Node):
             self.rejected.refuse("a status array whose columns disagree", gid, msg.name)
             return
         self.statuses_heard += len(rows)
-        self._take_rows(rows, gid, msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        arrival = next(self._arrivals)
+        if self._replay:  # after what came before it and waited for its host's word
+            take = partial(self._take_rows, rows, gid, stamp, arrival)
+            heapq.heappush(self._replay, (arrival, take))
+        else:
+            self._take_rows(rows, gid, stamp, arrival)
 
-    def _take_rows(self, rows: StatusRows, gid: bytes, stamp: float) -> None:
-        """A process's reports: each row used if it is sound and its robot is the process's."""
+    def _take_rows(self, rows: StatusRows, gid: bytes, stamp: float, arrival: int = 0) -> None:
+        """A process's reports: each row used if it is sound and its robot is the process's.
+        `arrival`: the order it came in, kept while it waits for its host's word."""
         ids = rows.sender_id
         inside = (ids >= 0) & (ids < self.params.count)
         owner = np.where(inside, self._owner[np.clip(ids, 0, self.params.count - 1)], -1)
         waiting = inside & (owner < 0)  # robots whose host has not been heard yet
         if waiting.any():
             if self._unplaced_rows < 10 * self.params.count + 1000:
-                self._unplaced.append((rows.select(waiting), gid, stamp))
+                self._unplaced.append((arrival, rows.select(waiting), gid, stamp))
                 self._unplaced_rows += int(waiting.sum())
             else:
                 for robot in ids[waiting]:
@@ -218,7 +269,7 @@ class MonitorNode(Node):
         """Take what waits in the readers (bounded batches, for `limit` seconds at most): the last
         reports of robots that stopped while nobody spun the monitor."""
         deadline = time.monotonic() + limit
-        while time.monotonic() < deadline and (self.polled.poll() or self.polled.more):
+        while time.monotonic() < deadline and (self.turn() or self.polled.more or self._replay):
             pass
 
     def rejected_messages(self) -> dict:

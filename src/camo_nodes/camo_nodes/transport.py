@@ -220,7 +220,9 @@ class Transport:
         self.remote: set[tuple[int, int]] = set()  # tiles subscribed to
         self.rejected = Rejections(node.get_logger())
         self.trusted = Hosts(params.count, self.rejected, setup)
-        self._seen: dict[tuple[str, int, int, int], object] = {}  # each message taken, once
+        # Each message taken, once: by round, then (kind, sender, step), so that a round is let
+        # go whole (`forget_before`) and the others are not copied.
+        self._seen: dict[int, dict[tuple[str, int, int], object]] = {}
         # Robots to wake: those that heard something since the generation being woken began,
         # and what is left of that generation.
         self._woken: set[int] = set()
@@ -301,7 +303,8 @@ class Transport:
         """What was kept of rounds before `round_`, which none of the hosted robots is in any
         more (continuous camouflage: a superseded round's messages are never all taken)."""
         self.mailbox.forget_before(round_)
-        self._seen = {k: v for k, v in self._seen.items() if k[2] >= round_}
+        for old in [r for r in self._seen if r < round_]:
+            del self._seen[old]
 
     def check_hosted(self) -> None:
         """Every hosted robot was added: the mailbox forgets a step's messages once each of them
@@ -367,15 +370,19 @@ class Transport:
             self.rejected.refuse("not from the process hosting its sender", gid, f"robot {sender}")
             return
         problem = message_problem(message, self.params)
-        key = (kind, sender, message.round, message.step)
-        if problem is None and key in self._seen:
-            if self._seen[key] == message.value:
-                return  # the same message again
-            problem = "a second, different message for the same step"
         if problem is not None:
             self.rejected.refuse(problem, gid, f"robot {sender}")
             return
-        self._seen[key] = message.value
+        seen = self._seen.get(message.round)
+        if seen is None:
+            seen = self._seen[message.round] = {}
+        key = (kind, sender, message.step)
+        if key in seen:
+            if seen[key] != message.value:
+                problem = "a second, different message for the same step"
+                self.rejected.refuse(problem, gid, f"robot {sender}")
+            return  # the same message again, or refused
+        seen[key] = message.value
         self._put(message, (sender, kind))
 
     # ---- out ----------------------------------------------------------------------

@@ -15,6 +15,9 @@ from camo_core.inputs.files import checked_file, shown
 
 MAX_SEQUENCE = 10_000  # image files of one --images pattern at most
 MAX_VIDEO_BYTES = 1 << 40  # a video is read frame by frame: its size costs no memory
+# Frames of a video whose time passed skipped per call at most: after a stall (a busy machine, a
+# stopped process) a call does not decode seconds of video before its caller's loop turns again.
+SKIPPED_PER_CALL = 64
 
 
 def _quiet_opencv() -> None:
@@ -61,6 +64,22 @@ class VideoSource(Source):
         ok, frame = self.capture.read()
         return frame if ok and frame is not None and frame.size else None
 
+    def _next(self, keep: bool) -> np.ndarray | bool | None:
+        """The next frame (`keep`: decoded into an image; else only grabbed: True), from the
+        start again at the end of a looped video; None, and `ended`, at the end of the video."""
+        for _ in range(2):
+            if keep:
+                frame = self._read()
+                if frame is not None:
+                    return frame
+            elif self.capture.grab():
+                return True
+            if not self.loop:
+                break
+            self.capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
+        self.ended = True
+        return None
+
     def frame(self, now: float) -> np.ndarray | None:
         if self.started is None:
             self.started, self.shown = now, 0
@@ -68,18 +87,16 @@ class VideoSource(Source):
         due = int((now - self.started) * self.fps)
         if due <= self.shown or self.ended:
             return None
-        frame = None
-        while self.shown < due:  # frames whose time passed are skipped, not shown late
-            frame = self._read()
-            if frame is None:
-                if not self.loop:
-                    self.ended = True
-                    return None
-                self.capture.set(cv2.CAP_PROP_POS_FRAMES, 0)
-                frame = self._read()
-                if frame is None:
-                    self.ended = True
-                    return None
+        # Frames whose time passed are skipped (grabbed, not retrieved as images), not shown late:
+        # SKIPPED_PER_CALL at most, after which the call shows the frame it reached and the next
+        # call goes on from there, in order, until the video has caught up with its time.
+        last = min(due, self.shown + SKIPPED_PER_CALL + 1)
+        while self.shown < last - 1:
+            if self._next(keep=False) is None:
+                return None
+            self.shown += 1
+        frame = self._next(keep=True)
+        if frame is not None:
             self.shown += 1
         return frame
 

@@ -1,0 +1,49 @@
+"""A projector's stream sources without ROS: a video behind its time catches up a bounded number
+of frames a call, in order."""
+
+import cv2
+import numpy as np
+
+from camo_projector.sources import SKIPPED_PER_CALL, VideoSource
+
+FRAMES = 2 * SKIPPED_PER_CALL + 10
+
+
+def numbered_video(path, fps: float = 25.0) -> str:
+    """A video whose frame k says k in two greys, 40 + 10 x its base-16 digits: the left half's
+    the high digit, the right half's the low one (MJPG keeps a uniform grey within a level or
+    two)."""
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, (32, 16))
+    for k in range(FRAMES):
+        image = np.full((16, 32, 3), 40 + 10 * (k // 16), np.uint8)
+        image[:, 16:] = 40 + 10 * (k % 16)
+        writer.write(image)
+    writer.release()
+    return str(path)
+
+
+def number(frame: np.ndarray | None) -> int | None:
+    if frame is None:
+        return None
+    high, low = (round((float(frame[4:12, x : x + 8].mean()) - 40) / 10) for x in (4, 20))
+    return 16 * high + low
+
+
+def test_a_video_behind_its_time_skips_a_bounded_number_of_frames_a_call_in_order(tmp_path):
+    video = VideoSource(numbered_video(tmp_path / "clip.avi"), fps=25.0)
+    assert number(video.frame(0.0)) == 0
+    late = (FRAMES - 5) / 25.0  # the source was not asked for that long: frames are due
+    shown = [number(video.frame(late)) for _ in range(4)]
+    assert shown == [SKIPPED_PER_CALL + 1, 2 * SKIPPED_PER_CALL + 2, FRAMES - 5, None]
+    assert number(video.frame(late + 1 / 25.0)) == FRAMES - 4  # caught up: frame by frame
+    video.close()
+
+
+def test_a_video_plays_each_frame_in_its_time_and_a_looped_one_starts_again(tmp_path):
+    path = numbered_video(tmp_path / "clip.avi")
+    for loop, after in ((False, [None, None]), (True, [0, 1])):
+        video = VideoSource(path, fps=25.0, loop=loop)
+        shown = [number(video.frame(0.0))]
+        shown += [number(video.frame((k + 0.5) / 25.0)) for k in range(1, FRAMES + 2)]
+        assert shown == [*range(FRAMES), *after] and video.ended is not loop
+        video.close()
