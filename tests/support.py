@@ -320,11 +320,11 @@ BAG_OPTIONS = [
 
 
 class FixedSensor:
-    def __init__(self, value: float) -> None:
-        self.value = value
+    def __init__(self, value: float, rgb: tuple[float, float, float] | None = None) -> None:
+        self.value, self.rgb = value, rgb
 
     def read(self) -> Reading:
-        return Reading(self.value)
+        return Reading(self.value, rgb=self.rgb)
 
     def next_round(self, frame: int) -> None:
         pass
@@ -337,12 +337,20 @@ class Bus:
     """An in-memory transport that delivers every message in a random order, and keeps every
     report its robots make (`reports`, in the order made)."""
 
-    def __init__(self, params: CamoParams, image_grid: np.ndarray, seed: int) -> None:
+    def __init__(
+        self,
+        params: CamoParams,
+        image_grid: np.ndarray,
+        seed: int,
+        colour_grid: np.ndarray | None = None,
+    ) -> None:
+        """`colour_grid`: the robots' colours (rows x cols x 3), besides their greys."""
         self.random = random.Random(seed)
         self.robots = {}
         for i in range(params.rows):
             for j in range(params.cols):
-                p = StepProtocol(params, i, j, FixedSensor(float(image_grid[i, j])))
+                rgb = None if colour_grid is None else tuple(colour_grid[i, j].tolist())
+                p = StepProtocol(params, i, j, FixedSensor(float(image_grid[i, j]), rgb))
                 self.robots[p.id] = p
         self.listeners: dict[tuple[int, str], list[StepProtocol]] = {}
         for p in self.robots.values():

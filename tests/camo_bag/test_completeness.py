@@ -318,3 +318,72 @@ def test_a_long_continuous_runs_ledger_holds_a_few_numbers_a_round():
     assert ledger.gaps() == [
         "round 20: 16 robots lack hellos, colours, votes, states, done reports: 0-15"
     ]
+
+
+# What camo_msgs/StatusArray held before the swarm reported colours (--colours).
+COLOUR_FIELDS = ("sensed_rgb_count", "sensed_rgb", "palette_rgb_count", "palette_rgb")
+COLOUR_FIELDS += ("shades_count", "shades")
+
+
+def before_colours(source, target) -> None:
+    """The bag as camo recorded it before StatusArray had its colour columns: the status topic
+    with that older definition, its arrays written without those fields."""
+    from mcap_ros2._dynamic import serialize_dynamic
+    from rclpy.serialization import deserialize_message
+
+    from camo_bag.msgdefs import SEPARATOR
+    from camo_msgs.msg import StatusArray
+
+    summary = read_summary(source)
+    status = next(t for t in summary.topics if t.type.endswith("StatusArray"))
+    main, _, rest = status.definition.partition(SEPARATOR)
+    kept = [
+        line
+        for line in main.splitlines()
+        if not (line.split()[1:2] and line.split()[1] in COLOUR_FIELDS)
+    ]
+    definition = "\n".join(kept) + "\n" + SEPARATOR + rest
+    encode = serialize_dynamic("camo_msgs/msg/StatusArray", definition)[
+        "camo_msgs/msg/StatusArray"
+    ]
+
+    def older(topic, data):
+        if topic != status.name:
+            return [data]
+        msg = deserialize_message(data, StatusArray)
+        fields = {
+            name: getattr(msg, name)
+            for name in StatusArray.get_fields_and_field_types()
+            if name not in COLOUR_FIELDS
+        }
+        return [encode(fields)]
+
+    writer = BagWriter(target, library="test")
+    for topic in summary.topics:
+        text = definition if topic.name == status.name else topic.definition
+        writer.add_topic(TopicInfo(topic.name, topic.type, topic.qos, ""), text)
+    for message in read_messages(source):
+        for data in older(message.topic, message.data):
+            writer.write(message.topic, data, message.log_time, message.publish_time)
+    writer.close()
+
+
+@pytest.mark.slow(SWARM)
+def test_a_bag_of_statuses_without_colour_columns_renders_and_replays_as_the_installed_type(
+    recorded, tmp_path
+):
+    from support import domain
+
+    bag, live = recorded
+    before_colours(bag, tmp_path / "older")
+    status = next(t for t in read_summary(tmp_path / "older").topics if t.name.endswith("/status"))
+    assert "float64[] sensed_rgb" not in status.definition
+    rendered = bag_tool("render", str(tmp_path / "older"), "--out", str(tmp_path / "r"))
+    assert rendered.returncode == 0, rendered.stderr
+    summary = strict_json(tmp_path / "r" / "summary.json")
+    assert summary["final"] == live["final"] and summary["display"] == live["display"]
+    assert summary["colour_distance"] is None  # the older statuses never said what they sensed
+    replay = bag_tool("replay", str(tmp_path / "older"), "--rate", "50",
+                      "--topics", status.name, "--domain-id", str(domain()))  # fmt: skip
+    assert replay.returncode == 0, replay.stderr
+    assert f"published {status.count} messages on 1 topics" in replay.stderr

@@ -868,6 +868,29 @@ def test_the_swarm_with_orientation_any_threshold_auto_and_levels_equals_the_sim
 
 
 @pytest.mark.slow(SWARM)
+def test_the_swarm_with_colours_and_loss_equals_the_simulator_live_and_rendered(tmp_path):
+    import cv2
+    from skimage import data
+    from support import bag_tool
+
+    image = tmp_path / "coffee.png"
+    cv2.imwrite(str(image), cv2.cvtColor(data.coffee(), cv2.COLOR_RGB2BGR))
+    args = ["--image", str(image), "--rows", "10", "--cols", "12", "--colours", "4",
+            "--rho-comm", "0.2", "--rho-meas", "0.1", "--seed", "4"]  # fmt: skip
+    run = camo_run(*args, "--procs", "2", "--out", str(tmp_path / "run"),
+                   "--record", str(tmp_path / "bag"))  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    sim = run_camo("sim", *args, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    ran = assert_like_sim(tmp_path / "run", tmp_path / "sim")
+    shown = {tuple(c) for row in ran["display"] for c in row}
+    assert len(shown) > 2 and any(len(set(c)) > 1 for c in shown)  # colours, not greys
+    rendered = bag_tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
+    assert rendered.returncode == 0, rendered.stderr
+    assert_like_sim(tmp_path / "rendered", tmp_path / "sim")
+
+
+@pytest.mark.slow(SWARM)
 def test_the_swarm_on_a_hexagonal_layout_with_levels_equals_the_simulator(tmp_path):
     from support import bag_tool
 

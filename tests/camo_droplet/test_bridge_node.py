@@ -42,7 +42,11 @@ def tinted_forest(path) -> np.ndarray:
     return image
 
 
-def bridged_run(tmp_path, emulator, faults: list[Faults]) -> list[DropletEmulator]:
+def bridged_run(
+    tmp_path, emulator, faults: list[Faults], extra: tuple[str, ...] = ()
+) -> list[DropletEmulator]:
+    """A bridged swarm equal to the simulator given the Droplets' readings (`extra`: more of
+    the run's options); each Droplet's LED shows what its robot shows."""
     image = tinted_forest(tmp_path / "tinted.png")
     (tmp_path / "cal.yaml").write_text("gain: 1.1\noffset: -5\n")
     calibration = Calibration.from_yaml(tmp_path / "cal.yaml")
@@ -57,15 +61,15 @@ def bridged_run(tmp_path, emulator, faults: list[Faults]) -> list[DropletEmulato
         "0.1",
         "--seed",
         "3",
+        *extra,
     ]
     emulators, overrides = [], []
     for (row, col), fault in zip(CELLS, faults, strict=False):
         rgb = emulated_rgb(image, 8, 8, row, col)
         emulators.append(emulator(rgb=rgb, faults=fault))
-        overrides += [
-            "--sensed",
-            f"{row},{col}={calibration.apply(rgb_to_gray(*rgb, 'droplet'))!r}",
-        ]
+        grey = calibration.apply(rgb_to_gray(*rgb, "droplet"))
+        colour = ",".join(repr(calibration.apply(c)) for c in rgb)  # calibrated as the grey
+        overrides += ["--sensed", f"{row},{col}={grey!r}/{colour}"]
     bridges = [
         x
         for (row, col), em in zip(CELLS, emulators, strict=False)
@@ -84,7 +88,10 @@ def bridged_run(tmp_path, emulator, faults: list[Faults]) -> list[DropletEmulato
     assert sim.returncode == 0, sim.stderr
     run_summary = assert_like_sim(tmp_path / "run", tmp_path / "sim")
     for (row, col), em in zip(CELLS, emulators, strict=False):
-        assert em.led == (LED_ON if run_summary["final"][row][col] == 1 else LED_OFF)
+        if "--colours" in extra:  # the palette colour its robot shows
+            assert em.led == tuple(run_summary["display"][row][col])
+        else:
+            assert em.led == (LED_ON if run_summary["final"][row][col] == 1 else LED_OFF)
     return emulators
 
 
@@ -158,6 +165,11 @@ def test_bridged_droplets_give_the_simulators_states_for_their_readings(tmp_path
 
 
 @pytest.mark.slow(COMPUTE)
+def test_a_bridged_droplets_led_shows_its_palette_colour(tmp_path, emulator):
+    bridged_run(tmp_path, emulator, [Faults(), Faults()], ("--colours", "3"))
+
+
+@pytest.mark.slow(COMPUTE)
 def test_bridged_run_finishes_through_garbage_and_a_reconnect(tmp_path, emulator):
     emulators = bridged_run(
         tmp_path,
@@ -191,6 +203,7 @@ def test_bad_bridge_options_are_one_line_errors(tmp_path):
         (["orientation:=any"], "orientation any (--orientation any)"),
         (["threshold_auto:=true", "orientation:=any"], "threshold_auto (--threshold auto) or"),
         (["levels:=4"], "levels 4 (--levels 4)"),
+        (["colours:=4"], "colours 4 (--colours 4)"),
     ],
 )
 def test_monitor_mode_names_the_options_the_firmware_does_not_have(options, named):

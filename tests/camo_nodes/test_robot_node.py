@@ -167,3 +167,23 @@ def test_a_params_file_key_naming_the_robot_applies_to_it(tmp_path):
     out = robot_node("--params-file", str(params))
     # Its own key's value (not robot_0_0's) reaches the checks.
     assert out.returncode == 2 and "rho_comm must be" in out.stderr and "2.0" in out.stderr
+
+
+def test_a_process_on_a_layout_senses_each_robots_grey_and_colour_round_its_position():
+    import numpy as np
+
+    from camo_core.algorithm.layout import colours_at, layout_for, sense_at
+    from camo_core.algorithm.params import CamoParams
+    from camo_core.algorithm.sensing import ProjectedSensor, Projection
+    from camo_nodes.robot_node import projected_on
+
+    params = CamoParams(rows=4, cols=5, layout="hex", orientation="any", colours=3)
+    image = np.random.default_rng(1).integers(0, 256, (60, 80, 3)).astype(np.uint8)
+    projection = Projection(params.rows, params.cols, params.profile, *projected_on(params))
+    projection.add(image)
+    layout = layout_for(params)
+    greys, colours = sense_at(image, layout), colours_at(image, layout)
+    for robot in range(params.count):
+        reading = ProjectedSensor(projection, *divmod(robot, params.cols)).read()
+        assert reading.value == greys[robot] and reading.rgb == tuple(colours[robot])
+    assert not np.allclose(colours[:, 0], colours[:, 2])  # a colour image's channels differ

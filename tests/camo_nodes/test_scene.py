@@ -105,3 +105,18 @@ def test_on_a_layout_each_cube_stands_at_its_position_in_its_palettes_grey():
     greys = [c.r for c in cubes.colors]
     assert np.allclose(greys[:3], [20 / 255, 120 / 255, 230 / 255])
     assert np.isclose(greys[3], 100 / 255)  # no state yet: its sensed grey
+
+
+def test_with_colours_each_cube_shows_its_palette_colour_and_before_that_its_sensed_colour():
+    params = CamoParams(rows=1, cols=3, colours=2)
+    rec = RoundRecord(params)
+    rec.sensed[:] = 100.0
+    rec.sensed_rgb[:] = [[200.0, 50.0, 25.0]] * 3
+    rec.state[:] = [1, 0, -1]
+    rec.palette_rgb[:] = [[[10, 80, 20], [240, 200, 100]]] * 3
+    rec.shades[:] = [0, 1]
+    cubes = scene.markers(rec, np.zeros(3, bool), set(), Time()).markers[0]
+    rgb = [(c.r, c.g, c.b) for c in cubes.colors]
+    assert np.allclose(rgb[0], np.array([10, 80, 20]) / 255)  # on: its darker colour
+    assert np.allclose(rgb[1], np.array([240, 200, 100]) / 255)  # off: its lighter colour
+    assert np.allclose(rgb[2], np.array([200, 50, 25]) / 255)  # no state yet: what it sensed

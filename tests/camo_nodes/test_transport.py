@@ -15,9 +15,9 @@ from camo_nodes.topics.names import RunTopics
 from camo_nodes.transport import (
     MAX_STATUS_BYTES,
     STATUS_PERIOD,
-    STATUS_ROW_BYTES,
     Statuses,
     Transport,
+    row_bytes,
 )
 
 
@@ -34,6 +34,7 @@ def report(robot: int, phase: int = CONSENSUS, step: int = 1, steps: int = 0) ->
     return SimpleNamespace(
         sender_id=robot, phase=phase, step=step, sensed=9.0, p=(1.0, 0.0, 0.0),
         p_from=step, p_trace=(1.0, 0.0, 0.0) * steps, state_trace=(), silent=(), palette=(),
+        sensed_rgb=(9.0, 9.0, 9.0), palette_rgb=(), shades=(),
     )  # fmt: skip
 
 
@@ -41,7 +42,7 @@ def test_thousands_of_reports_go_out_as_a_few_arrays_and_no_more_often_than_the_
     writer = Writer()
     statuses = Statuses(writer, "w")
     now = time.monotonic()
-    rows = MAX_STATUS_BYTES // STATUS_ROW_BYTES
+    rows = MAX_STATUS_BYTES // row_bytes(report(0))
     for robot in range(2 * rows + 5):
         statuses.add(report(robot))
     assert [len(m.sender_id) for m in writer.sent] == [rows, rows]

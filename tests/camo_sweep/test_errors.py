@@ -48,6 +48,29 @@ def test_errors_writes_csv_figure_and_the_table_they_come_from(tmp_path):
 
 
 @pytest.mark.slow(COMPUTE)
+def test_errors_with_colours_draws_the_colour_distance_from_the_tables_column(tmp_path):
+    from skimage import data
+
+    image = tmp_path / "chelsea.png"
+    cv2.imwrite(str(image), cv2.cvtColor(data.chelsea(), cv2.COLOR_RGB2BGR))
+    out = errors("--image", str(image), "--colours", "3", "--trials", "2", "--rhos", "0,0.3",
+                 "--out", str(tmp_path / "c"))  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    rows = list(csv.DictReader((tmp_path / "c" / "errors.csv").open()))
+    table = sweep_table(tmp_path / "c")
+    assert all(t["colour_distance"] > 0 for t in table)
+    both = [t for t in table if t["rho_meas"] == t["rho_comm"] == 0.3]
+    said = next(r for r in rows if r["mode"] == "both" and r["rho"] == "0.3")
+    assert float(said["mean_colour_distance"]) == sum(t["colour_distance"] for t in both) / 2
+    # Four panels: the paper's two, the grey distance and the colour distance.
+    figure = cv2.imread(str(tmp_path / "c" / "errors.png"))
+    plain = errors("--image", str(image), "--trials", "2", "--rhos", "0,0.3",
+                   "--out", str(tmp_path / "p"))  # fmt: skip
+    assert plain.returncode == 0, plain.stderr
+    assert figure.shape[1] > cv2.imread(str(tmp_path / "p" / "errors.png")).shape[1]
+
+
+@pytest.mark.slow(COMPUTE)
 def test_errors_rejects_bad_rhos_and_a_used_folder(tmp_path):
     out = errors("--rhos", "0,2", "--out", str(tmp_path / "a"))
     assert out.returncode == 2 and "probabilities" in out.stderr

@@ -15,19 +15,19 @@ import struct
 from dataclasses import dataclass
 from pathlib import Path
 
-from mcap.records import Schema
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from camo_bag.container import BagError, BagMessage, BagSummary, damaged
 from camo_bag.ledger import ARRAY_KINDS, COLUMN_KINDS, SINGLE_KINDS, Ledger
 from camo_bag.loader import Bag, open_bag
-from camo_bag.msgdefs import full_name, message_class, message_definition
+from camo_bag.msgdefs import full_name, message_class
+from camo_bag.upgrade import installed_decoder
 from camo_core.algorithm.protocol import DONE
 from camo_core.algorithm.run_setup import RunSetup, SetupError
 from camo_core.algorithm.status_rows import rows_of_message
 from camo_core.exceptions import CamoError
-from camo_msgs.msg import RobotStatus, StatusArray
+from camo_msgs.msg import RobotStatus
 from camo_nodes.topics.images import frame_number
 from camo_nodes.topics.names import PARAMS_SUFFIX
 from camo_nodes.topics.robot_messages import senders_rounds_steps
@@ -88,19 +88,15 @@ def run_topics_of(summary: BagSummary) -> tuple[str, str, str, str]:
 
 
 def status_decoder(summary: BagSummary, topic: str):
-    """Statuses decode with the installed RobotStatus when the bag's schema is its, else (a bag
-    of an older camo) with the schema the bag holds; fields it lacks read as empty."""
+    """Statuses as the installed StatusArray or RobotStatus: directly when the bag's schema is
+    the installed one, else (a bag of an older camo) through the schema the bag holds, fields it
+    lacks read as empty (upgrade.py)."""
     info = next((t for t in summary.topics if t.name == topic), None)
-    if info is not None and full_name(info.type) == "camo_msgs/msg/StatusArray":
-        return lambda data: deserialize_message(data, StatusArray)
-    if info is None or info.definition == message_definition("camo_msgs/msg/RobotStatus"):
+    if info is None:
         return lambda data: deserialize_message(data, RobotStatus)
-    from mcap_ros2.decoder import DecoderFactory
-
-    schema = Schema(id=1, name=info.type, encoding="ros2msg", data=info.definition.encode())
     try:
-        return DecoderFactory().decoder_for("cdr", schema)
-    except Exception as exc:  # noqa: BLE001 - a damaged schema: its parser raises anything
+        return installed_decoder(info)
+    except ValueError as exc:
         raise damaged(summary.path, exc, f"holds an unreadable schema for {topic}") from None
 
 

@@ -185,7 +185,7 @@ def render(path: str | Path | Bag, out: Path, partial: bool = False) -> list[dic
         summaries.append(write_round(result, image, folder, title, lacks or None, extra, marks))
         snapshots = Snapshots.of_record(record)
         write_animation(
-            snapshots, record.sensed, ~record.finished, folder / "run.gif", title, marks
+            snapshots, record.sensed_shown, ~record.finished, folder / "run.gif", title, marks
         )
         figures.timeline_figure(
             record.timeline(),

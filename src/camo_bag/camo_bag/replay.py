@@ -18,12 +18,12 @@ import time
 import rclpy
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 
 from camo_bag import msgdefs, qos_yaml
 from camo_bag.container import TopicInfo
 from camo_bag.loader import Bag, open_bag
+from camo_bag.upgrade import installed, installed_decoder
 from camo_core.cli.options import Parser
 from camo_core.cli.progress import ProgressBar
 from camo_core.exceptions import CamoError, UsageError
@@ -107,7 +107,10 @@ def replay(args, bag: Bag, stop: StopFlag) -> int:
             )
             for t in topics
         }
-        classes = {t.name: msgdefs.message_class(t.type) for t in topics}
+        # A topic of an older camo's type is decoded through the bag's schema and published as
+        # the installed type (upgrade.py); the others as they were recorded.
+        decoders = {t.name: installed_decoder(t) for t in topics}
+        upgraded = {t.name for t in topics if not installed(t)}
         total = sum(t.count for t in topics)
         passes = 0
         sleep_until(time.monotonic() + args.delay, stop)
@@ -119,11 +122,14 @@ def replay(args, bag: Bag, stop: StopFlag) -> int:
                 if stop:
                     break
                 try:  # subscribers would fail on it: left out, and counted
-                    deserialize_message(message.data, classes[message.topic])
+                    decoded = decoders[message.topic](message.data)
                 except Exception:  # noqa: BLE001 - bytes that do not decode as their type
                     bag.reject(message)
                     continue
-                publishers[message.topic].publish(message.data)
+                if message.topic in upgraded:
+                    publishers[message.topic].publish(decoded)
+                else:
+                    publishers[message.topic].publish(message.data)
                 bar.update(note=message.topic)
             passes += 1
             if not args.loop:

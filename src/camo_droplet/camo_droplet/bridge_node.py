@@ -225,6 +225,7 @@ def firmware_lacks(params: CamoParams) -> list[str]:
     paper = CamoParams()
     beyond = {"threshold_auto": params.threshold_auto, "orientation": params.orientation}
     beyond["levels"] = params.levels
+    beyond["colours"] = params.colours
     lacks = []
     for name, value in beyond.items():
         if value != getattr(paper, name):

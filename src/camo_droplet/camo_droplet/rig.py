@@ -88,7 +88,9 @@ class DropletSensor:
             return None
         grey = self.calibration.apply(rgb_to_gray(r, g, b, self.profile))
         self.reconnector.logger.info(f"read r {r} g {g} b {b}: grey {grey:g}")
-        return Reading(grey, real=True)
+        # Its colour, calibrated channel by channel as its grey is (--colours shows it).
+        rgb = (self.calibration.apply(r), self.calibration.apply(g), self.calibration.apply(b))
+        return Reading(grey, real=True, rgb=rgb)
 
     def next_round(self, frame: int) -> None:
         """The projector changed what the Droplet sees: nothing to do here."""
@@ -98,8 +100,9 @@ class DropletSensor:
 
 
 class DropletLed:
-    """The formation state on the LED (`on` when the state is 1). keep() is called periodically:
-    it learns the Droplet's id once and sets a colour that could not be set earlier."""
+    """The formation state on the LED (`on` when the state is 1; with --colours the palette
+    colour the robot shows). keep() is called periodically: it learns the Droplet's id once and
+    sets a colour that could not be set earlier."""
 
     def __init__(
         self,
@@ -133,8 +136,8 @@ class DropletLed:
         except CamoError as exc:
             self.reconnector.logger.warning(str(exc))
 
-    def show(self, state: int) -> None:
-        self.wanted = self.colors[int(state)]
+    def show(self, state: int, colour: tuple[int, int, int] | None = None) -> None:
+        self.wanted = self.colors[int(state)] if colour is None else colour
         if self.wanted != self.shown:
             self.keep()
 

@@ -363,7 +363,7 @@ class MonitorNode(Node):
             marks,
         )
         snapshots = Snapshots.of_record(record)
-        write_animation(snapshots, record.sensed, dead, folder / "run.gif", title, marks)
+        write_animation(snapshots, record.sensed_shown, dead, folder / "run.gif", title, marks)
         return summary
 
     def _view(self) -> tuple[int, RoundRecord]:

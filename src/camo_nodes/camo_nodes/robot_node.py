@@ -22,7 +22,7 @@ import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from camo_core.algorithm.layout import layout_for, sense_at
+from camo_core.algorithm.layout import colours_at, layout_for, sense_at
 from camo_core.algorithm.params import MAX_SIDE, CamoParams, ParameterError
 from camo_core.algorithm.protocol import DUE_ONLY_LATER, StepProtocol
 from camo_core.algorithm.robot_io import NOTHING, Display, Output, Sensor
@@ -155,13 +155,16 @@ ROBOT_PARAMETERS = (CamoParams, ProtocolParams, RobotCell, JoinParams)
 
 
 def projected_on(params: CamoParams):
-    """How a projected image becomes the robots' greys: None (block means), or on a layout the
-    means round their positions."""
+    """How a projected image becomes the robots' greys and colours: (None, None) for block
+    means, or on a layout the means round their positions."""
     if not params.layout:
-        return None
+        return None, None
     layout = layout_for(params)
     shape = (params.rows, params.cols)
-    return lambda image: sense_at(image, layout, params.profile).reshape(shape)
+    return (
+        lambda image: sense_at(image, layout, params.profile).reshape(shape),
+        lambda image: colours_at(image, layout).reshape((*shape, 3)),
+    )
 
 
 @dataclass(frozen=True)
@@ -233,7 +236,7 @@ def host_robots(
     node = host_node(topics)
     protocol = protocol.for_swarm(params.count)
     transport = Transport(node, params, topics, tiles, setup, protocol.step_timeout)
-    projection = Projection(params.rows, params.cols, params.profile, projected_on(params))
+    projection = Projection(params.rows, params.cols, params.profile, *projected_on(params))
     robots, hardware = [], []
     participants = Participants(node.context)
     for cell in sorted(transport.hosted):

@@ -3,8 +3,9 @@ robot (diagnostic_msgs), both built from what the monitor has heard.
 
 The scene is two markers in the frame `map` (RViz's default fixed frame; Foxglove's 3D panel
 follows it): a cube per robot at its grid position (column along x, row down along -y, one
-`SPACING` apart), coloured by the grey it shows (its state once it draws the pattern, its
-sensed grey before, mid-grey and faint until it reports), and a red outline around each dead
+`SPACING` apart), coloured as it shows (its state once it draws the pattern, in its
+palette's grey or colour with --levels or --colours; what it sensed before; mid-grey and faint
+until it reports), and a red outline around each dead
 robot and a blue one around each robot that is a real Droplet. A cube list and a line list
 keep it two markers at any swarm size.
 
@@ -23,7 +24,7 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from camo_core.algorithm import levels
+from camo_core.algorithm import colours, levels
 from camo_core.algorithm.layout import layout_for
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import PHASE_NAMES
@@ -46,17 +47,28 @@ def position(robot: int, params: CamoParams, z: float = 0.0) -> Point:
     return Point(x=col * SPACING, y=-row * SPACING, z=z)
 
 
-def shown_grey(record: RoundRecord) -> tuple[np.ndarray, np.ndarray]:
-    """Each robot's grey (0..1) and opacity: its state's colour once it has one (on = dark), its
-    sensed grey before, a faint mid-grey until it reports."""
-    sensed = np.nan_to_num(record.sensed, nan=128.0) / 255.0
-    if record.params.levels:  # the palette's grey of the layers on
-        shown = levels.shown_grid(np.maximum(record.state, 0), record.palette) / 255.0
-        grey = np.where(record.state >= 0, shown, sensed)
+def shown_colour(record: RoundRecord) -> tuple[np.ndarray, np.ndarray]:
+    """Each robot's colour (robots x 3, 0..1) and opacity: what its state shows once it has one
+    (on = dark; with --levels its palette's grey, with --colours its palette's colour), what it
+    sensed before (its colour with --colours, else its grey), a faint mid-grey until it
+    reports."""
+    state = record.state
+    sensed = np.nan_to_num(record.sensed, nan=128.0)
+    sensed_rgb = np.repeat(sensed[:, None], 3, axis=1)
+    if record.params.colours:  # the colours robots sensed, then their palettes' colours
+        known = ~np.isnan(record.sensed_rgb).any(axis=1)
+        sensed_rgb[known] = record.sensed_rgb[known]
+        shown = colours.shown_grid(np.maximum(state, 0), record.shades, record.palette_rgb)
+        rgb = np.where((state >= 0)[:, None], shown, sensed_rgb)
     else:
-        grey = np.where(record.state == 1, 0.0, np.where(record.state == 0, 1.0, sensed))
-    alpha = np.where(np.isnan(record.sensed) & (record.state < 0), 0.3, 1.0)
-    return grey, alpha
+        if record.params.levels:  # the palette's grey of the layers on
+            shown = levels.shown_grid(np.maximum(state, 0), record.palette)
+            grey = np.where(state >= 0, shown, sensed)
+        else:
+            grey = np.where(state == 1, 0.0, np.where(state == 0, 255.0, sensed))
+        rgb = np.repeat(grey[:, None], 3, axis=1)
+    alpha = np.where(np.isnan(record.sensed) & (state < 0), 0.3, 1.0)
+    return rgb / 255.0, alpha
 
 
 def _outline(robot: int, params: CamoParams) -> list[Point]:
@@ -69,7 +81,7 @@ def _outline(robot: int, params: CamoParams) -> list[Point]:
 
 
 def markers(record: RoundRecord, dead: np.ndarray, bridged: set[int], stamp: Time) -> MarkerArray:
-    grey, alpha = shown_grey(record)
+    rgb, alpha = shown_colour(record)
     cubes = Marker(ns="camo/robots", id=0, type=Marker.CUBE_LIST, action=Marker.ADD)
     cubes.header.frame_id, cubes.header.stamp = FRAME, stamp
     cubes.pose.orientation.w = 1.0
@@ -77,8 +89,8 @@ def markers(record: RoundRecord, dead: np.ndarray, bridged: set[int], stamp: Tim
     cubes.scale.z = HEIGHT
     cubes.points = [position(i, record.params, HEIGHT / 2) for i in range(record.params.count)]
     cubes.colors = [
-        ColorRGBA(r=float(g), g=float(g), b=float(g), a=float(a))
-        for g, a in zip(grey, alpha, strict=True)
+        ColorRGBA(r=r, g=g, b=b, a=a)
+        for (r, g, b), a in zip(rgb.tolist(), alpha.tolist(), strict=True)
     ]
     outlines = Marker(ns="camo/outlines", id=1, type=Marker.LINE_LIST, action=Marker.ADD)
     outlines.header.frame_id, outlines.header.stamp = FRAME, stamp

@@ -127,7 +127,8 @@ def times_a_round(report: Report) -> bool:
 def row_bytes(report: Report) -> int:
     """A report's size in a StatusArray, about."""
     traces = 8 * len(report.p_trace) + len(report.state_trace)
-    return STATUS_ROW_BYTES + traces + 4 * len(report.silent) + len(report.palette)
+    lists = 4 * len(report.silent) + len(report.palette) + 8 * len(report.sensed_rgb)
+    return STATUS_ROW_BYTES + traces + lists + len(report.palette_rgb) + len(report.shades)
 
 
 class Statuses:

@@ -46,6 +46,7 @@ CSV_COLUMNS = (
     "p90_diff",
     "correct_rate",
     "mean_grey_distance",
+    "mean_colour_distance",
 )
 
 
@@ -60,6 +61,8 @@ class ErrorPoint:
     p90_diff: float
     correct_rate: float
     mean_grey_distance: float  # greys shown against greys sensed (RunResult.grey_distance)
+    # Colours shown against colours sensed (RunResult.colour_distance, mean CIEDE2000).
+    mean_colour_distance: float
 
     def as_row(self) -> dict:
         return {k: getattr(self, k) for k in CSV_COLUMNS}
@@ -76,6 +79,8 @@ def error_spec(args, rhos: list[float]) -> SweepSpec:
         options["orientation"] = args.orientation
     if args.levels:
         options["levels"] = args.levels
+    if args.colours:
+        options["colours"] = args.colours
     for name in ("consensus_steps", "formation_steps", "contrast"):
         if getattr(args, name) is not None:
             options[name] = getattr(args, name)
@@ -86,7 +91,7 @@ def error_spec(args, rhos: list[float]) -> SweepSpec:
 def points_from(folder: Path, rhos: list[float], spec: SweepSpec) -> list[ErrorPoint]:
     """The points of `spec`'s trials (a folder run with more --trials before holds more)."""
     columns = ["trial_id", "rho_meas", "rho_comm", "diff_cells", "correct", "status"]
-    columns.append("grey_distance")
+    columns += ["grey_distance", "colour_distance"]
     data = read(folder, columns=columns).to_pydict()
     meas, comm = np.array(data["rho_meas"]), np.array(data["rho_comm"])
     ids = {t.trial_id for t in spec.trial_list()}
@@ -95,6 +100,7 @@ def points_from(folder: Path, rhos: list[float], spec: SweepSpec) -> list[ErrorP
     diff = np.array([np.nan if d is None else d for d in data["diff_cells"]], dtype=float)
     correct = np.array([bool(c) for c in data["correct"]])
     grey = np.array([np.nan if g is None else g for g in data["grey_distance"]], dtype=float)
+    colour = np.array([np.nan if c is None else c for c in data["colour_distance"]], dtype=float)
     points = []
     for mode in MODES:
         for rho in rhos:
@@ -119,6 +125,7 @@ def points_from(folder: Path, rhos: list[float], spec: SweepSpec) -> list[ErrorP
                     float(np.percentile(values, 90)),
                     float(np.mean(correct[keep])),
                     float(np.mean(grey[keep])),
+                    float(np.mean(colour[keep])),
                 )
             )
     return points
@@ -203,6 +210,7 @@ def run(argv: list[str] | None) -> int:
         folder / "errors.png",
         title=f"{label}, {params.rows}x{params.cols} robots, {args.trials} trials per point",
         cells=params.count,
+        colours=bool(params.colours),
     )
     print(f"wrote {folder}/errors.csv, errors.png and the trials' table trials/")
     return 0

@@ -19,6 +19,7 @@ from camo_sweep.table import read
 METRICS = (
     "diff_cells",
     "grey_distance",
+    "colour_distance",
     "correct",
     "votes_horizontal",
     "votes_vertical",

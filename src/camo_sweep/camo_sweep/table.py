@@ -52,6 +52,7 @@ def schema(spec: SweepSpec) -> pa.Schema:
         pa.field("correct", pa.bool_()),
         pa.field("diff_cells", pa.int64()),
         pa.field("grey_distance", pa.float64()),
+        pa.field("colour_distance", pa.float64()),
         *(pa.field(f"votes_{name}", pa.int64()) for name in PATTERN_NAMES),
         *(pa.field(f"mean_p_{name}", pa.float64()) for name in PATTERN_NAMES),
         pa.field("run_s", pa.float64()),

@@ -20,7 +20,7 @@ import pyarrow as pa
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import SUMMARY_KEYS, RunResult, mean_p, pattern_of
 from camo_core.algorithm.rules import PATTERN_NAMES
-from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.sensing import sense_colours, sense_image
 from camo_core.algorithm.simulator import simulate
 from camo_core.cli.options import image_from, params_from
 from camo_core.exceptions import CamoError, UsageError
@@ -37,6 +37,7 @@ RESULT_COLUMNS = (
     "correct",
     "diff_cells",
     "grey_distance",
+    "colour_distance",
     *(f"votes_{name}" for name in PATTERN_NAMES),
     *(f"mean_p_{name}" for name in PATTERN_NAMES),
 )
@@ -49,9 +50,14 @@ class Reference:
     pattern: str
     final: np.ndarray  # rows x cols uint8
     # The background's block means before noise, read where the sweep runs: a worker on
-    # another machine never opens the image (its path is the driver's).
+    # another machine never opens the image (its path is the driver's); and its blocks' colours.
     raw: np.ndarray
+    raw_colours: np.ndarray
     image: str | None  # the image's absolute path there, for a swarm trial's command line
+
+    @property
+    def sensed(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.raw, self.raw_colours
 
 
 def namespace(options: dict[str, Any], seed: int) -> argparse.Namespace:
@@ -72,14 +78,14 @@ def reference_options(options: dict[str, Any]) -> dict[str, Any]:
 def _sensed(
     source: tuple[str | None, str | None, float | None], rows: int, cols: int, profile: str
 ):
-    """The block means of a background (image, pattern, contrast), once per worker (a sweep
-    reuses a few backgrounds)."""
+    """The block means and colours of a background (image, pattern, contrast), once per worker
+    (a sweep reuses a few backgrounds)."""
     image, pattern, contrast = source
     args = argparse.Namespace(
         image=image, pattern=pattern, contrast=contrast, default_pattern="forest"
     )
     image, _ = image_from(args)
-    return sense_image(image, rows, cols, profile)
+    return sense_image(image, rows, cols, profile), sense_colours(image, rows, cols)
 
 
 def background_of(args: argparse.Namespace) -> tuple[str | None, str | None, float | None]:
@@ -87,15 +93,15 @@ def background_of(args: argparse.Namespace) -> tuple[str | None, str | None, flo
 
 
 def simulate_options(
-    options: dict[str, Any], seed: int, raw: np.ndarray | None = None
+    options: dict[str, Any], seed: int, sensed: tuple[np.ndarray, np.ndarray] | None = None
 ) -> RunResult:
-    """The trial's RunResult (`raw`: its background's block means, if known)."""
+    """The trial's RunResult (`sensed`: its background's block means and colours, if known)."""
     args = namespace(options, seed)
     params = params_from(args)
-    if raw is None:
-        raw = _sensed(background_of(args), params.rows, params.cols, params.profile)
+    if sensed is None:
+        sensed = _sensed(background_of(args), params.rows, params.cols, params.profile)
     _threads_for(params)
-    return simulate(params, raw)
+    return simulate(params, sensed[0], raw_colours=sensed[1])
 
 
 def check_options(options: dict[str, Any]) -> None:
@@ -117,13 +123,13 @@ def _threads_for(params: CamoParams) -> None:
 def reference_of(options: dict[str, Any]) -> Reference:
     args = namespace(options, 0)
     params = params_from(args)
-    raw = _sensed(background_of(args), params.rows, params.cols, params.profile)
-    result = simulate_options(reference_options(options), 0, raw)
+    sensed = _sensed(background_of(args), params.rows, params.cols, params.profile)
+    result = simulate_options(reference_options(options), 0, sensed)
     image = os.path.abspath(args.image) if args.image else None
     label = pattern_of(
         {"pattern": result.majority_pattern, "orientation_deg": result.orientation_deg}
     )
-    return Reference(label, result.final.copy(), raw, image)
+    return Reference(label, result.final.copy(), *sensed, image)
 
 
 def result_columns(summary: dict, reference: Reference) -> dict[str, Any]:
@@ -136,6 +142,7 @@ def result_columns(summary: dict, reference: Reference) -> dict[str, Any]:
         "correct": pattern_of(summary) == reference.pattern,
         "diff_cells": int(np.count_nonzero(final != reference.final)),
         "grey_distance": float(summary["grey_distance"]),
+        "colour_distance": summary.get("colour_distance"),
     }
     for k, name in enumerate(PATTERN_NAMES):
         row[f"votes_{name}"] = int(summary["votes"].get(name, 0))  # --orientation any: none
@@ -150,7 +157,7 @@ def failed(error: str) -> dict[str, Any]:
 def sim_row(trial: Trial, reference: Reference) -> dict[str, Any]:
     start = time.perf_counter()
     try:
-        result = simulate_options(trial.options, trial.seed, reference.raw)
+        result = simulate_options(trial.options, trial.seed, reference.sensed)
     except CamoError as exc:
         return {**failed(f"error: {exc}"), "run_s": time.perf_counter() - start}
     except Exception as exc:  # noqa: BLE001 - one trial's failure is its row, not the sweep's
@@ -161,6 +168,7 @@ def sim_row(trial: Trial, reference: Reference) -> dict[str, Any]:
         "orientation_deg": result.orientation_deg,
         "votes": result.selection_counts,
         "grey_distance": result.grey_distance,
+        "colour_distance": result.colour_distance,
         "mean_p": mean_p(result.p).tolist(),
         "final": result.final,
     }
@@ -203,7 +211,7 @@ def ros_row(trial: Trial, reference: Reference, timeout: float) -> dict[str, Any
         with open(os.path.join(out, "summary.json")) as handle:
             swarm = json.load(handle)
     row = result_columns(swarm, reference)
-    result = simulate_options(trial.options, trial.seed, reference.raw)
+    result = simulate_options(trial.options, trial.seed, reference.sensed)
     sim = json.loads(summary_bytes(result.summary()))
     same = all(swarm.get(k) == sim[k] for k in SUMMARY_KEYS if k != "elapsed_s")
     return {**row, "status": "ok", "run_s": elapsed, "equals_sim": same}

@@ -23,7 +23,7 @@ import numpy as np
 from camo_core.algorithm import rng
 from camo_core.algorithm.grid import neighbor_ids
 from camo_core.algorithm.params import MAX_COORDINATE, CamoParams
-from camo_core.algorithm.sensing import to_gray
+from camo_core.algorithm.sensing import to_gray, to_rgb
 from camo_core.exceptions import CamoError
 from camo_core.inputs.files import checked_file, shown
 from camo_core.inputs.numeric import number
@@ -215,7 +215,17 @@ def sense_at(image: np.ndarray, layout: Layout, profile: str = "paper") -> np.nd
     """Each robot's grey: the mean of the image (grey by the profile's weights) over one
     spacing around its position, the layout's extent (plus half a spacing round it)
     stretched over the image."""
-    gray = to_gray(image, profile)
+    return means_at(to_gray(image, profile), layout)
+
+
+def colours_at(image: np.ndarray, layout: Layout) -> np.ndarray:
+    """Each robot's mean colour (robots x 3, sRGB) over the spacing sense_at takes its grey."""
+    rgb = to_rgb(image)
+    return np.stack([means_at(rgb[:, :, c], layout) for c in range(3)], axis=-1)
+
+
+def means_at(gray: np.ndarray, layout: Layout) -> np.ndarray:
+    """The mean of one channel over one spacing around each robot's position (see sense_at)."""
     height, width = gray.shape
     low = layout.positions.min(axis=0) - 0.5
     span = layout.positions.max(axis=0) + 0.5 - low

@@ -29,6 +29,7 @@ PROFILE_DEFAULTS: dict[str, dict[str, Any]] = {
 }
 
 MAX_LEVELS = 8  # --levels: K - 1 layers fit a state's uint8 and leave 255 (not received) free
+MAX_COLOURS = 8  # --colours: a palette of at most 8, as --levels
 MAX_COORDINATE = 1e6  # spacings: a file layout's positions stay within this
 MAX_SIDE = 8192  # robots per row or column; ids stay far inside uint32
 MAX_STEPS = 100_000
@@ -83,6 +84,20 @@ class CamoParams:
         off=0,
         metavar="K",
         none_means="0, the paper's two",
+    )
+    # --colours K: K colours of the swarm's choosing, from its averaged colour histogram, each
+    # robot showing one of the two that bracket its own colour (0: the paper's black and
+    # white); docs/algorithm.md, "Colours".
+    colours: int = param(
+        0,
+        "show the background's colours: a K-colour palette (2 to 8) the swarm chooses from its "
+        "averaged colour histogram, the pattern choosing between the two that bracket each "
+        "robot's colour",
+        low=2,
+        high=MAX_COLOURS,
+        off=0,
+        metavar="K",
+        none_means="0, the paper's black and white",
     )
     # --layout: "" (the grid), "hex", "jitter:A", or "file" with the robots' x, y in
     # `positions` (spacings, y down, one pair per robot id); docs/algorithm.md, "Layout".
@@ -139,6 +154,11 @@ class CamoParams:
                     object.__setattr__(self, name, value)
         check_fields(self)
         self._check_layout()
+        if self.colours and self.levels:
+            raise ParameterError(
+                "--colours and --levels are two palettes: give one (--colours K shows colours, "
+                "--levels K greys)"
+            )
 
     @classmethod
     def from_options(cls, **options: Any) -> CamoParams:

@@ -23,9 +23,13 @@ def run_per_robot(
     raw_sensed: np.ndarray,
     exempt: np.ndarray | None = None,
     observe: Observer | None = None,
+    raw_colours: np.ndarray | None = None,
 ) -> RunResult:
     """`raw_sensed`: rows x cols block means before noise; `exempt`: real readings (no noise);
-    `observe` is shown every step as the simulator shows it (`simulator.Observer`)."""
+    `observe` is shown every step as the simulator shows it (`simulator.Observer`);
+    `raw_colours`: the blocks' mean colours (rows x cols x 3; --colours needs them)."""
+    if raw_colours is None and params.colours:
+        raise ValueError("--colours needs the sensed colours (raw_colours)")
     shown = observe or (lambda phase, step, values: None)
     start = time.perf_counter()
     rows, cols = params.rows, params.cols
@@ -37,6 +41,7 @@ def run_per_robot(
         robot.sense(
             raw_sensed[robot.row, robot.col],
             bool(exempt[robot.row, robot.col]) if exempt is not None else False,
+            None if raw_colours is None else raw_colours[robot.row, robot.col],
         )
     for robot in robots:
         robot.describe([None if n is None else robots[n].sensed for n in robot.neighbors])
@@ -63,8 +68,8 @@ def run_per_robot(
         robot.finish_consensus()
     initial = np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols)
 
-    def formation_view():  # what a GIF shows of formation: the states, or with --levels the greys
-        return np.array([r.display if params.levels else r.state for r in robots])
+    def formation_view():
+        return _formation_view(params, robots)
 
     relaying = params.orientation_any and not params.layout  # the grid's knight cells
     shown("formation", 0, formation_view())
@@ -93,4 +98,25 @@ def run_per_robot(
         if params.levels
         else None,
         positions=layout_for(params).positions if params.layout else None,
+        **_colour_fields(params, robots, known=raw_colours is not None),
     )
+
+
+def _formation_view(params: CamoParams, robots: list[RobotCore]) -> np.ndarray:
+    """What a GIF shows of formation: the states, or the greys (--levels) or colours shown."""
+    if params.colours:
+        return np.array([r.display_rgb for r in robots])
+    return np.array([r.display if params.levels else r.state for r in robots])
+
+
+def _colour_fields(params: CamoParams, robots: list[RobotCore], known: bool) -> dict:
+    """A result's colour fields from its robots: the colours sensed (if `known`), and with
+    --colours their palettes and the two colours each shows."""
+    rows, cols = params.rows, params.cols
+    fields: dict = {}
+    if known:
+        fields["sensed_rgb"] = np.array([r.sensed_rgb for r in robots]).reshape(rows, cols, 3)
+    if params.colours:
+        fields["palette_rgb"] = np.array([r.colours for r in robots]).reshape(rows, cols, -1, 3)
+        fields["shades"] = np.array([r.shades for r in robots]).reshape(rows, cols, 2)
+    return fields

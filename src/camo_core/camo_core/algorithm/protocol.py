@@ -365,7 +365,7 @@ class StepProtocol:
             if reading is None:  # not available yet: tried again on the next tick
                 self.hardware_wait = True
                 return False
-            core.sense(reading.value, reading.real)
+            core.sense(reading.value, reading.real, reading.rgb)
             self._send("color", 0, core.sensed)
             self.wait_started = now
         if self.energy_step is None:
@@ -575,7 +575,7 @@ class StepProtocol:
         carrying every p and state since the last report."""
         core = self.core
         if self.phase >= FORMATION:
-            self.display.show(core.state)
+            self.display.show(core.state, core.display_rgb if core.colours else None)
         if not forced and now - self.last_report < self.report_period:
             return
         self.last_report = now
@@ -596,6 +596,9 @@ class StepProtocol:
                 deadlines=self.deadlines,
                 silent=tuple(sorted(self._neighbor(s) for s in self.silent)),
                 palette=core.palette,
+                sensed_rgb=() if math.isnan(core.sensed) else core.sensed_rgb,
+                palette_rgb=tuple(c for colour in core.colours for c in colour),
+                shades=core.shades if core.colours else (),
                 **self.traces.unreported(),
             )
         )

@@ -8,11 +8,12 @@ from typing import Any
 
 import numpy as np
 
-from camo_core.algorithm import kernels, levels
+from camo_core.algorithm import colours, kernels, levels
 from camo_core.algorithm.layout import layout_for
 from camo_core.algorithm.orientation import CODES, ORIENTED, angle_of, pattern_name
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.rules import MOTTLED, PATTERN_NAMES
+from camo_core.algorithm.sensing import to_gray
 from camo_core.schema import values, with_role
 
 # What every summary.json holds: the run's parameters that describe it (declared with
@@ -27,6 +28,7 @@ SUMMARY_KEYS = (
     "final",
     "display",
     "grey_distance",
+    "colour_distance",
     "consensus_trace",
     "elapsed_s",
 )
@@ -83,6 +85,13 @@ class RunResult:
     palette: np.ndarray | None = None
     # --layout: robots x 2, each robot's x and y (y down) in spacings; None on the grid.
     positions: np.ndarray | None = None
+    # rows x cols x 3 float64: the colours robots sensed (sRGB 0-255, after measurement
+    # error); None where the driver had none (a grey reading's colour is its grey).
+    sensed_rgb: np.ndarray | None = None
+    # --colours: rows x cols x K x 3, each robot's palette (sRGB, darkest first), and rows x
+    # cols x 2, the two of it the robot shows (where its pattern is on, where it is off).
+    palette_rgb: np.ndarray | None = None
+    shades: np.ndarray | None = None
 
     @property
     def display(self) -> np.ndarray:
@@ -93,10 +102,31 @@ class RunResult:
         return levels.shown_grid(self.final, self.palette)
 
     @property
+    def display_rgb(self) -> np.ndarray:
+        """rows x cols x 3, the colour (sRGB 0-255) each robot shows: with --colours its
+        palette's, else its grey."""
+        if self.palette_rgb is None or self.shades is None:
+            return np.repeat(self.display[..., None], 3, axis=-1)
+        return colours.shown_grid(self.final, self.shades, self.palette_rgb)
+
+    @property
+    def colour_distance(self) -> float | None:
+        """How far the colours shown are from the colours sensed: the mean CIEDE2000 over the
+        robots that took part; None where the sensed colours are not known."""
+        if self.sensed_rgb is None:
+            return None
+        took_part = np.isfinite(self.sensed_rgb).all(axis=-1)
+        if self.alive is not None:
+            took_part &= self.alive
+        return colours.colour_distance(self.display_rgb[took_part], self.sensed_rgb[took_part])
+
+    @property
     def grey_distance(self) -> float:
         """How far the greys shown are from the greys sensed: the Wasserstein-1 distance between
         the two sets (the mean gap between them sorted), over the robots that took part."""
         shown, sensed = self.display, np.asarray(self.sensed, dtype=np.float64)
+        if self.params.colours and self.palette_rgb is not None:  # greys of the colours shown
+            shown = to_gray(self.display_rgb[..., ::-1].astype(np.uint8), self.params.profile)
         took_part = np.isfinite(sensed)  # a partial run's robots that never sensed hold NaN
         if self.alive is not None:
             took_part &= self.alive
@@ -152,6 +182,7 @@ class RunResult:
             grid = np.ascontiguousarray
         else:
             grid = np.ndarray.tolist
+        distance = self.colour_distance  # None where the colours sensed are not known
         summary = {
             **values(params, "summary"),
             "pattern": self.majority_pattern,
@@ -161,11 +192,15 @@ class RunResult:
             "sensed": grid(np.asarray(self.sensed, dtype=np.float64)),
             "initial": grid(self.initial.astype(int)),
             "final": grid(self.final.astype(int)),
-            "display": grid(self.display),
+            "display": grid(self.display_rgb if params.colours else self.display),
             "grey_distance": round(self.grey_distance, 6),
+            "colour_distance": None if distance is None else round(distance, 6),
             "consensus_trace": self.consensus_trace.tolist(),
             "elapsed_s": round(float(self.elapsed_s), 6),
         }
+        if params.colours and self.palette_rgb is not None:
+            summary["sensed_rgb"] = grid(np.asarray(self.sensed_rgb, dtype=np.float64))
+            summary["palette"] = grid(np.asarray(self.palette_rgb).astype(np.int64))
         if params.layout:  # where the robots stood (summary.json's grids are by robot id)
             summary["layout"] = params.layout
             summary["positions"] = [list(xy) for xy in layout_for(params).positions.tolist()]
@@ -174,6 +209,9 @@ class RunResult:
             dead = ~self.alive
             for key in ("initial", "final", "display"):
                 cells = np.asarray(getattr(self, key)).astype(int).astype(object)  # Python ints
+                if key == "display" and params.colours:  # a colour a cell, or null
+                    cells = np.empty(dead.shape, object)
+                    cells[...] = [[list(map(int, c)) for c in row] for row in self.display_rgb]
                 cells[dead] = None
                 summary[key] = cells.tolist()
             summary["dead"] = [[int(i), int(j)] for i, j in zip(*np.nonzero(dead), strict=True)]

@@ -9,10 +9,11 @@ on sender, receiver and step) and calls the rules of `rules.py`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from camo_core.algorithm import layout_rules, levels, orientation, rng, rules
+from camo_core.algorithm import colours, layout_rules, levels, orientation, rng, rules
 from camo_core.algorithm.grid import (
     CONSENSUS_SLOTS,
     DESCRIPTOR_SLOTS,
@@ -22,7 +23,7 @@ from camo_core.algorithm.grid import (
 )
 from camo_core.algorithm.layout import places_for
 from camo_core.algorithm.params import CamoParams, ParameterError
-from camo_core.algorithm.sensing import noisy_value
+from camo_core.algorithm.sensing import noisy_colour, noisy_value
 
 Vote = tuple[Sequence[float], int]
 
@@ -36,7 +37,7 @@ class RobotCore:
     known: list[bool] = field(default_factory=lambda: [False] * NUM_SLOTS)
     sensed: float = float("nan")
     vote: int = rules.MOTTLED
-    p: tuple[float, ...] = (0.0, 0.0, 1.0)  # with --levels, the grey histogram follows
+    p: tuple[float, ...] = (0.0, 0.0, 1.0)  # with --levels or --colours, a histogram follows
     pattern: int | None = None
     state: int = 0
     # The descriptor: scores, and texture energy (averaged with --threshold auto).
@@ -69,6 +70,11 @@ class RobotCore:
         self._known_counts()
         self.tensor = (0.0, 0.0, 0.0)  # --orientation any: (Jxx, Jyy, Jxy) before normalising
         self.palette: tuple[int, ...] = ()  # --levels: the greys it can show, darkest first
+        # --colours: the colour it sensed (sRGB), its palette's colours (sRGB, darkest first)
+        # and the two of them it shows: (where its pattern is on, where it is off).
+        self.sensed_rgb: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+        self.colours: tuple[tuple[int, int, int], ...] = ()
+        self.shades: tuple[int, int] = (0, 0)
         self._w2 = orientation.inhibitor_weights(self.params)
 
     # ---- the simulated link -------------------------------------------------
@@ -121,13 +127,22 @@ class RobotCore:
 
     # ---- phase 1: sensing and the local vote ----------------------------------
 
-    def sense(self, raw: float, exempt_from_noise: bool = False) -> float:
-        """Keep the sensed value, after measurement error unless it is a real reading."""
-        self.sensed = (
-            float(raw)
-            if exempt_from_noise
-            else noisy_value(self.params.seed, self.id, raw, self.params.rho_meas)
-        )
+    def sense(
+        self,
+        raw: float,
+        exempt_from_noise: bool = False,
+        rgb: Sequence[float] | None = None,
+    ) -> float:
+        """Keep the sensed value, after measurement error unless it is a real reading; `rgb`:
+        the colour read with it (sRGB 0..255; by default the grey's), replaced with it."""
+        params = self.params
+        rgb = (raw, raw, raw) if rgb is None else rgb
+        colour = (float(rgb[0]), float(rgb[1]), float(rgb[2]))
+        if exempt_from_noise:
+            self.sensed, self.sensed_rgb = float(raw), colour
+        else:
+            self.sensed = noisy_value(params.seed, self.id, raw, params.rho_meas)
+            self.sensed_rgb = noisy_colour(params.seed, self.id, colour, params.rho_meas)
         self.state = rules.initial_state(self.sensed)
         return self.sensed
 
@@ -172,6 +187,8 @@ class RobotCore:
             self.p = rules.one_hot(self.vote)
         if params.levels:  # the grey histogram, averaged with p
             self.p = (*self.p, *levels.start_vector(self.sensed))
+        elif params.colours:  # the colour histogram, averaged with p
+            self.p = (*self.p, *colours.start_vector(self.sensed_rgb))
         return self.vote
 
     # ---- phase 2: consensus -------------------------------------------------
@@ -193,6 +210,10 @@ class RobotCore:
         if params.levels:
             cuts, self.palette = levels.palette(self.p[3:], params.levels)
             self.state = levels.initial_layers(self.sensed, cuts)
+        elif params.colours:
+            self.colours, self.shades = colours.robot_palette(
+                self.p[3:], self.sensed_rgb, params.colours
+            )
         return self.pattern
 
     @property
@@ -201,6 +222,15 @@ class RobotCore:
         if self.palette:
             return levels.shown(self.state, self.palette)
         return 0 if self.state == 1 else 255
+
+    @property
+    def display_rgb(self) -> tuple[int, int, int]:
+        """The colour this robot shows: with --colours its palette's for its pattern's state,
+        else its grey."""
+        if self.colours:
+            return colours.shown(self.state, self.shades, self.colours)
+        grey = self.display
+        return grey, grey, grey
 
     # ---- phase 3: pattern formation ------------------------------------------
 

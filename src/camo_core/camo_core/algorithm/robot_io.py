@@ -110,6 +110,11 @@ class Report:
     state_from: int = 0
     state_trace: tuple[int, ...] = ()
     palette: tuple[int, ...] = ()  # --levels: the greys it can show, darkest first
+    sensed_rgb: tuple[float, ...] = ()  # the colour it sensed (sRGB), once it has
+    # --colours: its palette (sRGB triples, darkest first, flattened) and the two of them it
+    # shows (palette indices: where its pattern is on, where it is off).
+    palette_rgb: tuple[int, ...] = ()
+    shades: tuple[int, ...] = ()
 
 
 @dataclass
@@ -160,7 +165,9 @@ class Sensor(Protocol):
 
 
 class Display(Protocol):
-    def show(self, state: int) -> None: ...
+    def show(self, state: int, colour: tuple[int, int, int] | None = None) -> None:
+        """Show the formation state; `colour`: what it shows as (--colours), if not the
+        display's own colour for the state."""
 
     def ready(self) -> bool:
         """It shows the last state it was given."""
@@ -171,7 +178,7 @@ class Display(Protocol):
 class NoDisplay:
     """A simulated robot shows nothing."""
 
-    def show(self, state: int) -> None:
+    def show(self, state: int, colour: tuple[int, int, int] | None = None) -> None:
         pass
 
     def ready(self) -> bool:

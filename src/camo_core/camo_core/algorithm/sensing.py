@@ -323,11 +323,47 @@ def sense_image(image: np.ndarray, rows: int, cols: int, profile: str) -> np.nda
     return block_means(to_gray(image, profile), rows, cols)
 
 
+def to_rgb(image: np.ndarray) -> np.ndarray:
+    """An image's sRGB channels (H x W x 3, float64, 0..255); a grey image is that grey."""
+    if image.ndim == 2:
+        return np.repeat(image.astype(np.float64)[:, :, None], 3, axis=2)
+    return image[:, :, ::-1].astype(np.float64)  # OpenCV's BGR
+
+
+def sense_colours(image: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """The mean colour of the image block each robot covers (rows x cols x 3, sRGB float64),
+    as block_means takes the mean grey."""
+    return block_means(to_rgb(image), rows, cols)
+
+
 def noisy_value(seed: int, robot: int, value: float, rho_meas: float) -> float:
     """One robot's sensed value after measurement error (scalar)."""
     if rho_meas > 0.0 and rng.uniform(seed, rng.STREAM_SENSOR_REPLACED, 0, robot, 0) < rho_meas:
         return float(math.floor(256 * rng.uniform(seed, rng.STREAM_SENSOR_VALUE, 0, robot, 0)))
     return float(value)
+
+
+def noisy_colour(
+    seed: int, robot: int, rgb: tuple[float, float, float], rho_meas: float
+) -> tuple[float, float, float]:
+    """One robot's sensed colour after measurement error: a reading replaced by noise is the
+    noise's grey (the draws of noisy_value: a robot's grey and colour are replaced together)."""
+    if rho_meas > 0.0 and rng.uniform(seed, rng.STREAM_SENSOR_REPLACED, 0, robot, 0) < rho_meas:
+        grey = float(math.floor(256 * rng.uniform(seed, rng.STREAM_SENSOR_VALUE, 0, robot, 0)))
+        return grey, grey, grey
+    return float(rgb[0]), float(rgb[1]), float(rgb[2])
+
+
+def _replaced(shape: tuple[int, ...], seed: int, rho_meas: float, exempt: np.ndarray | None):
+    """Which robots' readings measurement error replaces (bool, `shape`), and the greys they
+    read instead."""
+    ids = np.arange(math.prod(shape), dtype=np.uint64).reshape(shape)
+    zero = np.uint64(0)
+    replaced = rng.uniform_array(seed, rng.STREAM_SENSOR_REPLACED, 0, ids, zero) < rho_meas
+    if exempt is not None:
+        replaced &= ~exempt
+    noise = np.floor(256 * rng.uniform_array(seed, rng.STREAM_SENSOR_VALUE, 0, ids, zero))
+    return replaced, noise
 
 
 def apply_noise(
@@ -340,13 +376,20 @@ def apply_noise(
     out = np.array(sensed, dtype=np.float64, copy=True)
     if rho_meas <= 0.0:
         return out
-    ids = np.arange(out.size, dtype=np.uint64).reshape(out.shape)
-    zero = np.uint64(0)
-    replaced = rng.uniform_array(seed, rng.STREAM_SENSOR_REPLACED, 0, ids, zero) < rho_meas
-    if exempt is not None:
-        replaced &= ~exempt
-    noise = np.floor(256 * rng.uniform_array(seed, rng.STREAM_SENSOR_VALUE, 0, ids, zero))
+    replaced, noise = _replaced(out.shape, seed, rho_meas, exempt)
     out[replaced] = noise[replaced]
+    return out
+
+
+def apply_colour_noise(
+    colours: np.ndarray, seed: int, rho_meas: float, exempt: np.ndarray | None = None
+) -> np.ndarray:
+    """apply_noise for sensed colours (rows x cols x 3): a replaced reading is its noise grey."""
+    out = np.array(colours, dtype=np.float64, copy=True)
+    if rho_meas <= 0.0:
+        return out
+    replaced, noise = _replaced(out.shape[:-1], seed, rho_meas, exempt)
+    out[replaced] = noise[replaced][:, None]
     return out
 
 
@@ -360,6 +403,7 @@ class Reading:
 
     value: float
     real: bool = False
+    rgb: tuple[float, float, float] | None = None  # its colour (sRGB); None: the grey's
 
 
 FRAMES_KEPT = 256  # a process keeps the sensed grids of this many frames (a few seconds of video)
@@ -369,12 +413,17 @@ class Projection:
     """The frames projected so far, by the projector's frame number, as sensed grids (one resize
     per frame, shared by all the robots of a process); the latest FRAMES_KEPT of them."""
 
-    def __init__(self, rows: int, cols: int, profile: str, sample=None) -> None:
+    def __init__(
+        self, rows: int, cols: int, profile: str, sample=None, sample_colours=None
+    ) -> None:
         self.rows, self.cols, self.profile = rows, cols, profile
         # How an image becomes the robots' greys (rows x cols, by robot id): block means, or
-        # on a --layout the means round the robots' positions (layout.sense_at).
+        # on a --layout the means round the robots' positions (layout.sense_at); and their
+        # colours (rows x cols x 3) likewise.
         self.sample = sample or (lambda image: sense_image(image, rows, cols, profile))
+        self.sample_colours = sample_colours or (lambda image: sense_colours(image, rows, cols))
         self.frames: dict[int, np.ndarray] = {}
+        self.colours: dict[int, np.ndarray] = {}
         self.stamps: dict[int, float] = {}  # when each frame was projected (ROS time, s)
         self.newest = -1
         self.protected: set[int] = {0}  # frames robots' rounds still read: never let go
@@ -385,23 +434,36 @@ class Projection:
         for an image smaller than the grid."""
         number = self.newest + 1 if number is None else number
         self.frames[number] = self.sample(image)
+        self.colours[number] = self.sample_colours(image)
         self.stamps[number] = stamp
         self.newest = max(self.newest, number)
         if len(self.frames) > FRAMES_KEPT:
             loose = sorted(n for n in self.frames if n not in self.protected)
             for oldest in loose[: len(self.frames) - FRAMES_KEPT]:
-                del self.frames[oldest], self.stamps[oldest]
+                del self.frames[oldest], self.stamps[oldest], self.colours[oldest]
         return number
 
     def grid(self, number: int) -> np.ndarray | None:
         """Frame `number`'s grid; None while it has not come. A frame let go already (a round
         its process joined very late) is read as the oldest frame kept after it."""
-        grid = self.frames.get(number)
-        if grid is None and number < self.newest:
+        kept = self.kept(number)
+        return None if kept is None else self.frames[kept]
+
+    def colour_grid(self, number: int) -> np.ndarray | None:
+        """Frame `number`'s colours (rows x cols x 3), as grid reads its greys."""
+        kept = self.kept(number)
+        return None if kept is None else self.colours[kept]
+
+    def kept(self, number: int) -> int | None:
+        """The frame read for frame `number` (itself, or the oldest kept after it), or None."""
+        if number in self.frames:
+            return number
+        if number < self.newest:
             later = [n for n in self.frames if n > number]
-            grid = self.frames[min(later)] if later else None
-            self.substituted += grid is not None
-        return grid
+            if later:
+                self.substituted += 1
+                return min(later)
+        return None
 
     @property
     def latest(self) -> np.ndarray | None:
@@ -416,8 +478,12 @@ class ProjectedSensor:
         self.frame = 0
 
     def read(self) -> Reading | None:
-        grid = self.projection.grid(self.frame)
-        return None if grid is None else Reading(float(grid[self.row, self.col]))
+        kept = self.projection.kept(self.frame)
+        if kept is None:
+            return None
+        grey = float(self.projection.frames[kept][self.row, self.col])
+        r, g, b = self.projection.colours[kept][self.row, self.col].tolist()
+        return Reading(grey, rgb=(r, g, b))
 
     def next_round(self, frame: int) -> None:
         self.frame = frame  # a round camouflages against the frame it is named after

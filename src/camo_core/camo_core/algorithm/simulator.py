@@ -14,12 +14,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from camo_core.algorithm import kernels, levels, orientation, rng, rules
+from camo_core.algorithm import colours, kernels, levels, orientation, rng, rules
 from camo_core.algorithm.grid import NEIGHBOR_OFFSETS, NUM_SLOTS
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult, p_stats
 from camo_core.algorithm.rules import select_pattern
-from camo_core.algorithm.sensing import apply_noise
+from camo_core.algorithm.sensing import apply_colour_noise, apply_noise
 
 PAD = 2  # slots reach two cells away
 
@@ -70,12 +70,19 @@ def simulate(
     exempt: np.ndarray | None = None,
     progress: Progress | None = None,
     observe: Observer | None = None,
+    raw_colours: np.ndarray | None = None,
 ) -> RunResult:
-    """Run all phases on rows x cols block means (before measurement noise)."""
+    """Run all phases on rows x cols block means (before measurement noise); `raw_colours`:
+    the blocks' mean colours (rows x cols x 3 sRGB; --colours needs them, and with them the
+    result knows how far the colours shown are from those sensed)."""
     start = time.perf_counter()
     rows, cols = params.rows, params.cols
     if raw_sensed.shape != (rows, cols):
         raise ValueError(f"sensed grid is {raw_sensed.shape}, expected {(rows, cols)}")
+    if raw_colours is None and params.colours:
+        raise ValueError("--colours needs the sensed colours (raw_colours)")
+    if raw_colours is not None and raw_colours.shape != (rows, cols, 3):
+        raise ValueError(f"sensed colours are {raw_colours.shape}, expected {(rows, cols, 3)}")
     grid = Grid(rows, cols)
 
     # Phase 0: a slot is known when its robot exists and its hello survived.
@@ -93,24 +100,35 @@ def simulate(
 
     # Phase 1: sensing and the local vote.
     sensed = apply_noise(raw_sensed, params.seed, params.rho_meas, exempt)
+    sensed_rgb = None
+    if raw_colours is not None:
+        sensed_rgb = apply_colour_noise(raw_colours, params.seed, params.rho_meas, exempt)
     votes, p0 = _vote(params, sensed, known_mask, degree)
     initial = (sensed < 127).astype(np.uint8)
     if params.levels:  # the grey histogram is averaged with p, in the same messages
         p0 = np.concatenate([p0, levels.start_vectors(sensed)], axis=-1)
+    elif params.colours:  # the colour histogram likewise
+        assert sensed_rgb is not None  # --colours was given the colours (checked above)
+        p0 = np.concatenate([p0, colours.start_vectors(sensed_rgb)], axis=-1)
 
     # Phase 2: consensus.
     p, trace, spread = _consensus(params, p0, known_mask, degree, progress, observe)
     p, histogram = p[..., :3], p[..., 3:]
     selected = orientation.choose(p) if params.orientation_any else select_pattern(p)
-    greys = None
+    greys = shown_colours = None
     if params.levels:
         cuts, greys = levels.palettes(histogram, params.levels)
         initial = np.zeros((rows, cols), np.uint8)
         for k in range(params.levels - 1):
             initial |= (sensed < cuts[..., k]).astype(np.uint8) << np.uint8(k)
+    elif params.colours:
+        assert sensed_rgb is not None
+        shown_colours = colours.palettes(histogram, sensed_rgb, params.colours)
 
     # Phase 3: pattern formation.
-    final = _formation(grid, params, initial, selected, known_mask, progress, observe, greys)
+    final = _formation(
+        grid, params, initial, selected, known_mask, progress, observe, greys, shown_colours
+    )
 
     return RunResult(
         params=params,
@@ -124,6 +142,9 @@ def simulate(
         elapsed_s=time.perf_counter() - start,
         consensus_range=spread,
         palette=greys,
+        sensed_rgb=sensed_rgb,
+        palette_rgb=None if shown_colours is None else shown_colours[0],
+        shades=None if shown_colours is None else shown_colours[1],
     )
 
 
@@ -220,16 +241,23 @@ def _formation(
     progress: Progress | None,
     observe: Observer | None,
     greys: np.ndarray | None = None,
+    shown_colours: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Formation steps; with --levels (`greys`: each robot's palette) on every layer of the
     state's bits, each with the same losses (one state message carries them all), and the
-    observer sees the greys shown."""
+    observer sees the greys shown; with --colours (`shown_colours`: each robot's palette and
+    brackets) the observer sees the colours shown (rows x cols x 3)."""
     state = initial.copy()
     nxt = np.empty_like(state)
     layer, layer_next = np.empty_like(state), np.empty_like(state)
     w2 = np.array(orientation.inhibitor_weights(params))
     layers = max(1, params.levels - 1)
-    shown = (lambda s: s) if greys is None else (lambda s: levels.shown_grid(s, greys))
+    if greys is not None:
+        shown = lambda s: levels.shown_grid(s, greys)  # noqa: E731
+    elif shown_colours is not None:
+        shown = lambda s: colours.shown_grid(s, shown_colours[1], shown_colours[0])  # noqa: E731
+    else:
+        shown = lambda s: s  # noqa: E731
     if observe:
         observe("formation", 0, shown(state))
     for step in range(params.formation_steps):

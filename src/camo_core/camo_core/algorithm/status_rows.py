@@ -41,6 +41,9 @@ LISTS: dict[str, tuple[str, Any, int]] = {
     "p_trace": ("p_trace_count", np.float64, 3),
     "state_trace": ("state_trace_count", np.int64, 1),
     "palette": ("palette_count", np.int64, 1),
+    "sensed_rgb": ("sensed_rgb_count", np.float64, 3),
+    "palette_rgb": ("palette_rgb_count", np.int64, 3),
+    "shades": ("shades_count", np.int64, 2),
 }
 
 
@@ -74,6 +77,12 @@ class StatusRows:
     state_trace: np.ndarray
     palette_count: np.ndarray
     palette: np.ndarray
+    sensed_rgb_count: np.ndarray
+    sensed_rgb: np.ndarray  # (colours, 3)
+    palette_rgb_count: np.ndarray
+    palette_rgb: np.ndarray  # (colours, 3)
+    shades_count: np.ndarray
+    shades: np.ndarray  # (pairs, 2)
     wrong_cell: np.ndarray  # a RobotStatus whose row and column are not its sender's cell
     ragged: np.ndarray  # a RobotStatus whose p_trace is not 3 values a step
 
@@ -136,8 +145,10 @@ class StatusRows:
             raise RowsError("a status array's p is not 3 values a row")
         columns["p"] = p.reshape(n, 3)
         for name, (count, dtype, width) in LISTS.items():
-            counts = np.asarray(getattr(msg, count), np.int64)
-            values = np.asarray(getattr(msg, name), dtype)
+            counts = np.asarray(getattr(msg, count, ()), np.int64)
+            values = np.asarray(getattr(msg, name, ()), dtype)
+            if len(counts) == 0 and len(values) == 0:  # an array of an older camo: none
+                counts = np.zeros(n, np.int64)
             if len(counts) != n or int(counts.sum()) * width != len(values):
                 raise RowsError(f"a status array's {name} does not match its counts")
             columns[count] = counts

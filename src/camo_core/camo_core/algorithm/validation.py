@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from camo_core.algorithm import colours
 from camo_core.algorithm.layout import MAX_SLOTS
 from camo_core.algorithm.levels import BIN_WIDTH, BINS
 from camo_core.algorithm.orientation import CODES
@@ -88,13 +89,36 @@ def histogram_vector(v: Sequence[float], tolerance: float = TOLERANCE) -> bool:
     )
 
 
+MAX_LAB = 128.0  # |a*|, |b*| of sRGB colours stay below it (and L* within 0..100)
+
+
+def colour_vector(v: Sequence[float], tolerance: float = TOLERANCE) -> bool:
+    """--colours' averaged histogram: 64 shares summing to 1, then per bin sums of L*, a* and
+    b* within what colours of that share can add up to."""
+    if len(v) != colours.SIZE or not all(math.isfinite(x) for x in v):
+        return False
+    histogram = v[: colours.BINS]
+    if not shares(histogram, tolerance):
+        return False
+    slack = tolerance * 256
+    lightness, a, b = (v[colours.BINS * k : colours.BINS * (k + 1)] for k in (1, 2, 3))
+    return all(
+        -slack <= lightness[k] <= 100.0 * h + slack
+        and abs(a[k]) <= MAX_LAB * h + slack
+        and abs(b[k]) <= MAX_LAB * h + slack
+        for k, h in enumerate(histogram)
+    )
+
+
 def vote_vector(params: CamoParams, tolerance: float = TOLERANCE):
     """The check of what a run's robots average: p, or with --orientation any the tensor; with
-    --levels followed by the histogram."""
+    --levels or --colours followed by the histogram."""
     check = tensor_vector if params.orientation_any else probability_vector
-    if not params.levels:
-        return lambda p: check(p, tolerance)
-    return lambda p: check(p[:3], tolerance) and histogram_vector(p[3:], tolerance)
+    if params.levels:
+        return lambda p: check(p[:3], tolerance) and histogram_vector(p[3:], tolerance)
+    if params.colours:
+        return lambda p: check(p[:3], tolerance) and colour_vector(p[3:], tolerance)
+    return lambda p: check(p, tolerance)
 
 
 def states_of(params: CamoParams) -> range:
@@ -198,6 +222,24 @@ def _p_rows_ok(p: np.ndarray, orientation_any: bool) -> np.ndarray:
         return finite & inside & (np.abs(p.sum(axis=1) - 1.0) <= tol)
 
 
+def _colours_bad(rows: StatusRows, params: CamoParams) -> np.ndarray:
+    """Rows whose colours do not fit the run: a sensed colour that is not one (0..255), a
+    palette of other than --colours' K colours, shades that are not two of its indices."""
+    bad = (rows.sensed_rgb_count > 1) | (rows.shades_count > 1)
+    bad |= (rows.palette_rgb_count != 0) & (rows.palette_rgb_count != params.colours)
+    if len(rows.sensed_rgb):
+        with np.errstate(invalid="ignore"):
+            rgb = rows.sensed_rgb
+            colour = np.isfinite(rgb) & (rgb >= 0) & (rgb <= 255)
+        sensed_rows, _ = rows.spans("sensed_rgb")
+        bad[sensed_rows[~colour.all(axis=1)]] = True
+    if len(rows.shades):
+        shade_rows, _ = rows.spans("shades")
+        outside = (rows.shades < 0) | (rows.shades >= max(params.colours, 1))
+        bad[shade_rows[outside.any(axis=1)]] = True
+    return bad
+
+
 def rows_problems(rows: StatusRows, params: CamoParams) -> list[str | None]:
     """Why the monitor must not use each row of a status table, or None: report_problem's
     checks, a column at a time (a process's array holds thousands)."""
@@ -217,7 +259,7 @@ def rows_problems(rows: StatusRows, params: CamoParams) -> list[str | None]:
         descending = np.r_[False, rows.palette[1:] < rows.palette[:-1]] & (within > 0)
         unsorted[palette_rows[descending]] = True
     wrong_count = (rows.palette_count != 0) & (rows.palette_count != params.levels)
-    problems[unsorted | wrong_count] = "status palette out of range"
+    problems[unsorted | wrong_count | _colours_bad(rows, params)] = "status palette out of range"
     trace_bad = rows.ragged.copy()
     p_rows, _ = rows.spans("p_trace")
     trace_bad[p_rows[~_p_rows_ok(rows.p_trace, params.orientation_any)]] = True

@@ -13,10 +13,10 @@ import sys
 
 import numpy as np
 
-from camo_core.algorithm.layout import layout_for, sense_at
+from camo_core.algorithm.layout import colours_at, layout_for, sense_at
 from camo_core.algorithm.perrobot import run_per_robot
 from camo_core.algorithm.result import pattern_said
-from camo_core.algorithm.sensing import sense_image
+from camo_core.algorithm.sensing import sense_colours, sense_image
 from camo_core.algorithm.simulator import simulate
 from camo_core.cli import bench
 from camo_core.cli.options import (
@@ -37,23 +37,32 @@ from camo_core.results.output import run_title
 from camo_core.results.summary import write_summary
 
 
-def sensed_overrides(texts: list[str], rows: int, cols: int) -> dict[tuple[int, int], float]:
-    """--sensed ROW,COL=VALUE options: real readings (a bridged Droplet's) for some cells."""
+def sensed_overrides(
+    texts: list[str], rows: int, cols: int
+) -> dict[tuple[int, int], tuple[float, tuple[float, float, float]]]:
+    """--sensed ROW,COL=VALUE[/R,G,B] options: real readings (a bridged Droplet's) for some
+    cells, a grey and its colour (by default the grey's)."""
     overrides = {}
     for text in texts:
         try:
-            cell, grey = text.split("=")
+            cell, reading = text.split("=")
             row, col = (integer(x) for x in items(cell, "--sensed"))
+            grey, _, colour = reading.partition("/")
             value = number(grey)
+            rgb = tuple(number(x) for x in items(colour, "--sensed")) if colour else (value,) * 3
+            if len(rgb) != 3:
+                raise ValueError
         except ValueError:
-            raise UsageError(f"--sensed takes ROW,COL=VALUE (got {text!r})") from None
+            raise UsageError(
+                f"--sensed takes ROW,COL=VALUE or ROW,COL=VALUE/R,G,B (got {text!r})"
+            ) from None
         if not (0 <= row < rows and 0 <= col < cols):
             raise UsageError(f"--sensed {text}: outside the {rows}x{cols} grid")
-        if not 0.0 <= value <= 255.0:
-            raise UsageError(f"--sensed {text}: a grey value is in 0..255")
+        if not all(0.0 <= v <= 255.0 for v in (value, *rgb)):
+            raise UsageError(f"--sensed {text}: a grey value or colour channel is in 0..255")
         if (row, col) in overrides:
             raise UsageError(f"--sensed {row},{col}: that cell is given twice")
-        overrides[(row, col)] = value
+        overrides[(row, col)] = (value, (rgb[0], rgb[1], rgb[2]))
     return overrides
 
 
@@ -64,15 +73,19 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if params.layout:
         if args.sensed:
             raise UsageError("--sensed names grid cells: it does not go with --layout")
-        raw = sense_at(image, layout_for(params), params.profile).reshape(params.rows, params.cols)
+        layout = layout_for(params)
+        raw = sense_at(image, layout, params.profile).reshape(params.rows, params.cols)
+        raw_colours = colours_at(image, layout).reshape(params.rows, params.cols, 3)
     else:
         raw = sense_image(image, params.rows, params.cols, params.profile)
+        raw_colours = sense_colours(image, params.rows, params.cols)
         overrides = sensed_overrides(args.sensed, params.rows, params.cols)
         if overrides:
             # Real readings: they replace the image's value and get no simulated noise.
             exempt = np.zeros(raw.shape, bool)
-            for (row, col), value in overrides.items():
+            for (row, col), (value, rgb) in overrides.items():
                 raw[row, col] = value
+                raw_colours[row, col] = rgb
                 exempt[row, col] = True
     folder = out_dir(args)
     big = params.count >= 256 * 256
@@ -82,9 +95,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
     progress = (lambda phase, step, total: bar.update(note=phase)) if bar else None
     snapshots = Snapshots(params)
     if params.layout:  # no vectorised kernels for positions: the robots' own rules, one by one
-        result = run_per_robot(params, raw, observe=snapshots)
+        result = run_per_robot(params, raw, observe=snapshots, raw_colours=raw_colours)
     else:
-        result = simulate(params, raw, exempt=exempt, progress=progress, observe=snapshots)
+        result = simulate(
+            params, raw, exempt, progress=progress, observe=snapshots, raw_colours=raw_colours
+        )
     summary = result.summary(arrays=True)
     write_summary(summary, folder)
     write_params_file(args.options_parser, args, folder)
@@ -92,7 +107,10 @@ def cmd_sim(args: argparse.Namespace) -> int:
     marks = None if exempt is None else {"real reading": exempt}
     figures.run_figure(result, image, folder / "figure.png", title=title, marks=marks)
     dead = np.zeros(params.count, bool)  # the simulator loses messages, never robots
-    write_animation(snapshots, result.sensed, dead, folder / "run.gif", title, marks)
+    sensed = (
+        result.sensed_rgb if params.colours and result.sensed_rgb is not None else result.sensed
+    )
+    write_animation(snapshots, sensed, dead, folder / "run.gif", title, marks)
     how = "robot by robot " if params.layout else ""
     print(
         f"pattern: {pattern_said(summary)}; wrote {folder}/summary.json, "
@@ -116,9 +134,10 @@ def add_sim_arguments(sim: Parser) -> Parser:
         "--sensed",
         action="append",
         default=[],
-        metavar="ROW,COL=VALUE",
-        help="this cell's sensed grey value is a real reading (e.g. a bridged Droplet's): it "
-        "replaces the image's and gets no measurement noise (repeatable)",
+        metavar="ROW,COL=VALUE[/R,G,B]",
+        help="this cell's sensed grey value (and colour) is a real reading (e.g. a bridged "
+        "Droplet's, as its run's summary.json says): it replaces the image's and gets no "
+        "measurement noise (repeatable)",
     )
     sim.add_params_file_option("camo_sim")
     sim.set_defaults(func=cmd_sim, options_parser=sim)

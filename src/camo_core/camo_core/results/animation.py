@@ -31,7 +31,7 @@ from PIL import Image
 if TYPE_CHECKING:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-from camo_core.algorithm import levels
+from camo_core.algorithm import colours, levels
 from camo_core.results.figures import PATTERN_COLORS, draw_discs, mark
 from camo_core.algorithm.layout import layout_for
 from camo_core.algorithm.params import CamoParams
@@ -87,11 +87,14 @@ class Snapshots:
             total, order = self.params.consensus_steps, 0
         else:
             cells = self.cells(values)
-            if self.params.levels:  # the greys the robots show (-1: unknown)
+            if self.params.colours:  # the colours the robots show (-1: unknown)
+                rgb = np.where(cells < 0, 0.5, cells.astype(float) / 255)
+            elif self.params.levels:  # the greys the robots show (-1: unknown)
                 grey = np.where(cells < 0, 0.5, cells.astype(float) / 255)
+                rgb = np.repeat(grey[..., None], 3, axis=-1)
             else:
                 grey = np.where(cells < 0, 0.5, np.where(cells == 1, 0.0, 1.0))
-            rgb = np.repeat(grey[..., None], 3, axis=-1)
+                rgb = np.repeat(grey[..., None], 3, axis=-1)
             total, order = self.params.formation_steps, 1
         self.frames[(order, step)] = (f"{phase} step {step}/{total}", rgb)
 
@@ -106,6 +109,9 @@ class Snapshots:
             if record.params.levels:
                 shown = levels.shown_grid(np.maximum(states, 0), record.palette)
                 states = np.where(states < 0, -1, shown)
+            elif record.params.colours:
+                shown = colours.shown_grid(np.maximum(states, 0), record.shades, record.palette_rgb)
+                states = np.where(states[..., None] < 0, -1, shown)
             snapshots("formation", step, states)
         return snapshots
 
@@ -122,22 +128,28 @@ def write_animation(
     title: str = "",
     marks: dict[str, np.ndarray] | None = None,
 ) -> Path:
-    """run.gif of a round; `sensed` and `dead` per robot, `marks` (name -> rows x cols, as
+    """run.gif of a round; `sensed` (greys, or colours x 3) and `dead` per robot, `marks` (name -> rows x cols, as
     figures.run_figure takes them) say which robots carry a mark, with their legend."""
     frames = snapshots.shown()
-    grey = np.nan_to_num(np.asarray(sensed, float), nan=128.0)
+    grey = np.nan_to_num(np.asarray(sensed, float), nan=128.0)  # or colours (... x 3)
+    coloured = grey.size == 3 * snapshots.params.count
     fig, (left, right) = plt.subplots(1, 2, figsize=(6.4, 3.9), dpi=80)
     params = snapshots.params
     positions = layout_for(params).positions if params.layout else None
     if positions is None:
-        left.imshow(snapshots.cells(grey), cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        if coloured:
+            left.imshow(snapshots.cells(grey) / 255.0, interpolation="nearest")
+        else:
+            left.imshow(
+                snapshots.cells(grey), cmap="gray", vmin=0, vmax=255, interpolation="nearest"
+            )
         shown = right.imshow(frames[0][1], interpolation="nearest", animated=True)
     else:  # each robot a disc at its position, recoloured frame by frame
         draw_discs(left, positions, grey)
         shown = draw_discs(right, positions, np.zeros(len(positions)))
         shown.set_array(None)
         shown.set_animated(True)
-    left.set_title("sensed grey", fontsize=9)
+    left.set_title("sensed colour" if coloured else "sensed grey", fontsize=9)
     caption = right.set_title(frames[0][0], fontsize=9)
     all_marks = {**(marks or {}), "dead": np.asarray(dead, bool)}
     all_marks = {name: snapshots.cells(mask) for name, mask in all_marks.items()}

@@ -15,7 +15,7 @@ import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 
-from camo_core.algorithm import levels
+from camo_core.algorithm import colours, levels
 from camo_core.algorithm.orientation import CODES, COHERENCE_MIN, ORIENTED, STEP_DEG
 from camo_core.algorithm.result import RunResult
 from camo_core.algorithm.rules import MOTTLED
@@ -97,12 +97,15 @@ def run_plot(
         shown = shown if shown.ndim == 2 else shown[:, :, ::-1]
         axes[0].imshow(shown, cmap="gray", vmin=0, vmax=255, **extent)
     axes[0].set_title("background")
+    palette, shades, sensed_rgb = result.palette_rgb, result.shades, result.sensed_rgb
+    coloured = bool(result.params.colours) and palette is not None and shades is not None
+    sensed = sensed_rgb if coloured and sensed_rgb is not None else result.sensed
     if result.positions is not None:
-        draw_discs(axes[1], result.positions, result.sensed)
+        draw_discs(axes[1], result.positions, sensed)
     else:
-        shown, extent = _shown(result.sensed, nearest=True)
-        axes[1].imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
-    axes[1].set_title(f"sensed grey ({result.params.rows}x{result.params.cols} robots)")
+        _grid_panel(axes[1], sensed)
+    what = "colour" if coloured else "grey"
+    axes[1].set_title(f"sensed {what} ({result.params.rows}x{result.params.cols} robots)")
     _consensus_panel(axes[2], result)
     for ax, states, label in (
         (axes[3], result.initial, "initial state (dark: sensed < 127)"),
@@ -115,13 +118,18 @@ def run_plot(
                 label = f"shown greys ({result.majority_label}), {result.params.levels} levels"
             else:
                 label = "initial greys (each robot's class)"
+        elif palette is not None and shades is not None:  # --colours: the colours shown
+            shown = colours.shown_grid(states, shades, palette).astype(float)
+            if ax is axes[4]:
+                label = f"shown colours ({result.majority_label}), {result.params.colours} colours"
+            else:
+                label = "initial colours (dark: sensed grey < 127)"
         if result.alive is not None:
             shown[~result.alive] = 128
         if result.positions is not None:
             draw_discs(ax, result.positions, shown)
         else:
-            shown, extent = _shown(shown, nearest=True)
-            ax.imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
+            _grid_panel(ax, shown)
         ax.set_title(label)
     if result.orientation_deg is not None:
         if result.positions is not None:
@@ -147,16 +155,30 @@ def run_plot(
     return fig
 
 
+def _grid_panel(ax, values: np.ndarray) -> None:
+    """A grid of greys (rows x cols) or colours (rows x cols x 3, sRGB), 0..255, a cell each."""
+    shown, extent = _shown(np.asarray(values, dtype=float), nearest=True)
+    if shown.ndim == 3:
+        ax.imshow(np.clip(shown / 255.0, 0, 1), interpolation="nearest", **extent)
+    else:
+        ax.imshow(shown, cmap="gray", vmin=0, vmax=255, interpolation="nearest", **extent)
+
+
 def draw_discs(ax, positions: np.ndarray, greys: np.ndarray):
-    """--layout: each robot a disc at its position, in its grey (y down, as on the grid); the
-    discs' collection."""
+    """--layout: each robot a disc at its position, in its grey or (robots x 3) colour (y down,
+    as on the grid); the discs' collection."""
+    values = np.asarray(greys, dtype=float)
+    coloured = values.shape[-1:] == (3,) and values.size == 3 * len(positions)
     discs = matplotlib.collections.PatchCollection(
         [matplotlib.patches.Circle((x, y), 0.45) for x, y in positions],
-        cmap="gray",
+        cmap=None if coloured else "gray",
         edgecolor="none",
     )
-    discs.set_array(np.asarray(greys, dtype=float).ravel())
-    discs.set_clim(0, 255)
+    if coloured:
+        discs.set_facecolor(np.clip(values.reshape(-1, 3) / 255.0, 0, 1).tolist())
+    else:
+        discs.set_array(values.ravel())
+        discs.set_clim(0, 255)
     ax.add_collection(discs)
     low, high = positions.min(axis=0) - 0.6, positions.max(axis=0) + 0.6
     ax.set_xlim(low[0], high[0])
@@ -248,21 +270,29 @@ PAPER_RANDOM_8X8 = 32  # "a random 8x8 pattern differs by 32 on average"
 
 
 def errors_figure(
-    rows: list[dict], random_level: float, path: str | Path, title: str = "", cells: int = 64
+    rows: list[dict],
+    random_level: float,
+    path: str | Path,
+    title: str = "",
+    cells: int = 64,
+    colours: bool = False,
 ) -> Path:
     """errors.png: errors_plot's figure, saved."""
-    return _save(errors_plot(rows, random_level, title, cells), path)
+    return _save(errors_plot(rows, random_level, title, cells, colours), path)
 
 
 def errors_plot(
-    rows: list[dict], random_level: float, title: str = "", cells: int = 64
+    rows: list[dict], random_level: float, title: str = "", cells: int = 64, colours: bool = False
 ) -> matplotlib.figure.Figure:
     """Left: the mean total absolute difference to the error-free pattern against the error
     probability, with the 10th-90th percentile band of the trials (a count: never below zero);
     right: the rate of trials that chose the error-free run's pattern. What the paper reports is
-    overlaid (its random-pattern level only for an 8x8 swarm, `cells` = 64)."""
+    overlaid (its random-pattern level only for an 8x8 swarm, `cells` = 64). Then the grey
+    distance, and with `colours` (a --colours sweep) the colour distance, against it."""
     greys = all("mean_grey_distance" in r for r in rows)
-    fig, axes = plt.subplots(1, 3 if greys else 2, figsize=(18 if greys else 12, 4.8))
+    colours = colours and all("mean_colour_distance" in r for r in rows)
+    panels = 2 + greys + colours
+    fig, axes = plt.subplots(1, panels, figsize=(6 * panels, 4.8))
     diff_ax, rate_ax = axes[0], axes[1]
     for mode, label, color in ERROR_MODES:
         data = sorted((r for r in rows if r["mode"] == mode), key=lambda r: r["rho"])
@@ -282,6 +312,15 @@ def errors_plot(
         if greys:
             shown = [r["mean_grey_distance"] for r in data]
             axes[2].plot(rho, shown, marker="o", color=color, label=label)
+        if colours:
+            shown = [r["mean_colour_distance"] for r in data]
+            axes[-1].plot(rho, shown, marker="o", color=color, label=label)
+    if colours:
+        axes[-1].set_ylim(bottom=0)
+        axes[-1].set_xlabel("error probability")
+        axes[-1].set_ylabel("CIEDE2000 (mean over robots and trials)")
+        axes[-1].set_title("colour distance: colours shown to colours sensed")
+        axes[-1].legend(fontsize=7.5)
     if greys:
         axes[2].set_ylim(bottom=0)
         axes[2].set_xlabel("error probability")
@@ -337,7 +376,8 @@ def timeline_figure(
 
     Consensus frames hold 0/1/2 (horizontal/vertical/mottled) or, with --orientation any, the
     stripe codes (orientation.ORIENTED + k, in their direction's colour); formation frames 0/1
-    (off/on); -1 is a robot that did not report that step (grey).
+    (off/on), or with --colours the colours shown (rows x cols x 3); -1 is a robot that did not
+    report that step (grey).
     """
     consensus = [f for f in frames if f[0].startswith("c")]
     formation = [f for f in frames if f[0].startswith("f")]
@@ -352,10 +392,16 @@ def timeline_figure(
     angles = [tensor_rgb(np.array(tensor_at(k * STEP_DEG))) for k in range(CODES - ORIENTED)]
     colors = np.array([*paper, *angles, (0.5, 0.5, 0.5)])
     grey = {0: 1.0, 1: 0.0, -1: 0.5}
+
+    def shown(g: np.ndarray) -> np.ndarray:  # states, or (--colours) the colours shown
+        if g.ndim == 3:
+            return np.where(g < 0, 0.5, g / 255.0)
+        return np.vectorize(grey.get)(g).astype(float)[..., None].repeat(3, -1)
+
     row = 0
     for group, paint in (
         (consensus, lambda g: colors[np.where(g < 0, CODES, g)]),
-        (formation, lambda g: np.vectorize(grey.get)(g).astype(float)[..., None].repeat(3, -1)),
+        (formation, shown),
     ):
         for k, (label, grid) in enumerate(group):
             ax = axes[row + k // per_row, k % per_row]

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from camo_core.algorithm import colours
 from camo_core.algorithm.change import params_of_round
 from camo_core.algorithm.layout import layout_for
 from camo_core.algorithm.orientation import selector
@@ -48,6 +49,11 @@ class RoundRecord:
         # that hears a report late still times the swarm right.
         # --levels: each robot's palette (the K greys it can show), as it reported it.
         self.palette = np.zeros((n, max(self.params.levels, 1)), np.int64)
+        # The colours robots sensed (sRGB), and with --colours their palettes (K colours) and
+        # the two of them each shows (where its pattern is on, where it is off).
+        self.sensed_rgb = np.full((n, 3), np.nan)
+        self.palette_rgb = np.zeros((n, max(self.params.colours, 1), 3), np.int64)
+        self.shades = np.zeros((n, 2), np.int64)
         self.voted_at = np.full(n, np.nan)
         self.done_at = np.full(n, np.nan)
 
@@ -87,6 +93,7 @@ class RoundRecord:
             if full.any():
                 mine = np.repeat(full, rows.palette_count)
                 self.palette[i[full]] = rows.palette[mine].reshape(-1, self.params.levels)
+        self._colours(rows)
         # The steps since each robot's last report (statuses of an older camo have none: they
         # came one a step).
         self._traces(rows)
@@ -94,6 +101,23 @@ class RoundRecord:
         self.state_trace[step[done], i[done]] = rows.state[done]
         self.selected[i[done]] = rows.pattern[done]
         self.finished[i[done]] = True
+
+    def _colours(self, rows: StatusRows) -> None:
+        """The colours sensed, and with --colours the palettes and the shades shown."""
+        i = rows.sender_id
+        sensed = rows.sensed_rgb_count == 1
+        if sensed.any():
+            self.sensed_rgb[i[sensed]] = rows.sensed_rgb[np.repeat(sensed, rows.sensed_rgb_count)]
+        k = self.params.colours
+        if not k:
+            return
+        full = rows.palette_rgb_count == k
+        if full.any():
+            mine = np.repeat(full, rows.palette_rgb_count)
+            self.palette_rgb[i[full]] = rows.palette_rgb[mine].reshape(-1, k, 3)
+        paired = rows.shades_count == 1
+        if paired.any():
+            self.shades[i[paired]] = rows.shades[np.repeat(paired, rows.shades_count)]
 
     def _given_up(self, rows: StatusRows) -> None:
         """Who each reporter has given up on, at its latest report (a few rows have any)."""
@@ -154,15 +178,27 @@ class RoundRecord:
 
     def timeline(self) -> list[tuple[str, np.ndarray]]:
         """The swarm at each consensus step (selected pattern, -1 unknown) and formation step
-        (state)."""
+        (state; with --colours the colour shown, rows x cols x 3, -1 unknown)."""
         shape = (self.params.rows, self.params.cols)
-        frames = []
+        frames: list[tuple[str, np.ndarray]] = []
         for step, p in enumerate(self.p_trace):
             unknown = np.isnan(p).any(axis=1)
             chosen = self.select(np.nan_to_num(p))
             frames.append((f"c{step}", np.where(unknown, -1, chosen).reshape(shape)))
-        frames += [(f"f{step}", s.reshape(shape)) for step, s in enumerate(self.state_trace)]
+        for step, states in enumerate(self.state_trace):
+            frame: np.ndarray
+            if self.params.colours:
+                shown = colours.shown_grid(np.maximum(states, 0), self.shades, self.palette_rgb)
+                frame = np.where(states[:, None] < 0, -1, shown).reshape((*shape, 3))
+            else:
+                frame = states.reshape(shape)
+            frames.append((f"f{step}", frame))
         return frames
+
+    @property
+    def sensed_shown(self) -> np.ndarray:
+        """What a GIF shows as sensed: the robots' colours with --colours, else their greys."""
+        return self.sensed_rgb if self.params.colours else self.sensed
 
     def result(self, dead: np.ndarray, partial: bool = False) -> RunResult:
         """What the swarm computed, in the reference simulator's form; dead robots masked out.
@@ -207,6 +243,12 @@ class RoundRecord:
             palette=self.palette.reshape((*shape, -1)) if self.params.levels else None,
             positions=layout_for(self.params).positions if self.params.layout else None,
             consensus_range=np.array(spread).reshape(-1, 3, 2) if spread else None,
+            # Known only where every robot that took part said what it sensed.
+            sensed_rgb=self.sensed_rgb.reshape((*shape, 3))
+            if not np.isnan(self.sensed_rgb[alive]).any()
+            else None,
+            palette_rgb=self.palette_rgb.reshape((*shape, -1, 3)) if self.params.colours else None,
+            shades=self.shades.reshape((*shape, 2)) if self.params.colours else None,
         )
 
 

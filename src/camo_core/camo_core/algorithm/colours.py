@@ -1,0 +1,279 @@
+"""--colours K: the swarm shows K colours of its own choosing (docs/algorithm.md §2.7).
+
+The pattern is the paper's, chosen from luminance and formed by the unchanged rule on one
+binary layer; colour changes only what a robot shows. Each robot starts consensus with a
+256-value vector: the one-hot of its colour's bin (4 x 4 x 4 bins of sRGB) and its colour in
+CIELAB times that one-hot. Averaged over the swarm (by the p-vector's Metropolis steps, in the
+same messages), the first 64 values are the swarm's colour histogram and the rest the bins'
+sums of L*, a* and b*. From it every robot derives the same K-colour palette by a fixed rule,
+k-means in CIELAB over the bins' mean colours (palette_lab), and shows one of the two palette
+colours that bracket its own colour in lightness: the nearer darker one where its pattern is
+on, the nearer lighter one where it is off (brackets). The pattern stays visible as light and
+dark, in the robot's own hues.
+
+CIELAB conversions are scikit-image's, on one robot's colours at a time in every driver (a
+conversion of a whole grid goes through a matrix product whose rounding may differ with the
+array's size); the palette rule is one compiled function that every driver calls per robot.
+So the reference simulator, the per-robot driver and the swarm compute the same bits.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Sequence
+
+import numpy as np
+from numba import njit
+
+LEVELS_PER_CHANNEL = 4  # sRGB bins per channel
+BIN_WIDTH = 256 // LEVELS_PER_CHANNEL
+BINS = LEVELS_PER_CHANNEL**3
+SIZE = 4 * BINS  # the averaged vector: the histogram, then the bins' sums of L*, a*, b*
+LLOYD_ROUNDS = 20  # k-means iterations from each start; a palette settles within a few
+GREY_TOLERANCE = 1e-6  # channels this close are one grey (CIELAB round trips of greys)
+
+RGB = tuple[int, int, int]
+Lab = tuple[float, float, float]
+
+
+def bin_of(rgb: Sequence[float] | np.ndarray) -> int:
+    """The histogram bin of an sRGB colour (channels 0..255)."""
+    r, g, b = (min(LEVELS_PER_CHANNEL - 1, math.floor(c / BIN_WIDTH)) for c in rgb)
+    return (r * LEVELS_PER_CHANNEL + g) * LEVELS_PER_CHANNEL + b
+
+
+def lab_of(rgb: Sequence[float] | np.ndarray) -> Lab:
+    """CIELAB (D65) of one sRGB colour (channels 0..255), by scikit-image, converted alone."""
+    from skimage.color import rgb2lab  # only --colours and the colour distance need it
+
+    lab = rgb2lab(np.array([[rgb]], dtype=np.float64) / 255.0)[0, 0]
+    return float(lab[0]), float(lab[1]), float(lab[2])
+
+
+def labs_of(rgb: np.ndarray) -> np.ndarray:
+    """lab_of for every robot (... x 3), one robot at a time."""
+    flat = np.asarray(rgb, dtype=np.float64).reshape(-1, 3)
+    return np.array([lab_of(c) for c in flat]).reshape(np.shape(rgb))
+
+
+def start_vector(rgb: Sequence[float] | np.ndarray) -> tuple[float, ...]:
+    """What a robot averages: the one-hot of its colour's bin, then its L*, a*, b* there."""
+    vector = [0.0] * SIZE
+    b = bin_of(rgb)
+    vector[b] = 1.0
+    for channel, value in enumerate(lab_of(rgb)):
+        vector[BINS * (1 + channel) + b] = value
+    return tuple(vector)
+
+
+def start_vectors(rgb: np.ndarray) -> np.ndarray:
+    """start_vector for every robot (rgb ... x 3 -> ... x SIZE)."""
+    flat = np.asarray(rgb, dtype=np.float64).reshape(-1, 3)
+    out = np.array([start_vector(c) for c in flat]).reshape(-1, SIZE)
+    return out.reshape((*np.shape(rgb)[:-1], SIZE))
+
+
+# ---- the palette: k-means in CIELAB over the averaged histogram's bins ---------------------
+
+
+@njit(cache=True)
+def _distance2(points, i, centres, k):
+    d0 = points[i, 0] - centres[k, 0]
+    d1 = points[i, 1] - centres[k, 1]
+    d2 = points[i, 2] - centres[k, 2]
+    return d0 * d0 + d1 * d1 + d2 * d2
+
+
+@njit(cache=True)
+def _nearest(points, i, centres):
+    best, chosen = np.inf, 0
+    for k in range(centres.shape[0]):
+        d = _distance2(points, i, centres, k)
+        if d < best:
+            best, chosen = d, k
+    return chosen, best
+
+
+@njit(cache=True)
+def _start_by_lightness(points, weights, k):
+    """Centres at the weighted lightness quantiles (k + 1/2) / K: the bin where the weight,
+    summed over the bins in order of lightness, first reaches each."""
+    order = np.argsort(points[:, 0], kind="mergesort")
+    total = 0.0
+    for i in order:
+        total = total + weights[i]
+    centres = np.empty((k, 3))
+    for c in range(k):
+        target = (c + 0.5) / k * total
+        reached = 0.0
+        chosen = order[-1]
+        for i in order:
+            reached = reached + weights[i]
+            if reached >= target:
+                chosen = i
+                break
+        centres[c] = points[chosen]
+    return centres
+
+
+@njit(cache=True)
+def _start_far_apart(points, weights, k):
+    """Centres far apart: the heaviest bin, then each time the bin whose weight times its
+    squared distance to the nearest centre so far is largest (the heaviest again if none)."""
+    heaviest = np.argmax(weights)
+    centres = np.empty((k, 3))
+    centres[0] = points[heaviest]
+    for c in range(1, k):
+        best, chosen = 0.0, heaviest
+        for i in range(points.shape[0]):
+            _, d = _nearest(points, i, centres[:c])
+            score = weights[i] * d
+            if score > best:
+                best, chosen = score, i
+        centres[c] = points[chosen]
+    return centres
+
+
+@njit(cache=True)
+def _lloyd(points, weights, sums, centres):
+    """LLOYD_ROUNDS of k-means: each bin to its nearest centre, each centre to the mean colour
+    of its bins (their sums over their shares, added in bin order; a centre without bins stays)."""
+    k = centres.shape[0]
+    for _ in range(LLOYD_ROUNDS):
+        share = np.zeros(k)
+        total = np.zeros((k, 3))
+        for i in range(points.shape[0]):
+            c, _ = _nearest(points, i, centres)
+            share[c] = share[c] + weights[i]
+            for ch in range(3):
+                total[c, ch] = total[c, ch] + sums[i, ch]
+        for c in range(k):
+            if share[c] > 0.0:
+                for ch in range(3):
+                    centres[c, ch] = total[c, ch] / share[c]
+    error = 0.0
+    for i in range(points.shape[0]):
+        _, d = _nearest(points, i, centres)
+        error = error + weights[i] * d
+    return centres, error
+
+
+@njit(cache=True)
+def palette_lab(vector, k):
+    """The K palette colours (K x 3, CIELAB, darkest first) from one robot's averaged vector:
+    k-means over the bins' mean colours weighted by their shares, from two starts (lightness
+    quantiles, then bins far apart); the start whose palette leaves the smaller weighted squared
+    error is kept, the first on a tie."""
+    n = 0
+    for b in range(BINS):
+        if vector[b] > 0.0:
+            n += 1
+    if n == 0:  # nothing averaged (cannot happen in a run): mid grey
+        out = np.zeros((k, 3))
+        out[:, 0] = 50.0
+        return out
+    points = np.empty((n, 3))
+    sums = np.empty((n, 3))
+    weights = np.empty(n)
+    i = 0
+    for b in range(BINS):
+        if vector[b] > 0.0:
+            weights[i] = vector[b]
+            for ch in range(3):
+                sums[i, ch] = vector[BINS * (1 + ch) + b]
+                points[i, ch] = sums[i, ch] / weights[i]
+            i += 1
+    first, first_error = _lloyd(points, weights, sums, _start_by_lightness(points, weights, k))
+    second, second_error = _lloyd(points, weights, sums, _start_far_apart(points, weights, k))
+    chosen = second if second_error < first_error else first
+    return chosen[np.argsort(chosen[:, 0], kind="mergesort")].copy()
+
+
+def palette(vector: Sequence[float] | np.ndarray, k: int) -> np.ndarray:
+    """palette_lab of one robot's vector (any sequence of floats)."""
+    return palette_lab(np.asarray(vector, dtype=np.float64), k)
+
+
+# ---- what a robot shows ---------------------------------------------------------------------
+
+
+def brackets(own: Sequence[float], palette: np.ndarray) -> tuple[int, int]:
+    """(where on, where off): the palette colour nearest the robot's own (CIELAB, squared
+    distance) among those no lighter than it, and among those no darker; the darkest and the
+    lightest where none is. The first on a tie."""
+    darker = lighter = -1
+    near_darker = near_lighter = math.inf
+    lightness = own[0]
+    for index, colour in enumerate(palette.tolist()):
+        d0, d1, d2 = own[0] - colour[0], own[1] - colour[1], own[2] - colour[2]
+        distance = d0 * d0 + d1 * d1 + d2 * d2
+        if colour[0] <= lightness and distance < near_darker:
+            darker, near_darker = index, distance
+        if colour[0] >= lightness and distance < near_lighter:
+            lighter, near_lighter = index, distance
+    return (darker if darker >= 0 else 0), (lighter if lighter >= 0 else len(palette) - 1)
+
+
+def palette_rgb(palette: np.ndarray) -> tuple[RGB, ...]:
+    """The palette as the sRGB colours robots show (0..255, halves round up), converted by
+    scikit-image one robot's palette at a time; a colour whose channels agree within
+    GREY_TOLERANCE (a grey's round trip through CIELAB) is that grey."""
+    from skimage.color import lab2rgb
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # out-of-gamut means are clipped, and said to be
+        rgb = lab2rgb(np.asarray(palette, dtype=np.float64).reshape(1, -1, 3))[0] * 255.0
+    out: list[RGB] = []
+    for r, g, b in rgb.tolist():
+        if max(r, g, b) - min(r, g, b) < GREY_TOLERANCE:
+            r = g = b = (r + g + b) / 3.0
+        red, green, blue = (int(min(255, max(0, math.floor(c + 0.5)))) for c in (r, g, b))
+        out.append((red, green, blue))
+    return tuple(out)
+
+
+def shown(state: int, shades: Sequence[int], colours: Sequence[Sequence[int]]) -> RGB:
+    """The colour a robot shows: its darker bracket where its pattern is on, else its lighter."""
+    r, g, b = colours[shades[0] if state == 1 else shades[1]]
+    return int(r), int(g), int(b)
+
+
+def shown_grid(states: np.ndarray, shades: np.ndarray, colours: np.ndarray) -> np.ndarray:
+    """shown for every robot: states ..., shades ... x 2, colours ... x K x 3 -> ... x 3."""
+    index = np.where(np.asarray(states) == 1, shades[..., 0], shades[..., 1])
+    return np.take_along_axis(colours, index[..., None, None], axis=-2)[..., 0, :]
+
+
+def robot_palette(
+    vector: Sequence[float] | np.ndarray, own: Sequence[float] | np.ndarray, k: int
+) -> tuple[tuple[RGB, ...], tuple[int, int]]:
+    """One robot's palette as it shows it: (its K colours, sRGB, darkest first; its two
+    brackets), from its averaged vector and its own colour (sRGB)."""
+    lab = palette(vector, k)
+    return palette_rgb(lab), brackets(lab_of(own), lab)
+
+
+def palettes(vectors: np.ndarray, own: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """robot_palette for every robot (vectors ... x SIZE, own ... x 3): colours ... x K x 3
+    and shades ... x 2, one robot at a time."""
+    shape = vectors.shape[:-1]
+    flat_vectors = vectors.reshape(-1, SIZE)
+    flat_own = np.asarray(own, dtype=np.float64).reshape(-1, 3)
+    colours = np.zeros((len(flat_vectors), k, 3), np.int64)
+    shades = np.zeros((len(flat_vectors), 2), np.int64)
+    for robot, (vector, rgb) in enumerate(zip(flat_vectors, flat_own, strict=True)):
+        colours[robot], shades[robot] = robot_palette(vector, rgb, k)
+    return colours.reshape((*shape, k, 3)), shades.reshape((*shape, 2))
+
+
+def colour_distance(shown: np.ndarray, sensed: np.ndarray) -> float:
+    """The mean CIEDE2000 difference (scikit-image's) between the colours robots show and
+    those they sensed (sRGB ... x 3, 0..255), over the robots given."""
+    from skimage.color import deltaE_ciede2000, rgb2lab
+
+    shown = np.asarray(shown, dtype=np.float64).reshape(-1, 1, 3)
+    sensed = np.asarray(sensed, dtype=np.float64).reshape(-1, 1, 3)
+    if shown.size == 0:
+        return 0.0
+    return float(np.mean(deltaE_ciede2000(rgb2lab(sensed / 255.0), rgb2lab(shown / 255.0))))
