@@ -201,7 +201,8 @@ def test_a_noticed_round_superseded_before_any_robot_reported_lets_its_frame_go(
         for frame in range(10):
             monitor.images.add((frame, 0), lambda: np.zeros((8, 8), np.uint8), frame)
         for robot, frame in ((1, 3), (2, 5), (3, 7)):  # notices: rounds of frames 3, 5 and 7
-            monitor._notice(robot, frame, 1.0, 2.0, HOST_GID)
+            columns = (np.array([robot]), np.array([frame]), np.array([1.0]), np.array([2.0]))
+            monitor._notice_rows(columns, HOST_GID, next(monitor._arrivals))
         for robot in range(4):  # only round 7 is reported in, and done
             monitor._on_status(*status(sender_id=robot, phase=2, step=0, round=7))
         monitor.close(7)

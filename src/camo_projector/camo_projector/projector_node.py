@@ -90,7 +90,11 @@ class ProjectorParams:
         metavar="S",
     )
     camera: int = param(
-        -1, "project this local camera (OpenCV device number; -1: none)", low=-1, metavar="N"
+        -1,
+        "project this local camera (OpenCV device number; -1: none)",
+        low=-1,
+        high=2**31 - 1,  # OpenCV takes the number as a C int
+        metavar="N",
     )
     max_fps: float = param(
         10.0,

@@ -141,7 +141,11 @@ class CameraSource(Source):
 
     def __init__(self, index: int) -> None:
         _quiet_opencv()
-        self.capture = cv2.VideoCapture(index)
+        try:
+            self.capture = cv2.VideoCapture(index)
+        except (cv2.error, OverflowError, TypeError) as exc:
+            said = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+            raise ImageError(f"camera {index}: OpenCV cannot open it ({said})") from None
         if not self.capture.isOpened():
             raise ImageError(f"camera {index}: there is none (OpenCV opened no device {index})")
         self.index = index
