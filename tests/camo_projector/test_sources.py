@@ -47,3 +47,23 @@ def test_a_video_plays_each_frame_in_its_time_and_a_looped_one_starts_again(tmp_
         shown += [number(video.frame((k + 0.5) / 25.0)) for k in range(1, FRAMES + 2)]
         assert shown == [*range(FRAMES), *after] and video.ended is not loop
         video.close()
+
+
+def test_opening_a_video_or_a_missing_camera_leaves_opencvs_log_level_as_it_was(tmp_path):
+    """OpenCV's log level is the process's: a projector silenced it for good when it opened a
+    video, and then a damaged image it loaded no longer said what its decoder reported."""
+    import pytest
+
+    from camo_core.algorithm.sensing import ImageError, load_image
+    from camo_projector.sources import CameraSource
+
+    logging = cv2.utils.logging
+    before = logging.getLogLevel()
+    VideoSource(numbered_video(tmp_path / "numbered.avi")).close()
+    with pytest.raises(ImageError):
+        CameraSource(57)
+    assert logging.getLogLevel() == before
+    path = tmp_path / "float.tiff"
+    assert cv2.imwrite(str(path), np.random.default_rng(0).random((8, 8)).astype(np.float32))
+    with pytest.raises(ImageError, match=r"the decoder says 'OpenCV TIFF: .*32-bit samples'"):
+        load_image(path)

@@ -32,7 +32,7 @@ import numpy as np
 
 from camo_core.algorithm.backgrounds import background
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.sensing import load_image, sense_image
+from camo_core.algorithm.sensing import load_image, sense_colours, sense_image
 from camo_core.algorithm.simulator import simulate
 from camo_core.cli.options import Parser
 from camo_core.exceptions import EXIT_USAGE, CamoError
@@ -72,8 +72,10 @@ def like_sim(folder: Path, side: int, rho: float) -> bool:
     """Whether a continuous round (its folder) equals `./camo sim` on its frame with its seed."""
     live = json.loads((folder / "summary.json").read_text())
     params = CamoParams(rows=side, cols=side, rho_meas=rho, seed=live["seed"])
-    grid = sense_image(load_image(str(folder / "background.png")), side, side, params.profile)
-    sim = json.loads(summary_bytes(simulate(params, grid).summary(arrays=True)))
+    image = load_image(str(folder / "background.png"))
+    grid = sense_image(image, side, side, params.profile)
+    result = simulate(params, grid, raw_colours=sense_colours(image, side, side))
+    sim = json.loads(summary_bytes(result.summary(arrays=True)))
     return all(live.get(key) == value for key, value in sim.items() if key != "elapsed_s")
 
 

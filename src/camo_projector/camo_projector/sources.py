@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import glob
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import cv2
@@ -20,12 +22,21 @@ MAX_VIDEO_BYTES = 1 << 40  # a video is read frame by frame: its size costs no m
 SKIPPED_PER_CALL = 64
 
 
-def _quiet_opencv() -> None:
+@contextmanager
+def _quiet_opencv() -> Iterator[None]:
     """OpenCV's video back-ends log to stderr when a device or file cannot be opened: camo says
-    so in one line of its own instead."""
+    so in one line of its own instead. Only while opening: OpenCV's log level is the process's,
+    and the image loader reads what the decoders log (sensing.load_image)."""
     logging = getattr(getattr(cv2, "utils", None), "logging", None)
-    if logging is not None:
-        logging.setLogLevel(logging.LOG_LEVEL_SILENT)
+    if logging is None:
+        yield
+        return
+    before = logging.getLogLevel()
+    logging.setLogLevel(logging.LOG_LEVEL_SILENT)
+    try:
+        yield
+    finally:
+        logging.setLogLevel(before)
 
 
 class Source:
@@ -45,9 +56,9 @@ class VideoSource(Source):
     """A video file at its own frame rate (or `fps`), once or looped."""
 
     def __init__(self, path: str, fps: float = 0.0, loop: bool = False) -> None:
-        _quiet_opencv()
         self.path = checked_file(path, "video", MAX_VIDEO_BYTES, ImageError)
-        self.capture = cv2.VideoCapture(str(self.path))
+        with _quiet_opencv():
+            self.capture = cv2.VideoCapture(str(self.path))
         if not self.capture.isOpened():
             raise ImageError(f"video {shown(path)}: OpenCV cannot read it (not a video it knows)")
         own = self.capture.get(cv2.CAP_PROP_FPS)
@@ -140,9 +151,9 @@ class CameraSource(Source):
     """A local camera (OpenCV's device `index`): its newest frame whenever asked."""
 
     def __init__(self, index: int) -> None:
-        _quiet_opencv()
         try:
-            self.capture = cv2.VideoCapture(index)
+            with _quiet_opencv():
+                self.capture = cv2.VideoCapture(index)
         except (cv2.error, OverflowError, TypeError) as exc:
             said = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
             raise ImageError(f"camera {index}: OpenCV cannot open it ({said})") from None
