@@ -3,7 +3,8 @@ anything it started is left running, and what it wrote (docs/swarm.md, "Large sw
 
     ./camo python tools/interrupt_large.py [--side 256] [--runs 3] [--after 3] [--out DIR]
 
-Each run: `./camo run --rows SIDE --cols SIDE --consensus-steps 3000` (forest), SIGINT to the
+Each run: `./camo run --rows SIDE --cols SIDE --consensus-steps 3000` on the forest scaled to the
+grid (or --image), SIGINT to the
 launcher AFTER seconds after its progress line first shows every robot in consensus; then the
 seconds from SIGINT to the launcher's exit, its exit code, the processes it started that still
 run 10 s after SIGINT, and whether summary.json (partial) was written.
@@ -52,9 +53,10 @@ def alive(pid: int) -> bool:
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
 
-def one_run(side: int, after: float, out: Path) -> dict:
+def one_run(side: int, after: float, out: Path, image: Path) -> dict:
     command = [sys.executable, "-m", "camo_bringup.launcher", "--rows", str(side), "--cols"]
-    command += [str(side), "--consensus-steps", "3000", "--out", str(out)]
+    command += [str(side), "--consensus-steps", "3000", "--image", str(image), "--out", str(out)]
+    started = time.monotonic()
     launcher = subprocess.Popen(command, cwd=ROOT, stderr=subprocess.PIPE, text=True)
     in_consensus = threading.Event()
     lines: list[str] = []
@@ -63,13 +65,12 @@ def one_run(side: int, after: float, out: Path) -> dict:
     def read() -> None:
         assert launcher.stderr is not None
         for line in launcher.stderr:
-            lines.append(line)
+            lines.append(f"{time.monotonic() - started:8.2f} {line}")
             if everyone.search(line):
                 in_consensus.set()
 
     reader = threading.Thread(target=read, daemon=True)
     reader.start()
-    started = time.monotonic()
     children: set[int] = set()
     while not in_consensus.is_set() and launcher.poll() is None:
         children |= descendants(launcher.pid)
@@ -81,6 +82,7 @@ def one_run(side: int, after: float, out: Path) -> dict:
     children |= descendants(launcher.pid)
     launcher.send_signal(signal.SIGINT)
     interrupted = time.monotonic()
+    lines.append(f"{interrupted - started:8.2f} (SIGINT)\n")
     try:
         launcher.wait(LIMIT)
     except subprocess.TimeoutExpired:
@@ -91,6 +93,7 @@ def one_run(side: int, after: float, out: Path) -> dict:
     if launcher.poll() is None:
         launcher.kill()
     reader.join(5)
+    (out / "launcher.log").write_text("".join(lines))  # its stderr, each line timed
     summary = out / "summary.json"
     partial = json.loads(summary.read_text()).get("incomplete") if summary.exists() else None
     return {
@@ -110,10 +113,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--after", type=float, default=3.0)
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--image", type=Path, default=None)
     args = parser.parse_args(argv)
     base = args.out or Path(tempfile.mkdtemp(prefix="camo-interrupt-"))
+    base.mkdir(parents=True, exist_ok=True)
+    image = args.image
+    if image is None:  # the forest, scaled up to the grid by whole pixels
+        import cv2
+
+        from camo_core.algorithm.backgrounds import background
+
+        image = base / "forest.png"
+        size = max(128, args.side)
+        forest = background("forest")
+        cv2.imwrite(str(image), cv2.resize(forest, (size, size), interpolation=cv2.INTER_NEAREST))
     for k in range(args.runs):
-        row = one_run(args.side, args.after, base / f"run_{k}")
+        row = one_run(args.side, args.after, base / f"run_{k}", image)
         print(json.dumps(row), flush=True)
     return 0
 

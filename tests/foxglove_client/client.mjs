@@ -52,17 +52,38 @@ function finish(code) {
 client.on("error", (error) => {
   errors.push(String(error?.message ?? error));
 });
+function subscribe(channel) {
+  try {
+    const reader = new MessageReader(parse(channel.schema, { ros2: true }));
+    readers.set(client.subscribe(channel.id), { topic: channel.topic, reader, channel: channel.id });
+  } catch (error) {
+    errors.push(`${channel.topic}: schema: ${error.message}`);
+  }
+}
+
 client.on("advertise", (advertised) => {
   for (const channel of advertised) {
     channels.set(channel.id, channel);
-    if (!wanted.some((suffix) => channel.topic.endsWith(suffix))) continue;
-    try {
-      const reader = new MessageReader(parse(channel.schema, { ros2: true }));
-      readers.set(client.subscribe(channel.id), { topic: channel.topic, reader });
-    } catch (error) {
-      errors.push(`${channel.topic}: schema: ${error.message}`);
-    }
+    if (wanted.some((suffix) => channel.topic.endsWith(suffix))) subscribe(channel);
   }
+});
+client.on("unadvertise", (ids) => {
+  for (const id of ids) channels.delete(id);
+});
+// The Foxglove SDK's server (0.30) sends an advertisement before it records the channel as
+// advertised to this client, so a subscription that answers at once can meet "Unknown channel
+// ID" on a loaded machine: subscribe again while the channel is still advertised, as a user
+// would click the topic again.
+client.on("status", ({ level, message }) => {
+  const unknown = /^Unknown channel ID: (\d+)$/.exec(message);
+  if (!unknown) return;
+  const id = Number(unknown[1]);
+  for (const [subscription, entry] of readers)
+    if (entry.channel === id) {
+      readers.delete(subscription);
+      client.unsubscribe(subscription);
+    }
+  setTimeout(() => channels.has(id) && subscribe(channels.get(id)), 100);
 });
 client.on("message", ({ subscriptionId, data }) => {
   const entry = readers.get(subscriptionId);

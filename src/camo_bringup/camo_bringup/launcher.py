@@ -284,8 +284,12 @@ def run(config: RunConfig) -> int:
         code = exc.code
     finally:
         stuck = watchdog(config.folder)
-        group.stop(keep=lambda proc: proc in (group.recorder, group.server))
-        # The robots' last reports came while the workers stopped, and nobody took them yet.
+        # The monitor takes the robots' last reports while their workers stop (a worker waits
+        # for them to be taken before it exits), then what is left of them.
+        group.stop(
+            keep=lambda proc: proc in (group.recorder, group.server),
+            meanwhile=session.monitor.turn,
+        )
         session.monitor.take_waiting()
         if len(ran) < config.rounds and group.cells and not config.continuous:
             summary = write_partial(config, session.monitor, len(ran))

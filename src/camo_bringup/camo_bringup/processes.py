@@ -221,12 +221,22 @@ class ProcessGroup:
                 proc.send_signal(signal.SIGINT)
                 self._interrupted.append(proc)
 
-    def stop(self, grace: float = 5.0, keep: Callable[[subprocess.Popen], bool] = lambda p: False):
+    def stop(
+        self,
+        grace: float = 5.0,
+        keep: Callable[[subprocess.Popen], bool] = lambda p: False,
+        meanwhile: Callable[[], object] | None = None,
+    ):
         """SIGINT to each (but those `keep` spares), SIGKILL to those still running after
-        `grace` seconds."""
+        `grace` seconds. `meanwhile` is called while they stop (a bounded piece of work, such
+        as a turn of the monitor): a stopping worker sends its robots' last reports and waits
+        for them to be taken, which they are only if somebody takes them."""
         stopping = [p for p in self.procs if p.poll() is None and not keep(p)]
         self.interrupt(keep)
         deadline = time.monotonic() + grace
+        while any(p.poll() is None for p in stopping) and time.monotonic() < deadline:
+            if not (meanwhile and meanwhile()):
+                time.sleep(0.02)
         for proc in stopping:
             try:
                 proc.wait(max(0.1, deadline - time.monotonic()))
