@@ -152,3 +152,33 @@ def test_a_message_taken_twice_counts_once_until_its_round_is_forgotten():
         assert transport.rejected.counts == {"a second, different message for the same step": 1}
         transport.close()
         node.destroy_node()
+
+
+def test_a_step_every_hosted_robot_took_is_let_go_and_a_late_message_for_it_is_not_kept():
+    """A long round keeps only the steps under way: once both hosted robots took step 0, what
+    was taken for it is let go at the next flush, and a late, different vote for it is read by
+    no one: neither kept nor refused. Step 1, still under way, still refuses one."""
+    from camo_msgs.msg import Host
+
+    with ros_context() as context:
+        node = rclpy.create_node("late_test", context=context)
+        transport = Transport(node, CamoParams(rows=2, cols=2), RunTopics("late_test"), [(0, 1)])
+        other = bytes(range(16))  # the process hosting robots 2 and 3
+        transport.trusted.learn(Host(name="other", first=[2], last=[3]), other)
+        for robot in (0, 1):
+            transport.add(robot, [(2, "vote")], lambda now: NOTHING, emit=None)
+        vote = lambda step, p: Message("vote", 2, 0, step, (p, 3))  # noqa: E731
+        for step in (0, 1):
+            transport._robot_message(vote(step, (1.0, 0.0, 0.0)), other)
+        for _ in (0, 1):  # each hosted robot takes step 0
+            assert transport.mailbox.take((0, "vote", 0)) == {2: ((1.0, 0.0, 0.0), 3)}
+        transport.flush()
+        assert list(transport._seen) == [(0, "vote", 1)]
+        transport._robot_message(vote(0, (0.0, 1.0, 0.0)), other)  # late: step 0 is over
+        assert transport.rejected.counts == {}
+        assert transport.mailbox.box((0, "vote", 0)) == {}
+        assert list(transport._seen) == [(0, "vote", 1)]
+        transport._robot_message(vote(1, (0.0, 1.0, 0.0)), other)
+        assert transport.rejected.counts == {"a second, different message for the same step": 1}
+        transport.close()
+        node.destroy_node()

@@ -220,9 +220,11 @@ class Transport:
         self.remote: set[tuple[int, int]] = set()  # tiles subscribed to
         self.rejected = Rejections(node.get_logger())
         self.trusted = Hosts(params.count, self.rejected, setup)
-        # Each message taken, once: by round, then (kind, sender, step), so that a round is let
-        # go whole (`forget_before`) and the others are not copied.
-        self._seen: dict[int, dict[tuple[str, int, int], object]] = {}
+        # Each message taken from another process, once, by step (round, kind, step) then
+        # sender: a second, different one for the same step is refused. A step is let go once
+        # every hosted robot took it (`flush`), a round whole (`forget_before`), so that a long
+        # round keeps only the steps under way.
+        self._seen: dict[tuple[int, str, int], dict[int, object]] = {}
         # Robots to wake: those that heard something since the generation being woken began,
         # and what is left of that generation.
         self._woken: set[int] = set()
@@ -303,7 +305,7 @@ class Transport:
         """What was kept of rounds before `round_`, which none of the hosted robots is in any
         more (continuous camouflage: a superseded round's messages are never all taken)."""
         self.mailbox.forget_before(round_)
-        for old in [r for r in self._seen if r < round_]:
+        for old in [key for key in self._seen if key[0] < round_]:
             del self._seen[old]
 
     def check_hosted(self) -> None:
@@ -373,16 +375,18 @@ class Transport:
         if problem is not None:
             self.rejected.refuse(problem, gid, f"robot {sender}")
             return
-        seen = self._seen.get(message.round)
+        step = (message.round, kind, message.step)
+        seen = self._seen.get(step)
         if seen is None:
-            seen = self._seen[message.round] = {}
-        key = (kind, sender, message.step)
-        if key in seen:
-            if seen[key] != message.value:
+            if self.mailbox.finished(step):
+                return  # late: every hosted robot took its step, and nobody reads it
+            seen = self._seen[step] = {}
+        elif sender in seen:
+            if seen[sender] != message.value:
                 problem = "a second, different message for the same step"
                 self.rejected.refuse(problem, gid, f"robot {sender}")
             return  # the same message again, or refused
-        seen[key] = message.value
+        seen[sender] = message.value
         self._put(message, (sender, kind))
 
     # ---- out ----------------------------------------------------------------------
@@ -411,6 +415,13 @@ class Transport:
         for batch in unsent:
             batch.flush()
         self.statuses.flush(time.monotonic())
+        self._forget_taken_steps()
+
+    def _forget_taken_steps(self) -> None:
+        """Let go of the steps every hosted robot took (a few keys: the steps under way)."""
+        finished = self.mailbox.finished
+        for step in [step for step in self._seen if finished(step)]:
+            del self._seen[step]
 
     def _flush_edges(self) -> None:
         unsent, self._unsent_edges = self._unsent_edges, []

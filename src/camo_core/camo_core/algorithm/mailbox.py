@@ -60,6 +60,10 @@ class Mailbox:
             return self.boxes.pop(key, EMPTY)
         return self.boxes.get(key, EMPTY)
 
+    def finished(self, key: Key) -> bool:
+        """Whether every reader has taken this step: what comes for it now is kept by no one."""
+        return self._taken.get(key, 0) >= self.readers
+
     def hello_rounds_after(self, round_: int) -> list[int]:
         """The rounds later than `round_` that hellos came for, latest first."""
         return [r for r in reversed(self.hello_rounds) if r > round_]
