@@ -197,7 +197,12 @@ def test_two_runs_on_different_domains_do_not_disturb_each_other(tmp_path):
         assert sum(summary["votes"].values()) == 64 and "dead" not in summary
 
 
-KILLED_TIMEOUT = 2.0  # s: the step timeout of the run whose robots are killed
+# s: the step timeout of the run whose robots are killed. Its process may stall for a second
+# or two when they die (seen under CI's load); a stall is not counted against the neighbours
+# (protocol.stalled), so the margins below allow one, and a robot that waited two timeouts
+# still fails them.
+KILLED_TIMEOUT = 4.0
+KILLED_MARGIN = 3.0  # s: a stall, and reports' spacing (STATUS_PERIOD)
 
 
 @pytest.mark.slow(SWARM)
@@ -215,7 +220,7 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
         seen = wait_for_line(proc, "consensus 64")  # every robot has voted and is in consensus
         processes = json.loads((out_dir / "processes.json").read_text())
         victims = [int(pid) for pid, cells in processes.items() if cells in ([19], [46])]
-        killed = time.monotonic()
+        killed = time.time()  # the wall clock: what the robots' processes stamp statuses with
         for pid in victims:
             os.kill(pid, 9)
         assert len(victims) == 2, "".join(seen[-30:])
@@ -225,15 +230,16 @@ def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     # Found dead within one step timeout: the robots waiting for them at the kill (in
     # consensus) gave up on them, and said so in a status, within one timeout of it; those that
     # came to need them only once those gave up, within two. (Their neighbours in formation
-    # only wait a timeout for them once formation begins.) A margin for reports to come.
+    # only wait a timeout for them once formation begins.) Timed by when their process said so
+    # (the status's stamp), not by when this test's listener got to it.
     gave_up = {}
     for row in statuses.got:
         if row.deadlines and row.phase == CONSENSUS:
-            gave_up.setdefault(row.sender_id, row.taken - killed)
+            gave_up.setdefault(row.sender_id, row.said - killed)
     assert gave_up and not {19, 46} & set(gave_up)
     first, last = min(gave_up.values()), max(gave_up.values())
-    assert first < KILLED_TIMEOUT + 1.5, f"the first gave up {first:.1f} s after the kill"
-    assert last < 2 * KILLED_TIMEOUT + 1.5, f"the last gave up {last:.1f} s after the kill"
+    assert first < KILLED_TIMEOUT + KILLED_MARGIN, f"the first gave up {first:.1f} s after it"
+    assert last < 2 * KILLED_TIMEOUT + KILLED_MARGIN, f"the last gave up {last:.1f} s after it"
     summary = json.loads((out_dir / "summary.json").read_text())
     assert sorted(summary["dead"]) == [[2, 3], [5, 6]]
     assert summary["final"][2][3] is None and summary["final"][5][6] is None
