@@ -217,22 +217,20 @@ class StatusListener:
         return self
 
     def _take(self, msg) -> None:
-        """Each row of a process's status array, as a report with RobotStatus's fields,
-        `taken`: when the listener took it (time.monotonic()), and `said`: when its process
-        published it (its header stamp, by the wall clock: time.time())."""
+        """Each row of a process's status array, as a report with RobotStatus's fields, and
+        `said`: when its process published it (its header stamp, by the wall clock:
+        time.time())."""
         from types import SimpleNamespace
 
         from camo_core.algorithm.status_rows import StatusRows
 
         rows = StatusRows.from_message(msg)
-        taken = time.monotonic()
         said = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         for k in range(len(rows)):
             self.got.append(
                 SimpleNamespace(
                     **{name: getattr(rows, name)[k].item() for name in SCALAR_FIELDS},
                     p=rows.p[k].tolist(),
-                    taken=taken,
                     said=said,
                 )
             )

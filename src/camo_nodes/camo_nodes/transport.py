@@ -42,7 +42,7 @@ from rclpy.serialization import deserialize_message
 
 from camo_core.algorithm.layout import slot_ids
 from camo_core.algorithm.liveness import Liveness
-from camo_core.algorithm.mailbox import Mailbox
+from camo_core.algorithm.mailbox import Key, Mailbox
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import (
     CONSENSUS,
@@ -224,7 +224,7 @@ class Transport:
         # sender: a second, different one for the same step is refused. A step is let go once
         # every hosted robot took it (`flush`), a round whole (`forget_before`), so that a long
         # round keeps only the steps under way.
-        self._seen: dict[tuple[int, str, int], dict[int, object]] = {}
+        self._seen: dict[Key, dict[int, object]] = {}
         # Robots to wake: those that heard something since the generation being woken began,
         # and what is left of that generation.
         self._woken: set[int] = set()
@@ -375,19 +375,19 @@ class Transport:
         if problem is not None:
             self.rejected.refuse(problem, gid, f"robot {sender}")
             return
-        step = (message.round, kind, message.step)
-        seen = self._seen.get(step)
+        key = (message.round, kind, message.step)
+        seen = self._seen.get(key)
         if seen is None:
-            if self.mailbox.finished(step):
+            if self.mailbox.finished(key):
                 return  # late: every hosted robot took its step, and nobody reads it
-            seen = self._seen[step] = {}
+            seen = self._seen[key] = {}
         elif sender in seen:
             if seen[sender] != message.value:
                 problem = "a second, different message for the same step"
                 self.rejected.refuse(problem, gid, f"robot {sender}")
             return  # the same message again, or refused
         seen[sender] = message.value
-        self._put(message, (sender, kind))
+        self._put(key, message)
 
     # ---- out ----------------------------------------------------------------------
 
@@ -420,8 +420,8 @@ class Transport:
     def _forget_taken_steps(self) -> None:
         """Let go of the steps every hosted robot took (a few keys: the steps under way)."""
         finished = self.mailbox.finished
-        for step in [step for step in self._seen if finished(step)]:
-            del self._seen[step]
+        for key in [key for key in self._seen if finished(key)]:
+            del self._seen[key]
 
     def _flush_edges(self) -> None:
         unsent, self._unsent_edges = self._unsent_edges, []
@@ -446,11 +446,11 @@ class Transport:
         """Work is left for the next turn: robots to wake or messages waiting in a reader."""
         return bool(self._woken or self._generation) or self.polled.more
 
-    def _put(self, message: Message, sender_kind: tuple[int, str]) -> None:
-        """Into the mailbox, once; the hosted robots that listen to its sender, to be woken."""
-        targets = self.targets.get(sender_kind)
+    def _put(self, key: Key, message: Message) -> None:
+        """Into the mailbox under its step's `key`, once; the hosted robots that listen to its
+        sender, to be woken."""
+        targets = self.targets.get((message.sender, message.kind))
         if targets:
-            key = (message.round, message.kind, message.step)
             self.mailbox.put(key, message.sender, message.value)
             self._woken.update(targets)
 

@@ -39,7 +39,7 @@ class Mailbox:
         box = self.boxes.get(key)
         if box is not None:
             box[sender] = value
-        elif self._taken.get(key, 0) < self.readers:
+        elif not self.finished(key):
             self.boxes[key] = {sender: value}
             if key[1] == "hello" and key[0] not in self.hello_rounds:
                 self.hello_rounds.append(key[0])
