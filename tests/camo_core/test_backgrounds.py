@@ -5,8 +5,9 @@ import pytest
 
 from camo_core.algorithm.backgrounds import background
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.sensing import ImageError, sense_image
+from camo_core.algorithm.sensing import sense_image
 from camo_core.algorithm.simulator import simulate
+from camo_core.inputs.images import ImageError
 
 
 @pytest.mark.parametrize(

@@ -54,7 +54,7 @@ def test_opening_a_video_or_a_missing_camera_leaves_opencvs_log_level_as_it_was(
     video, and then a damaged image it loaded no longer said what its decoder reported."""
     import pytest
 
-    from camo_core.algorithm.sensing import ImageError, load_image
+    from camo_core.inputs.images import ImageError, load_image
     from camo_projector.sources import CameraSource
 
     logging = cv2.utils.logging

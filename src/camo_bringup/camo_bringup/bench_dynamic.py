@@ -32,10 +32,11 @@ import numpy as np
 
 from camo_core.algorithm.backgrounds import background
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.sensing import load_image, sense_colours, sense_image
+from camo_core.algorithm.sensing import sense_colours, sense_image
 from camo_core.algorithm.simulator import simulate
 from camo_core.cli.options import Parser
 from camo_core.exceptions import EXIT_USAGE, CamoError
+from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer
 from camo_core.results.summary import summary_bytes
 

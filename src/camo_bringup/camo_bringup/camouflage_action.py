@@ -34,8 +34,9 @@ from rclpy.task import Future
 from std_msgs.msg import String
 
 from camo_core.algorithm.robot_io import CONSENSUS
-from camo_core.algorithm.sensing import MAX_IMAGE_PIXELS, sense_image
+from camo_core.algorithm.sensing import sense_image
 from camo_core.exceptions import CamoError
+from camo_core.inputs.images import MAX_IMAGE_PIXELS
 from camo_msgs.action import Camouflage
 from camo_nodes.topics.images import image_from_msg
 

@@ -18,7 +18,7 @@ import numpy as np
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.run_setup import MAX_WAIT, ProtocolParams, RunSetup, contiguous
-from camo_core.algorithm.sensing import Calibration, image_digest, load_image, sense_image
+from camo_core.algorithm.sensing import Calibration, image_digest, sense_image
 from camo_core.cli.options import (
     Parser,
     add_options,
@@ -31,6 +31,7 @@ from camo_core.cli.options import (
 )
 from camo_core.exceptions import UsageError
 from camo_core.inputs.files import checked_path, shown
+from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer, items
 from camo_core.results.folders import new_folder_problem
 from camo_nodes.topics.names import RunTopics, check_run_id, new_run_id

@@ -22,7 +22,7 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
-from camo_core.algorithm.sensing import load_image
+from camo_core.inputs.images import load_image
 
 
 def scene(name: str) -> np.ndarray:

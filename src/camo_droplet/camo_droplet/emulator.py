@@ -31,9 +31,10 @@ import numpy as np
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.sensing import block_means, load_image
+from camo_core.algorithm.sensing import block_means
 from camo_core.cli.options import Parser, a_path, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
+from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer, items
 from camo_core.shutdown import interrupt_on_signals
 

@@ -32,8 +32,9 @@ from camo_core.algorithm.change import Watch
 from camo_core.algorithm.liveness import HEARTBEAT_PERIOD
 from camo_core.algorithm.protocol import TICK
 from camo_core.algorithm.run_setup import ProtocolParams
-from camo_core.algorithm.sensing import ImageError, Projection, image_digest
+from camo_core.algorithm.sensing import Projection, image_digest
 from camo_core.algorithm.ticks import Ticks
+from camo_core.inputs.images import ImageError
 from camo_msgs.msg import Notices
 from camo_nodes.topics.images import ImageEncodingError, frame_number, image_from_msg
 from camo_nodes.topics.names import RunTopics

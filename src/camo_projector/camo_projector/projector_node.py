@@ -31,9 +31,9 @@ from std_msgs.msg import String
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.run_setup import MAX_WAIT
-from camo_core.algorithm.sensing import load_image
 from camo_core.cli.options import Parser, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
+from camo_core.inputs.images import load_image
 from camo_core.schema import check_fields, param, with_role
 from camo_nodes.topics.images import (
     ImageEncodingError,

@@ -12,8 +12,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from camo_core.algorithm.sensing import MAX_IMAGE_BYTES, ImageError, image_header, load_image
 from camo_core.inputs.files import checked_file, shown
+from camo_core.inputs.images import MAX_IMAGE_BYTES, ImageError, image_header, load_image
 
 MAX_SEQUENCE = 10_000  # image files of one --images pattern at most
 MAX_VIDEO_BYTES = 1 << 40  # a video is read frame by frame: its size costs no memory
@@ -26,7 +26,7 @@ SKIPPED_PER_CALL = 64
 def _quiet_opencv() -> Iterator[None]:
     """OpenCV's video back-ends log to stderr when a device or file cannot be opened: camo says
     so in one line of its own instead. Only while opening: OpenCV's log level is the process's,
-    and the image loader reads what the decoders log (sensing.load_image)."""
+    and the image loader reads what the decoders log (inputs.images.load_image)."""
     logging = getattr(getattr(cv2, "utils", None), "logging", None)
     if logging is None:
         yield

@@ -9,7 +9,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from camo_core.algorithm.sensing import ImageError
+from camo_core.inputs.images import ImageError
 
 SIZE = 128
 BACKGROUNDS = ("desert", "forest", "leopard")

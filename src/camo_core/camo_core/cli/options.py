@@ -14,9 +14,10 @@ import numpy as np
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.sensing import load_image, with_contrast
+from camo_core.algorithm.sensing import with_contrast
 from camo_core.exceptions import UsageError
 from camo_core.inputs.files import checked_path
+from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer, number
 from camo_core.results.folders import output_folder
 from camo_core.schema import Declared, with_role
