@@ -302,8 +302,9 @@ def test_background_switch_waits_for_a_matched_projector_and_names_a_missing_one
     import rclpy
     from std_msgs.msg import String
 
+    from camo_bringup.failures import RunFailed
     from camo_bringup.run_config import build_parser, config_from
-    from camo_bringup.session import RunFailed, Session
+    from camo_bringup.session import Session
 
     config = config_from(build_parser().parse_args(["--rows", "2", "--out", str(tmp_path)]))
     with ros_context() as context:

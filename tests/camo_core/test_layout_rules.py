@@ -11,11 +11,12 @@ from support import COMPUTE, PROCESS, brick_courses, run_camo
 
 from camo_core.algorithm import orientation
 from camo_core.algorithm.backgrounds import background, stripes
-from camo_core.algorithm.layout import LayoutError, layout_for, layout_of, places_for, sense_at
+from camo_core.algorithm.layout import layout_for, layout_of, places_for, sense_at
 from camo_core.algorithm.layout_rules import fitted_tensor, kernel
 from camo_core.algorithm.params import CamoParams, ParameterError
 from camo_core.algorithm.perrobot import run_per_robot
 from camo_core.algorithm.rules import MOTTLED
+from camo_core.inputs.positions import LayoutError
 
 
 def test_a_hexagonal_robot_has_six_neighbours_one_spacing_away():
@@ -189,7 +190,7 @@ def test_a_layout_file_with_bad_numbers_or_rows_is_one_line(tmp_path, content, s
 
 @pytest.mark.parametrize("header", [b"", b"x,y\n"])
 def test_a_layout_csv_with_a_byte_order_mark_keeps_every_robot(tmp_path, header):
-    from camo_core.algorithm.layout import read_positions
+    from camo_core.inputs.positions import read_positions
 
     path = tmp_path / "layout.csv"
     rows = b"".join(b"%d,%d\n" % (c, r) for r in range(4) for c in range(4))
@@ -205,20 +206,20 @@ def test_a_layout_csv_with_a_byte_order_mark_keeps_every_robot(tmp_path, header)
 def test_a_layout_path_that_is_no_file_is_one_line(tmp_path, monkeypatch, name, said):
     monkeypatch.chdir(tmp_path)
     with pytest.raises(LayoutError, match=said) as caught:
-        from camo_core.algorithm.layout import file_positions
+        from camo_core.inputs.positions import file_positions
 
         file_positions(name)
     assert "\n" not in str(caught.value)
 
 
 def test_a_layout_file_too_big_to_be_one_is_refused_before_reading(tmp_path, monkeypatch):
-    from camo_core.algorithm import layout
+    from camo_core.inputs import positions
 
     path = tmp_path / "big.csv"
     path.write_text("0,0\n1,0\n")
-    monkeypatch.setattr(layout, "MAX_FILE_BYTES", 4)
+    monkeypatch.setattr(positions, "MAX_FILE_BYTES", 4)
     with pytest.raises(LayoutError, match="bytes"):
-        layout.file_positions(str(path))
+        positions.file_positions(str(path))
 
 
 NUMBERS = st.one_of(

@@ -25,10 +25,11 @@ import numpy as np
 import rclpy
 from rclpy.signals import SignalHandlerOptions
 
+from camo_bringup.failures import Interrupted, RunFailed
 from camo_bringup.processes import ProcessGroup
 from camo_bringup.round_report import continuous_round, report_round, write_partial
 from camo_bringup.run_config import RunConfig, build_parser, config_from
-from camo_bringup.session import Interrupted, RunFailed, Session
+from camo_bringup.session import Session
 from camo_core.algorithm.robot_io import CONSENSUS
 from camo_core.algorithm.run_setup import contiguous
 from camo_core.cli.params_file import write_params_file

@@ -8,16 +8,34 @@ import json
 import sys
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from rclpy.duration import Duration
+from rclpy.node import Node
 from std_msgs.msg import String
 
+from camo_bringup.failures import RunFailed
+from camo_bringup.run_config import RunConfig
+from camo_nodes.monitor_node import MonitorNode
+from camo_nodes.topics.names import RunTopics
 from camo_nodes.topics.qos import LATCHED, LATCHED_READER
 
 if TYPE_CHECKING:
     from camo_bringup.processes import ProcessGroup
-    from camo_bringup.session import Session
+
+
+class RunSide(Protocol):
+    """What the recorders need of the launcher's side of a run (session.Session): its node,
+    topics, configuration and monitor, when it started, and spinning its executor."""
+
+    node: Node
+    topics: RunTopics
+    config: RunConfig
+    monitor: MonitorNode
+    started: float
+
+    def spin_for(self, seconds: float) -> None: ...
+
 
 RECORDER_SETTLE = 1.0  # s after the parameters appear that a waiting recorder has joined
 
@@ -50,7 +68,7 @@ class Recorders:
     """Every recorder of the run (ours, or one started by hand) reports what its bag holds on
     /<run>/swarm/recorded; the run's result goes out on /<run>/swarm/result."""
 
-    def __init__(self, session: Session) -> None:
+    def __init__(self, session: RunSide) -> None:
         self.session = session
         node, topics = session.node, session.topics
         self.reports: dict[str, dict] = {}
@@ -108,8 +126,6 @@ class Recorders:
         """Before the robots stop or start a new round: a robot's topics keep one round of
         history for late subscribers, so every recorder must have taken this round in first
         (`finished`: the robots that finished it, if the monitor's record is let go)."""
-        from camo_bringup.session import RunFailed
-
         session = self.session
         if finished is None:
             finished = int(session.monitor.record(round_index).finished.sum())

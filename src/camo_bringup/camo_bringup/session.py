@@ -11,32 +11,15 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 from camo_bringup.camouflage_action import CamouflageAction
+from camo_bringup.failures import EXIT_CONFLICT, Interrupted, RunFailed
 from camo_bringup.recording import Recorders
 from camo_bringup.run_config import RunConfig
-from camo_core.exceptions import CamoError
 from camo_core.shutdown import StopFlag
 from camo_nodes.host import host_node_name
 from camo_nodes.monitor_node import MonitorNode
 from camo_nodes.topics.qos import LATCHED
 
-# The exit code of a run that cannot go on because of another process in its domain: a live run
-# of the same id, or a stranger hosting its tiles (the code of bad input: nothing would change
-# by trying again as it is).
-EXIT_CONFLICT = 2
 HOSTS_SETTLE = 2.0  # s: a host the graph shows has its latched announcement taken by then
-
-
-class RunFailed(CamoError):
-    """A process of the run failed, or a wait gave up: exit code 1 (2 when the process said its
-    input was bad)."""
-
-    def __init__(self, message: str, code: int = 1) -> None:
-        super().__init__(message)
-        self.code = code
-
-
-class Interrupted(Exception):
-    """Ctrl-C or SIGTERM reached the launcher."""
 
 
 class Session:

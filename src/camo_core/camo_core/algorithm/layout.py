@@ -11,7 +11,6 @@ ones in id order.
 
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -22,24 +21,16 @@ import numpy as np
 
 from camo_core.algorithm import rng
 from camo_core.algorithm.grid import neighbor_ids
-from camo_core.algorithm.params import MAX_COORDINATE, CamoParams
+from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import to_gray, to_rgb
-from camo_core.exceptions import CamoError
-from camo_core.inputs.files import checked_file, shown
 from camo_core.inputs.numeric import number
+from camo_core.inputs.positions import LayoutError, read_positions
 
 NEAR = 1.5
 FAR = 2.3
-MIN_GAP = 0.5  # spacings: closer robots would crowd a robot's reach
 MAX_SLOTS = 64  # neighbours within FAR: RobotStatus.known_slots is a 64-bit mask
 KINDS = ("hex", "jitter:A", "FILE")
 STREAM_JITTER = rng.STREAM_JITTER  # the jitter draws (a = coordinate, b = robot)
-MAX_ROBOTS = 65536
-MAX_FILE_BYTES = 16 * 1024 * 1024  # 65536 lines of x,y and then some
-
-
-class LayoutError(CamoError):
-    """A layout that cannot be read or made; the message says why in one line."""
 
 
 @dataclass(frozen=True)
@@ -101,11 +92,6 @@ def slot_ids(params: CamoParams, robot: int) -> list[int | None]:
     return neighbor_ids(*divmod(robot, params.cols), params.rows, params.cols)
 
 
-def file_positions(path: str) -> tuple[tuple[float, float], ...]:
-    """--layout FILE's positions, as CamoParams carries them."""
-    return tuple((float(x), float(y)) for x, y in read_positions(path))
-
-
 def layout_of(spec: str, rows: int, cols: int, seed: int) -> Layout:
     """hex, jitter:A (A in [0, 0.5)) over rows x cols, or a CSV file of x,y positions."""
     if spec == "hex":
@@ -125,57 +111,6 @@ def layout_of(spec: str, rows: int, cols: int, seed: int) -> Layout:
         positions = np.stack([j + amount * shift[0], i + amount * shift[1]], axis=-1)
         return Layout(spec, positions.astype(np.float64))
     return Layout(spec, read_positions(Path(spec)))
-
-
-def read_positions(path: str | Path) -> np.ndarray:
-    """x,y per line (spacings), numbers as camo_core.inputs.numeric.number reads them. The file is
-    UTF-8, with or without a byte-order mark. Its first line is a header, and skipped, only if
-    none of its fields is a number (`x,y`): a line with a number in it is data, and a data
-    line that does not parse is an error, never taken for a header."""
-    path = checked_file(path, "layout file", MAX_FILE_BYTES, LayoutError)
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as handle:
-            lines = [
-                (number, row)
-                for number, row in enumerate(csv.reader(handle), 1)
-                if row and any(c.strip() for c in row)
-            ]
-    except OSError as exc:
-        raise LayoutError(f"cannot read layout {shown(path)}: {exc.strerror or exc}") from None
-    except (UnicodeDecodeError, csv.Error):
-        raise LayoutError(f"layout {shown(path)} is not a CSV file of x,y positions") from None
-    if lines and not any(_parses(c) for c in lines[0][1]):
-        lines = lines[1:]  # a header of words
-    bad = next((n for n, row in lines if len(row) != 2 or not _numbers(row)), None)
-    if bad is not None or not lines:
-        where = f"line {bad}" if bad is not None else "no positions"
-        want = f"want x,y (two numbers within +-{MAX_COORDINATE:g}) a line"
-        raise LayoutError(f"layout {shown(path)}: {where}: {want}")
-    rows = [row for _, row in lines]
-    if len(rows) > MAX_ROBOTS:
-        raise LayoutError(f"layout {shown(path)} has {len(rows)} robots, above {MAX_ROBOTS}")
-    positions = np.array([[number(x), number(y)] for x, y in rows])
-    close = _closest_pair(positions)
-    if close is not None and close < MIN_GAP:
-        raise LayoutError(
-            f"layout {shown(path)} has two robots {close:.3g} spacings apart (< {MIN_GAP:g})"
-        )
-    return positions
-
-
-def _parses(field: str) -> bool:
-    try:
-        number(field, special=True)
-    except ValueError:
-        return False
-    return True
-
-
-def _numbers(row: list[str]) -> bool:
-    try:
-        return all(abs(number(c)) <= MAX_COORDINATE for c in row)
-    except ValueError:
-        return False
 
 
 def neighbours_of(positions: np.ndarray) -> list[tuple[list[int], list[int]]]:
@@ -200,15 +135,6 @@ def neighbours_of(positions: np.ndarray) -> list[tuple[list[int], list[int]]]:
                         far.append(other)
         out.append((sorted(near), sorted(far)))
     return out
-
-
-def _closest_pair(positions: np.ndarray) -> float | None:
-    best = None
-    for robot, (near, _) in enumerate(neighbours_of(positions)):
-        for other in near:
-            d = float(np.hypot(*(positions[other] - positions[robot])))
-            best = d if best is None or d < best else best
-    return best
 
 
 def sense_at(image: np.ndarray, layout: Layout, profile: str = "paper") -> np.ndarray:

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from camo_core.inputs.positions import MAX_COORDINATE, file_positions
 from camo_core.schema import ParameterError, check_fields, declared, param, to_dict
 
 PROFILES = ("paper", "droplet")
@@ -30,7 +31,6 @@ PROFILE_DEFAULTS: dict[str, dict[str, Any]] = {
 
 MAX_LEVELS = 8  # --levels: K - 1 layers fit a state's uint8 and leave 255 (not received) free
 MAX_COLOURS = 8  # --colours: a palette of at most 8, as --levels
-MAX_COORDINATE = 1e6  # spacings: a file layout's positions stay within this
 MAX_SIDE = 8192  # robots per row or column; ids stay far inside uint32
 MAX_STEPS = 100_000
 AUTO = "auto"
@@ -170,8 +170,6 @@ class CamoParams:
             options["threshold"], options["threshold_auto"] = THRESHOLD_DEFAULT, True
         layout = options.get("layout") or ""
         if layout and layout != "hex" and not layout.startswith("jitter:") and layout != "file":
-            from camo_core.algorithm.layout import file_positions  # a loader; layout imports us
-
             positions = file_positions(layout)
             options.update(rows=1, cols=len(positions), layout="file", positions=positions)
         if options.get("consensus_steps") == AUTO:
