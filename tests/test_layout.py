@@ -261,6 +261,28 @@ def test_each_parameter_is_spelled_in_at_most_two_modules():
     assert {n: m for n, m in spelled.items() if len(m) > 2} == {}
 
 
+# The flags that choose a variation of the algorithm (camo_core.algorithm.modes.modes_of).
+MODE_FLAGS = ("colours", "levels", "layout", "orientation", "orientation_any", "threshold_auto")
+# Where a flag may be read freely: its declaration, the mode objects that it chooses, and the
+# command line, which reads options as the user gave them.
+MODE_HOMES = re.compile(r"camo_core/algorithm/(modes/|params\.py)|camo_core/cli/|run_config\.py")
+
+
+def test_each_mode_flag_is_read_in_at_most_two_modules_besides_its_objects():
+    """A variation of the algorithm is one object chosen once (modes.modes_of); the drivers,
+    results, figures and nodes ask that object, not the flag that chose it."""
+    readers: dict[str, set[str]] = {flag: set() for flag in MODE_FLAGS}
+    for path in sorted(SRC.rglob("*.py")):
+        where = str(path.relative_to(SRC))
+        if MODE_HOMES.search(where):
+            continue
+        text = path.read_text()
+        for flag in MODE_FLAGS:
+            if re.search(rf"\bparams\.{flag}\b", text):
+                readers[flag].add(where)
+    assert {flag: found for flag, found in readers.items() if len(found) > 2} == {}
+
+
 def console_scripts() -> list[tuple[str, str]]:
     """(package, script name) of every console script the packages declare."""
     scripts = []

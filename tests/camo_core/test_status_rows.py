@@ -9,6 +9,7 @@ from support import Bus
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.status_rows import RowsError, StatusRows, rows_of_message
+from camo_core.algorithm.validation import rows_problems
 from camo_core.results.record import RoundRecord
 
 
@@ -69,12 +70,35 @@ def test_a_robot_reported_twice_in_one_table_keeps_its_later_report():
 
 
 def test_columns_whose_lengths_disagree_are_not_a_table():
-    fields = StatusRows.from_reports(
-        [SimpleNamespace(sender_id=0, phase=1, p=[0, 0, 0], silent=[1, 2])]
-    ).message_fields()
-    for name, value in (("phase", []), ("p", [0.0]), ("silent", [1]), ("silent_count", [3])):
+    two = [SimpleNamespace(sender_id=k, phase=1, p=[0, 0, 1], silent=[1, 2]) for k in (0, 1)]
+    fields = StatusRows.from_reports(two).message_fields()
+    for name, value in (
+        ("phase", [1]),
+        ("p", [0.0, 0.0, 1.0, 0.0, 1.0]),  # not the same number of values a row
+        ("p", []),
+        ("p_trace_count", [1, 0]),  # a step of p's width, and no values
+        ("silent", [1]),
+        ("silent_count", [3, 2]),
+    ):
         with pytest.raises(RowsError):
             StatusRows.from_message(SimpleNamespace(**{**fields, name: value}))
+
+
+def test_p_is_of_any_width_and_a_report_of_another_width_than_the_others_is_refused():
+    # A fourth pattern widens p: a table takes any width, the same for every row; a report whose
+    # p is of another width is ragged, and the monitor refuses its row.
+    wide = [
+        SimpleNamespace(sender_id=k, phase=2, p=[0.25] * 4, p_trace=[0.25] * 8) for k in (0, 1)
+    ]
+    rows = StatusRows.from_message(
+        SimpleNamespace(**StatusRows.from_reports(wide).message_fields())
+    )
+    assert rows.width == 4 and rows.p_trace_count.tolist() == [2, 2]
+    odd = SimpleNamespace(sender_id=2, phase=2, p=[0.5, 0.5])
+    mixed = StatusRows.from_reports([*wide, odd])
+    assert mixed.ragged.tolist() == [False, False, True]
+    problems = rows_problems(mixed, CamoParams(rows=2, cols=2))  # the paper's p: 3 wide
+    assert all(problems), problems
 
 
 def test_a_status_of_an_older_camo_reads_as_one_row():

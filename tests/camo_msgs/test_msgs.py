@@ -2,6 +2,7 @@
 
 import os
 import time
+from pathlib import Path
 
 import pytest
 
@@ -67,7 +68,7 @@ def test_each_message_type_round_trips(monkeypatch):
 
 
 def test_robot_status_constants_are_the_protocols_phases_and_the_rules_patterns():
-    from camo_core.algorithm import protocol, rules
+    from camo_core.algorithm import protocol
 
     assert [
         RobotStatus.PHASE_DISCOVERY,
@@ -82,10 +83,53 @@ def test_robot_status_constants_are_the_protocols_phases_and_the_rules_patterns(
         protocol.FORMATION,
         protocol.DONE,
     ]
-    assert [
-        RobotStatus.PATTERN_HORIZONTAL,
-        RobotStatus.PATTERN_VERTICAL,
-        RobotStatus.PATTERN_MOTTLED,
-    ] == [rules.HORIZONTAL, rules.VERTICAL, rules.MOTTLED]
+    from camo_core.algorithm.orientation import ORIENTED
+    from camo_core.algorithm.patterns import PATTERNS
+
+    # Every pattern of the table has its constant, at its code; stripes at an angle follow them.
+    for pattern in PATTERNS:
+        assert getattr(RobotStatus, f"PATTERN_{pattern.name.upper()}") == pattern.code
+    assert RobotStatus.PATTERN_STRIPES == ORIENTED
     assert RobotStatus.PATTERN_NONE == protocol.NO_PATTERN
-    assert [rules.PATTERN_NAMES[k] for k in (0, 1, 2)] == ["horizontal", "vertical", "mottled"]
+
+
+MSG = Path(__file__).parents[2] / "src" / "camo_msgs" / "msg"
+
+
+def msg_fields(name: str) -> dict[str, str]:
+    """A .msg file's fields: name -> type (constants and comments left out)."""
+    fields = {}
+    for line in (MSG / f"{name}.msg").read_text().splitlines():
+        line = line.split("#", 1)[0].strip()
+        if line and "=" not in line:
+            kind, field = line.split()
+            fields[field] = kind
+    return fields
+
+
+def test_status_messages_hold_each_declared_status_column_with_its_type():
+    # The status columns are declared once (robot_io.Report); the messages must carry each
+    # with its declared type: a RobotStatus one robot's values, a StatusArray a column of them
+    # (lists flattened, with a count a row), and nothing else beside the header and name.
+    from camo_core.algorithm.robot_io import STATUS_COLUMNS
+
+    single, array = {}, {}
+    for name, meta in STATUS_COLUMNS.items():
+        element, shape = meta["element"], meta["shape"]
+        if meta["single"]:
+            single[name] = element if shape == "value" else f"{element}[]"
+        if meta["array"]:
+            array[name] = f"{'uint8' if element == 'bool' else element}[]"
+            if shape == "list":
+                array[f"{name}_count"] = "uint32[]"
+    assert msg_fields("RobotStatus") == {"header": "std_msgs/Header", **single}
+    assert msg_fields("StatusArray") == {"header": "std_msgs/Header", "name": "string", **array}
+
+
+def test_a_vote_holds_p_of_any_width():
+    # A fourth pattern widens p: every message that carries p takes any width.
+    assert msg_fields("Vote")["p"] == "float64[]"
+    assert msg_fields("Votes")["p"] == "float64[]"
+    assert msg_fields("RobotStatus")["p"] == "float64[]"
+    status = RobotStatus(p=[0.25, 0.25, 0.25, 0.25])
+    assert list(status.p) == [0.25] * 4

@@ -298,3 +298,18 @@ def test_bench_sweep_reads_trials_as_ascii_digits_in_one_line(trials, capsys):
     err = capsys.readouterr().err
     assert err.startswith("camo bench sweep: error: argument --trials: invalid int value")
     assert len(err.strip().splitlines()) == 1
+
+
+def test_a_trials_reference_leaves_out_every_parameter_declared_as_noise(monkeypatch):
+    # A trial is compared with its run without errors: what is declared noise=True (and only
+    # that) is left out of the reference's options, whatever its name.
+    from camo_core.algorithm.params import CamoParams
+    from camo_core.schema import declared
+    from camo_sweep import trials
+
+    options = {"rows": 8, "cols": 8, "seed": 3, "rho_meas": 0.1, "rho_comm": 0.2}
+    assert trials.reference_options(options) == {"rows": 8, "cols": 8, "seed": 3}
+    noisy = {name for name, d in declared(CamoParams).items() if d.spec.noise}
+    assert noisy == {"rho_meas", "rho_comm"}
+    monkeypatch.setattr(trials, "NOISE", ("seed",))  # as if seed were declared noise
+    assert trials.reference_options(options) == {k: v for k, v in options.items() if k != "seed"}

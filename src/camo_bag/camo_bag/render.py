@@ -36,7 +36,7 @@ from camo_core.exceptions import CamoError
 from camo_core.results import figures
 from camo_core.results.animation import Snapshots, join_animations, write_animation
 from camo_core.results.output import run_title, write_round
-from camo_core.results.record import Backgrounds, Rounds
+from camo_core.results.record import Backgrounds, Rounds, round_fields
 from camo_msgs.msg import Notices
 from camo_nodes.topics.images import frame_number, image_from_msg, pixels_sha256
 
@@ -177,7 +177,7 @@ def render(path: str | Path | Bag, out: Path, partial: bool = False) -> list[dic
         if at < len(results) and "rejected_messages" in results[at]:
             extra["rejected_messages"] = results[at]["rejected_messages"]
         if named:
-            extra.update(continuous_fields(run, k, index, record))
+            extra.update(round_fields(k, index, run.images, run.notices, record))
             if image is not None:  # the frame, as the live run keeps it
                 cv2.imwrite(str(folder / "background.png"), image)
         lacks = "; ".join(gaps_of_round(gaps, index))
@@ -196,22 +196,6 @@ def render(path: str | Path | Bag, out: Path, partial: bool = False) -> list[dic
     if named and summaries:  # a continuous run's GIF: its rounds one after another
         join_animations([out / f"round_{k}" for k in range(len(summaries))], out / "run.gif")
     return summaries
-
-
-def continuous_fields(run: RecordedRun, k: int, frame: int, record) -> dict:
-    """The fields a continuous round's summary.json has besides the simulator's (as the live
-    run writes them: round_report.continuous_round)."""
-    noticed = run.notices.get(frame)
-    clocks = record.timing()
-    return {
-        "round": k,
-        "frame": frame,
-        "background_sha256": run.images.digests.get(frame),
-        "changed_at": noticed[1] if noticed else run.images.times.get(frame),
-        "noticed_at": noticed[2] if noticed else None,
-        "noticed_by": noticed[0] if noticed else None,
-        "done_at": clocks[1] if clocks is not None else None,
-    }
 
 
 def main(argv: list[str] | None = None) -> int:

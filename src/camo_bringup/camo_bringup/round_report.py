@@ -16,6 +16,7 @@ from camo_core.algorithm.result import pattern_said
 from camo_core.algorithm.robot_io import CONSENSUS
 from camo_core.algorithm.run_setup import contiguous
 from camo_core.results.animation import join_animations
+from camo_core.results.record import round_fields
 from camo_nodes.monitor_node import MonitorNode
 
 
@@ -118,17 +119,8 @@ def continuous_round(
     folder.mkdir(exist_ok=True)
     record = monitor.record(round_)
     noticed = monitor.notices.get(round_)
-    clocks = record.timing()
-    done_at = clocks[1] if clocks is not None and not partial else None
-    extra = {
-        "round": index,
-        "frame": round_,
-        "background_sha256": monitor.images.digests.get(round_),
-        "changed_at": noticed[1] if noticed else monitor.images.times.get(round_),
-        "noticed_at": noticed[2] if noticed else None,
-        "noticed_by": noticed[0] if noticed else None,
-        "done_at": done_at,
-    }
+    extra = round_fields(index, round_, monitor.images, monitor.notices, record, partial)
+    done_at = extra["done_at"]
     label = f"{config.labels[0]}, frame {round_}" + (" (incomplete)" if partial else "")
     summary = monitor.write(round_, folder, label, partial=partial, extra=extra)
     image = monitor.images.get(round_)

@@ -26,7 +26,8 @@ import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from camo_core.algorithm.params import AUTO, CamoParams, ParameterError
+from camo_core.algorithm.modes import modes_of
+from camo_core.algorithm.params import CamoParams, ParameterError
 from camo_core.algorithm.protocol import CONSENSUS, NO_PATTERN, SENSING
 from camo_core.algorithm.sensing import Calibration
 from camo_core.algorithm.status_rows import StatusRows
@@ -222,19 +223,7 @@ def run_monitor(robot: RobotSetup, topics: RunTopics, bridge: BridgeParams, stop
 def firmware_lacks(params: CamoParams) -> list[str]:
     """The options of a run that a Droplet's own firmware has no rules for (it runs the
     paper's, with a fixed threshold and two stripe directions)."""
-    paper = CamoParams()
-    beyond = {"threshold_auto": params.threshold_auto, "orientation": params.orientation}
-    beyond["levels"] = params.levels
-    beyond["colours"] = params.colours
-    lacks = []
-    for name, value in beyond.items():
-        if value != getattr(paper, name):
-            d = declared(CamoParams)[name]
-            # A switch is named alone; a value with its option's spelling.
-            named = name if isinstance(value, bool) else f"{name} {value}"
-            said = f"{d.option} {value}" if d.spec.cli else f"--threshold {AUTO}"
-            lacks.append(f"{named} ({said})")
-    return lacks
+    return modes_of(params).beyond_paper()
 
 
 def check_bridge(values: dict) -> None:

@@ -22,7 +22,7 @@ import rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from camo_core.algorithm.layout import colours_at, layout_for, sense_at
+from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import MAX_SIDE, CamoParams, ParameterError
 from camo_core.algorithm.protocol import DUE_ONLY_LATER, StepProtocol
 from camo_core.algorithm.robot_io import NOTHING, Display, Output, Sensor
@@ -157,13 +157,12 @@ ROBOT_PARAMETERS = (CamoParams, ProtocolParams, RobotCell, JoinParams)
 def projected_on(params: CamoParams):
     """How a projected image becomes the robots' greys and colours: (None, None) for block
     means, or on a layout the means round their positions."""
-    if not params.layout:
+    layout = modes_of(params).layout
+    if layout.grid:
         return None, None
-    layout = layout_for(params)
-    shape = (params.rows, params.cols)
     return (
-        lambda image: sense_at(image, layout, params.profile).reshape(shape),
-        lambda image: colours_at(image, layout).reshape((*shape, 3)),
+        lambda image: layout.sense_greys(image, params.profile),
+        lambda image: layout.sense_colours(image),
     )
 
 

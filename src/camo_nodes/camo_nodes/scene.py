@@ -24,8 +24,7 @@ from geometry_msgs.msg import Point
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from camo_core.algorithm import colours, levels
-from camo_core.algorithm.layout import layout_for
+from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot_io import PHASE_NAMES
 from camo_core.results.record import RoundRecord
@@ -40,8 +39,9 @@ BRIDGED = ColorRGBA(r=0.1, g=0.4, b=1.0, a=1.0)
 
 def position(robot: int, params: CamoParams, z: float = 0.0) -> Point:
     """A robot's place in the scene: its grid cell, or on a --layout its position."""
-    if params.layout:
-        x, y = layout_for(params).positions[robot]
+    positions = modes_of(params).layout.positions
+    if positions is not None:
+        x, y = positions[robot]
         return Point(x=float(x) * SPACING, y=-float(y) * SPACING, z=z)
     row, col = divmod(robot, params.cols)
     return Point(x=col * SPACING, y=-row * SPACING, z=z)
@@ -52,21 +52,18 @@ def shown_colour(record: RoundRecord) -> tuple[np.ndarray, np.ndarray]:
     (on = dark; with --levels its palette's grey, with --colours its palette's colour), what it
     sensed before (its colour with --colours, else its grey), a faint mid-grey until it
     reports."""
-    state = record.state
+    state, modes = record.state, record.modes
+    n, shape = len(state), (record.params.rows, record.params.cols)
     sensed = np.nan_to_num(record.sensed, nan=128.0)
     sensed_rgb = np.repeat(sensed[:, None], 3, axis=1)
-    if record.params.colours:  # the colours robots sensed, then their palettes' colours
+    if modes.sensing.colour:  # the colours robots sensed
         known = ~np.isnan(record.sensed_rgb).any(axis=1)
         sensed_rgb[known] = record.sensed_rgb[known]
-        shown = colours.shown_grid(np.maximum(state, 0), record.shades, record.palette_rgb)
-        rgb = np.where((state >= 0)[:, None], shown, sensed_rgb)
-    else:
-        if record.params.levels:  # the palette's grey of the layers on
-            shown = levels.shown_grid(np.maximum(state, 0), record.palette)
-            grey = np.where(state >= 0, shown, sensed)
-        else:
-            grey = np.where(state == 1, 0.0, np.where(state == 0, 255.0, sensed))
-        rgb = np.repeat(grey[:, None], 3, axis=1)
+    states = np.maximum(state, 0).reshape(shape)
+    shown = modes.palette.shown_grid(states, record.grid_palette()).reshape(n, -1)
+    if shown.shape[1] == 1:  # greys
+        shown = np.repeat(shown, 3, axis=1)
+    rgb = np.where((state >= 0)[:, None], shown, sensed_rgb)
     alpha = np.where(np.isnan(record.sensed) & (state < 0), 0.3, 1.0)
     return rgb / 255.0, alpha
 

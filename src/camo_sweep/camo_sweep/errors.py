@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from camo_core.algorithm.modes import modes_of
 from camo_core.cli.options import (
     Parser,
     add_contrast_option,
@@ -210,7 +211,7 @@ def run(argv: list[str] | None) -> int:
         folder / "errors.png",
         title=f"{label}, {params.rows}x{params.cols} robots, {args.trials} trials per point",
         cells=params.count,
-        colours=bool(params.colours),
+        colours=modes_of(params).sensing.colour,
     )
     print(f"wrote {folder}/errors.csv, errors.png and the trials' table trials/")
     return 0

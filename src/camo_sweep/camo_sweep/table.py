@@ -19,7 +19,7 @@ import pyarrow.compute
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
-from camo_core.algorithm.rules import PATTERN_NAMES
+from camo_core.algorithm.patterns import PATTERN_NAMES
 from camo_core.exceptions import CamoError
 from camo_sweep.spec import SweepSpec, Trial
 

@@ -18,13 +18,14 @@ import numpy as np
 import pyarrow as pa
 
 from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.patterns import PATTERN_NAMES
 from camo_core.algorithm.result import SUMMARY_KEYS, RunResult, mean_p, pattern_of
-from camo_core.algorithm.rules import PATTERN_NAMES
 from camo_core.algorithm.sensing import sense_colours, sense_image
 from camo_core.algorithm.simulator import simulate
 from camo_core.cli.options import image_from, params_from
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.results.summary import summary_bytes
+from camo_core.schema import with_role
 from camo_sweep.spec import Trial, defaults, sim_args
 from camo_sweep.table import Layout, rows_table
 
@@ -69,9 +70,14 @@ def namespace(options: dict[str, Any], seed: int) -> argparse.Namespace:
     return args
 
 
+# The parameters that make a trial noisy (declared with noise=True: rho_meas, rho_comm).
+NOISE = tuple(with_role(CamoParams, "noise"))
+
+
 def reference_options(options: dict[str, Any]) -> dict[str, Any]:
-    """A trial's options without errors: its reference run's."""
-    return {k: v for k, v in options.items() if k not in ("rho_meas", "rho_comm")}
+    """A trial's options without errors (the parameters declared with noise=True): its
+    reference run's."""
+    return {k: v for k, v in options.items() if k not in NOISE}
 
 
 @cache

@@ -15,13 +15,8 @@ from numba import njit, prange
 
 from camo_core.algorithm import orientation, rng
 from camo_core.algorithm.orientation import KNIGHT_FALLBACKS, OFFSETS, ORIENTED, RELAY_PATHS
-from camo_core.algorithm.rules import (
-    DIAGONAL_FALLBACKS,
-    HORIZONTAL,
-    MOTTLED,
-    OPPOSITE_CARDINAL,
-    VERTICAL,
-)
+from camo_core.algorithm.patterns import HORIZONTAL, MOTTLED, VERTICAL
+from camo_core.algorithm.rules import DIAGONAL_FALLBACKS, OPPOSITE_CARDINAL
 
 # Offsets 0-11 are the slots, 12-19 the knight cells of --orientation any (orientation.OFFSETS).
 DI = np.array([o[0] for o in OFFSETS], dtype=np.int64)
@@ -330,24 +325,25 @@ def tensors_all(sensed, known, prefix, rho, jxx, jyy, jxy):
 
 @njit(cache=True)
 def mean_p(p_flat):
-    """Mean of p over robots, summed in robot-id order: one order for every driver."""
-    n = p_flat.shape[0]
-    total = np.zeros(3)
+    """Mean of p over robots (robots x width), summed in robot-id order: one order for every
+    driver."""
+    n, width = p_flat.shape
+    total = np.zeros(width)
     for r in range(n):
-        for k in range(3):
+        for k in range(width):
             total[k] = total[k] + p_flat[r, k]
     return total / n
 
 
 @njit(cache=True)
 def p_stats(p_flat):
-    """mean_p's mean (the same sums in the same order) and, in the same pass, 3 x 2: the least
-    and the greatest p over robots, per pattern."""
-    n = p_flat.shape[0]
-    total = np.zeros(3)
-    spread = np.full((3, 2), np.nan)
+    """mean_p's mean (the same sums in the same order) and, in the same pass, width x 2: the
+    least and the greatest p over robots, per entry."""
+    n, width = p_flat.shape
+    total = np.zeros(width)
+    spread = np.full((width, 2), np.nan)
     for r in range(n):
-        for k in range(3):
+        for k in range(width):
             value = p_flat[r, k]
             total[k] = total[k] + value
             if r == 0 or value < spread[k, 0]:

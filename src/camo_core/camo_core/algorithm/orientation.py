@@ -24,24 +24,19 @@ import numpy as np
 
 from camo_core.algorithm.grid import NEIGHBOR_OFFSETS
 from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.patterns import ACTIVATORS, INHIBITORS, MOTTLED, PATTERN_NAMES, WIDTH
 from camo_core.algorithm.rules import (
-    ACTIVATORS,
     DIAGONAL_FALLBACKS,
-    INHIBITORS,
-    MIN_THRESHOLD,
-    MOTTLED,
     OPPOSITE_CARDINAL,
-    PATTERN_NAMES,
-    auto_threshold,
     reflect_four,
-    select_pattern,
+    w2_for,
 )
 
 REGULARISER = 16.0  # squared grey levels added to a tensor's trace before normalising it
 COHERENCE_MIN = 0.15  # below it the averaged tensor says mottled
 STEP_DEG = 15
 ANGLES = 180 // STEP_DEG
-ORIENTED = 3  # pattern code of stripes at 0 degrees
+ORIENTED = WIDTH  # pattern code of stripes at 0 degrees: the codes after the table's
 CODES = ORIENTED + ANGLES
 
 # The eight two-hop cells beyond the twelve slots, offsets (d_row, d_col): offsets 12-19.
@@ -87,15 +82,6 @@ OPPOSITE_CORNER = {4: 6, 5: 7, 6: 4, 7: 5}
 
 
 # ---- phase 1: the structure tensor ------------------------------------------------
-
-
-def regulariser(params: CamoParams, energy: float) -> float:
-    """16, or with --threshold auto 16 * (T / 5)^2 for the robot's threshold T: the same share
-    of a faint texture's tensor is discounted as of a strong one's."""
-    if not params.threshold_auto:
-        return REGULARISER
-    scale = auto_threshold(energy) / MIN_THRESHOLD
-    return REGULARISER * scale * scale
 
 
 def raw_tensor(own: float, received: Sequence[float | None]) -> tuple[float, float, float]:
@@ -169,11 +155,6 @@ def choose(p: Sequence[float] | np.ndarray) -> int | np.ndarray:
     return int(chosen) if chosen.ndim == 0 else chosen
 
 
-def selector(params: CamoParams):
-    """The choice a run's robots make from their averaged p: rules.select_pattern, or choose."""
-    return choose if params.orientation_any else select_pattern
-
-
 def angle_of(code: int) -> int | None:
     """Degrees of a stripe code, counter-clockwise from horizontal (None for other codes)."""
     return (code - ORIENTED) * STEP_DEG if ORIENTED <= code < CODES else None
@@ -221,7 +202,7 @@ ROLES = _roles()  # ROLES[code, offset]
 def inhibitor_weights(params: CamoParams) -> tuple[float, ...]:
     """W2 per pattern code: the paper's two, and for stripes at an angle
     w2_stripes * (activators + 1) / 5 * 6 / inhibitors, which is w2_stripes at 0 and 90."""
-    w2 = [params.w2_stripes, params.w2_stripes, params.w2_mottled]
+    w2 = [w2_for(code, params) for code in range(ORIENTED)]
     for code in range(ORIENTED, CODES):
         activators = int(np.count_nonzero(ROLES[code] == 1))
         inhibitors = int(np.count_nonzero(ROLES[code] == -1))

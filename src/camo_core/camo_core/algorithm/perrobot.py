@@ -11,7 +11,8 @@ import time
 
 import numpy as np
 
-from camo_core.algorithm.layout import layout_for
+from camo_core.algorithm.modes import Modes, modes_of
+from camo_core.algorithm.modes.palettes import GridPalette
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult, mean_p
 from camo_core.algorithm.robot import RobotCore
@@ -24,16 +25,19 @@ def run_per_robot(
     exempt: np.ndarray | None = None,
     observe: Observer | None = None,
     raw_colours: np.ndarray | None = None,
+    modes: Modes | None = None,
 ) -> RunResult:
     """`raw_sensed`: rows x cols block means before noise; `exempt`: real readings (no noise);
     `observe` is shown every step as the simulator shows it (`simulator.Observer`);
-    `raw_colours`: the blocks' mean colours (rows x cols x 3; --colours needs them)."""
-    if raw_colours is None and params.colours:
-        raise ValueError("--colours needs the sensed colours (raw_colours)")
+    `raw_colours`: the blocks' mean colours (rows x cols x 3; colour sensing needs them);
+    `modes`: the run's variations (modes.modes_of(params) unless given)."""
+    modes = modes or modes_of(params)
+    if raw_colours is None and modes.sensing.colour:
+        raise ValueError(f"{modes.sensing.name} sensing needs the sensed colours (raw_colours)")
     shown = observe or (lambda phase, step, values: None)
     start = time.perf_counter()
     rows, cols = params.rows, params.cols
-    robots = [RobotCore(params, i, j) for i in range(rows) for j in range(cols)]
+    robots = [RobotCore(params, i, j, modes) for i in range(rows) for j in range(cols)]
 
     for robot in robots:
         robot.discover([n is not None for n in robot.neighbors])
@@ -45,7 +49,7 @@ def run_per_robot(
         )
     for robot in robots:
         robot.describe([None if n is None else robots[n].sensed for n in robot.neighbors])
-    if params.threshold_auto:
+    if modes.threshold.averages_energy:
         for step in range(params.consensus_steps):
             energies = [(r.energy, r.degree) for r in robots]
             for robot in robots:
@@ -67,17 +71,20 @@ def run_per_robot(
     for robot in robots:
         robot.finish_consensus()
     initial = np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols)
+    palette = _palette(modes, robots, rows, cols)
 
-    def formation_view():
-        return _formation_view(params, robots)
+    def formation_view() -> np.ndarray:
+        """What the robots show, robot by robot (modes.palette.frame)."""
+        states = np.array([r.state for r in robots]).reshape(rows, cols)
+        frame = modes.palette.frame(states, palette)
+        return frame.reshape(len(robots), *frame.shape[2:])
 
-    relaying = params.orientation_any and not params.layout  # the grid's knight cells
     shown("formation", 0, formation_view())
     for step in range(params.formation_steps):
         sent_states = [r.state for r in robots]
         heard = [[None if n is None else sent_states[n] for n in r.neighbors] for r in robots]
         relays = [
-            r.relay(step, h) if relaying else None for r, h in zip(robots, heard, strict=True)
+            r.relay(step, h) if modes.relays else None for r, h in zip(robots, heard, strict=True)
         ]
         for robot, states in zip(robots, heard, strict=True):
             from_relays = [None if n is None else relays[n] for n in robot.neighbors[:8]]
@@ -88,35 +95,29 @@ def run_per_robot(
         params=params,
         sensed=np.array([r.sensed for r in robots]).reshape(rows, cols),
         votes=votes,
-        p=np.array([r.pattern_p for r in robots]).reshape(rows, cols, 3),
+        p=np.array([r.pattern_p for r in robots]).reshape(rows, cols, modes.descriptor.width),
         selected=np.array([r.pattern for r in robots]).reshape(rows, cols),
         initial=initial,
         final=np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols),
         consensus_trace=np.array(trace),
         elapsed_s=time.perf_counter() - start,
-        palette=np.array([r.palette for r in robots]).reshape(rows, cols, -1)
-        if params.levels
+        palette=palette.greys,
+        positions=modes.layout.positions,
+        sensed_rgb=np.array([r.sensed_rgb for r in robots]).reshape(rows, cols, 3)
+        if raw_colours is not None
         else None,
-        positions=layout_for(params).positions if params.layout else None,
-        **_colour_fields(params, robots, known=raw_colours is not None),
+        palette_rgb=palette.colours,
+        shades=palette.shades,
     )
 
 
-def _formation_view(params: CamoParams, robots: list[RobotCore]) -> np.ndarray:
-    """What a GIF shows of formation: the states, or the greys (--levels) or colours shown."""
-    if params.colours:
-        return np.array([r.display_rgb for r in robots])
-    return np.array([r.display if params.levels else r.state for r in robots])
-
-
-def _colour_fields(params: CamoParams, robots: list[RobotCore], known: bool) -> dict:
-    """A result's colour fields from its robots: the colours sensed (if `known`), and with
-    --colours their palettes and the two colours each shows."""
-    rows, cols = params.rows, params.cols
-    fields: dict = {}
-    if known:
-        fields["sensed_rgb"] = np.array([r.sensed_rgb for r in robots]).reshape(rows, cols, 3)
-    if params.colours:
-        fields["palette_rgb"] = np.array([r.colours for r in robots]).reshape(rows, cols, -1, 3)
-        fields["shades"] = np.array([r.shades for r in robots]).reshape(rows, cols, 2)
-    return fields
+def _palette(modes: Modes, robots: list[RobotCore], rows: int, cols: int) -> GridPalette:
+    """The robots' palettes as the whole grid's (what the simulator's palette.grid gives)."""
+    shows = [r.shows for r in robots]
+    greys = colours = shades = None
+    if shows and shows[0].greys:
+        greys = np.array([s.greys for s in shows]).reshape(rows, cols, -1)
+    if shows and shows[0].colours:
+        colours = np.array([s.colours for s in shows]).reshape(rows, cols, -1, 3)
+        shades = np.array([s.shades for s in shows]).reshape(rows, cols, 2)
+    return GridPalette(greys=greys, colours=colours, shades=shades)

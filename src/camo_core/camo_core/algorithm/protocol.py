@@ -374,14 +374,14 @@ class StepProtocol:
                 return False
             core.describe(self._take("color", 0, self.listen["color"]))
             self.energy_step = 0
-            if params.threshold_auto and params.consensus_steps:
+            if core.modes.threshold.averages_energy and params.consensus_steps:
                 self._wait_anew(now)
                 self._send_energy()
                 return True
-        if params.threshold_auto and self.energy_step < params.consensus_steps:
+        if core.modes.threshold.averages_energy and self.energy_step < params.consensus_steps:
             return self._energy_step(now, ticking)
         core.cast_vote()
-        self.traces = Traces(p=list(core.pattern_p))
+        self.traces = Traces(p=list(core.pattern_p), width=len(core.pattern_p))
         self._next(CONSENSUS, 0, now)
         self._report(now, forced=True)
         self._send_vote()
@@ -415,7 +415,7 @@ class StepProtocol:
         if pending and not self._ready(pending, self.step_timeout, now, ticking):
             return False
         p = core.consensus(step, self._take("vote", step, slots))
-        self.traces.p.extend(p[:3])
+        self.traces.p.extend(p[: self.traces.width])
         self.step = step = step + 1  # _next(CONSENSUS, step + 1, now)
         self.wait_started, self._awaiting = now, None
         self._report(now)
@@ -575,7 +575,7 @@ class StepProtocol:
         carrying every p and state since the last report."""
         core = self.core
         if self.phase >= FORMATION:
-            self.display.show(core.state, core.display_rgb if core.colours else None)
+            self.display.show(core.state, core.display_rgb if core.modes.palette.colour else None)
         if not forced and now - self.last_report < self.report_period:
             return
         self.last_report = now
@@ -598,7 +598,7 @@ class StepProtocol:
                 palette=core.palette,
                 sensed_rgb=() if math.isnan(core.sensed) else core.sensed_rgb,
                 palette_rgb=tuple(c for colour in core.colours for c in colour),
-                shades=core.shades if core.colours else (),
+                shades=core.shades if core.modes.palette.colour else (),
                 **self.traces.unreported(),
             )
         )

@@ -9,11 +9,11 @@ from typing import Any
 import numpy as np
 
 from camo_core.algorithm import colours, kernels, levels
-from camo_core.algorithm.layout import layout_for
-from camo_core.algorithm.orientation import CODES, ORIENTED, angle_of, pattern_name
+from camo_core.algorithm.modes import Modes, modes_of
+from camo_core.algorithm.modes.descriptors import majority_name
+from camo_core.algorithm.orientation import angle_of
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.rules import MOTTLED, PATTERN_NAMES
-from camo_core.algorithm.sensing import to_gray
+from camo_core.algorithm.patterns import MOTTLED
 from camo_core.schema import values, with_role
 
 # What every summary.json holds: the run's parameters that describe it (declared with
@@ -57,13 +57,15 @@ def pattern_said(summary: dict) -> str:
 
 
 def mean_p(p: np.ndarray) -> np.ndarray:
-    """Mean p over robots (p: ... x 3), summed in robot-id order by every driver."""
-    return kernels.mean_p(np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3))
+    """Mean p over robots (p: ... x width), summed in robot-id order by every driver."""
+    p = np.asarray(p, dtype=np.float64)
+    return kernels.mean_p(np.ascontiguousarray(p).reshape(-1, p.shape[-1]))
 
 
 def p_stats(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """mean_p(p), and 3 x 2: the least and the greatest p over robots, per pattern."""
-    return kernels.p_stats(np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3))
+    """mean_p(p), and width x 2: the least and the greatest p over robots, per entry."""
+    p = np.asarray(p, dtype=np.float64)
+    return kernels.p_stats(np.ascontiguousarray(p).reshape(-1, p.shape[-1]))
 
 
 @dataclass
@@ -71,14 +73,15 @@ class RunResult:
     params: CamoParams
     sensed: np.ndarray  # rows x cols float64, after measurement noise
     votes: np.ndarray  # rows x cols int, the local one-hot votes (pattern index)
-    p: np.ndarray  # rows x cols x 3 float64, after the last consensus step
+    p: np.ndarray  # rows x cols x width float64, after the last consensus step
     selected: np.ndarray  # rows x cols int, each robot's selected pattern
     initial: np.ndarray  # rows x cols uint8, the binarised initial states
     final: np.ndarray  # rows x cols uint8, the states after the last formation step
-    consensus_trace: np.ndarray  # (consensus_steps + 1) x 3, mean p before step 0 and after each
+    # (consensus_steps + 1) x width, mean p before step 0 and after each
+    consensus_trace: np.ndarray
     elapsed_s: float = 0.0
     alive: np.ndarray | None = None  # rows x cols bool; None means every robot took part
-    # (consensus_steps + 1) x 3 x 2: the least and the greatest p over robots at each step, the
+    # (consensus_steps + 1) x width x 2: the least and the greatest p over robots at each step, the
     # spread the figure draws around the mean; None where a driver did not keep it.
     consensus_range: np.ndarray | None = None
     # --levels: rows x cols x K, the greys each robot's palette holds, darkest first.
@@ -92,6 +95,11 @@ class RunResult:
     # cols x 2, the two of it the robot shows (where its pattern is on, where it is off).
     palette_rgb: np.ndarray | None = None
     shades: np.ndarray | None = None
+
+    @property
+    def modes(self) -> Modes:
+        """The run's variations (those its parameters choose)."""
+        return modes_of(self.params)
 
     @property
     def display(self) -> np.ndarray:
@@ -124,9 +132,10 @@ class RunResult:
     def grey_distance(self) -> float:
         """How far the greys shown are from the greys sensed: the Wasserstein-1 distance between
         the two sets (the mean gap between them sorted), over the robots that took part."""
-        shown, sensed = self.display, np.asarray(self.sensed, dtype=np.float64)
-        if self.params.colours and self.palette_rgb is not None:  # greys of the colours shown
-            shown = to_gray(self.display_rgb[..., ::-1].astype(np.uint8), self.params.profile)
+        sensed = np.asarray(self.sensed, dtype=np.float64)
+        shown = self.display
+        if self.modes.palette.colour and self.palette_rgb is not None:  # the colours' greys
+            shown = self.modes.palette.shown_greys(self.display_rgb, self.params.profile)
         took_part = np.isfinite(sensed)  # a partial run's robots that never sensed hold NaN
         if self.alive is not None:
             took_part &= self.alive
@@ -140,12 +149,13 @@ class RunResult:
     def codes(self) -> range:
         """The pattern codes a robot of this run can select: the paper's three, or mottled and
         the twelve stripe directions of --orientation any."""
-        return range(MOTTLED, CODES) if self.params.orientation_any else range(MOTTLED + 1)
+        return self.modes.descriptor.codes
 
     @property
     def selection_counts(self) -> dict[str, int]:
         chosen = self.selected if self.alive is None else self.selected[self.alive]
-        return {pattern_name(k): int(np.count_nonzero(chosen == k)) for k in self.codes}
+        name_of = self.modes.descriptor.name_of
+        return {name_of(k): int(np.count_nonzero(chosen == k)) for k in self.codes}
 
     @property
     def majority_code(self) -> int:
@@ -158,8 +168,7 @@ class RunResult:
     @property
     def majority_pattern(self) -> str:
         """horizontal, vertical or mottled; with --orientation any stripes or mottled."""
-        code = self.majority_code
-        return "stripes" if code >= ORIENTED else PATTERN_NAMES[code]
+        return majority_name(self.majority_code)
 
     @property
     def orientation_deg(self) -> int | None:
@@ -186,30 +195,30 @@ class RunResult:
         summary = {
             **values(params, "summary"),
             "pattern": self.majority_pattern,
-            **({"orientation_deg": self.orientation_deg} if params.orientation_any else {}),
+            **(
+                {"orientation_deg": self.orientation_deg} if self.modes.descriptor.oriented else {}
+            ),
             "votes": self.selection_counts,
             "mean_p": mean_p(p).tolist(),
             "sensed": grid(np.asarray(self.sensed, dtype=np.float64)),
             "initial": grid(self.initial.astype(int)),
             "final": grid(self.final.astype(int)),
-            "display": grid(self.display_rgb if params.colours else self.display),
+            "display": grid(self.display_rgb if self.modes.palette.colour else self.display),
             "grey_distance": round(self.grey_distance, 6),
             "colour_distance": None if distance is None else round(distance, 6),
             "consensus_trace": self.consensus_trace.tolist(),
             "elapsed_s": round(float(self.elapsed_s), 6),
         }
-        if params.colours and self.palette_rgb is not None:
+        if self.modes.palette.colour and self.palette_rgb is not None:
             summary["sensed_rgb"] = grid(np.asarray(self.sensed_rgb, dtype=np.float64))
             summary["palette"] = grid(np.asarray(self.palette_rgb).astype(np.int64))
-        if params.layout:  # where the robots stood (summary.json's grids are by robot id)
-            summary["layout"] = params.layout
-            summary["positions"] = [list(xy) for xy in layout_for(params).positions.tolist()]
+        summary |= self.modes.layout.summary()  # where robots stood (grids are by robot id)
         if self.alive is not None:
             # A swarm run in which robots died: their cells hold null, and they are listed.
             dead = ~self.alive
             for key in ("initial", "final", "display"):
                 cells = np.asarray(getattr(self, key)).astype(int).astype(object)  # Python ints
-                if key == "display" and params.colours:  # a colour a cell, or null
+                if key == "display" and self.modes.palette.colour:  # a colour a cell, or null
                     cells = np.empty(dead.shape, object)
                     cells[...] = [[list(map(int, c)) for c in row] for row in self.display_rgb]
                 cells[dead] = None

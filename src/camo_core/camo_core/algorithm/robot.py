@@ -13,15 +13,10 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from camo_core.algorithm import colours, layout_rules, levels, orientation, rng, rules
-from camo_core.algorithm.grid import (
-    CONSENSUS_SLOTS,
-    DESCRIPTOR_SLOTS,
-    NUM_SLOTS,
-    neighbor_ids,
-    robot_id,
-)
-from camo_core.algorithm.layout import places_for
+from camo_core.algorithm import orientation, rng, rules
+from camo_core.algorithm.grid import CONSENSUS_SLOTS, robot_id
+from camo_core.algorithm.modes import Modes, modes_of
+from camo_core.algorithm.modes.palettes import RobotPalette
 from camo_core.algorithm.params import CamoParams, ParameterError
 from camo_core.algorithm.sensing import noisy_colour, noisy_value
 
@@ -33,8 +28,11 @@ class RobotCore:
     params: CamoParams
     row: int
     col: int
+    # The run's variations (modes.modes_of(params) unless given): what it senses, describes,
+    # averages and shows, and where its neighbours are.
+    modes: Modes = None  # type: ignore[assignment]  # modes_of(params) when not given
     # Filled in as the phases go by.
-    known: list[bool] = field(default_factory=lambda: [False] * NUM_SLOTS)
+    known: list[bool] = field(default_factory=list)
     sensed: float = float("nan")
     vote: int = rules.MOTTLED
     p: tuple[float, ...] = (0.0, 0.0, 1.0)  # with --levels or --colours, a histogram follows
@@ -50,32 +48,25 @@ class RobotCore:
                 f"cell ({self.row}, {self.col}) is outside the "
                 f"{self.params.rows}x{self.params.cols} grid"
             )
+        modes = self.modes = self.modes or modes_of(self.params)
         self.id = robot_id(self.row, self.col, self.params.cols)
-        # On a --layout a robot's slots are its neighbours by range, the near ones first
-        # (colours, energies and votes come from those); on the grid the twelve of §1.
-        self.place = places_for(self.params)[self.id] if self.params.layout else None
-        if self.place is None:
-            self.neighbors: list[int | None] = neighbor_ids(
-                self.row, self.col, self.params.rows, self.params.cols
-            )
-            self.near = len(CONSENSUS_SLOTS)
-        else:
-            self.neighbors = list(self.place.neighbors)
-            self.near = self.place.near
-            self.known = [False] * len(self.neighbors)
-        self._kernel: tuple[list[int], float] | None = None  # a layout's, once it has a pattern
+        # Its slots: on the grid the twelve of §1, on a --layout its neighbours by range, the
+        # near ones first (colours, energies and votes come from those).
+        self.neighbors, self.near, self.place = modes.layout.slots(self.id)
+        self.known = [False] * len(self.neighbors)
+        self._form = modes.layout.former(self.place, self.params)
+        self._colour_slots = range(
+            modes.layout.listen(modes.descriptor.colour_slots, self.near)["color"]
+        )
         self._arrivals: dict[tuple[int, int], tuple[bool, ...]] = {}
         # A lossless link delivers every neighbour's message: no draw needed.
         self._everyone = tuple(n is not None for n in self.neighbors)
         self._known_counts()
         self.tensor = (0.0, 0.0, 0.0)  # --orientation any: (Jxx, Jyy, Jxy) before normalising
-        self.palette: tuple[int, ...] = ()  # --levels: the greys it can show, darkest first
-        # --colours: the colour it sensed (sRGB), its palette's colours (sRGB, darkest first)
-        # and the two of them it shows: (where its pattern is on, where it is off).
+        # What it sensed in colour (sRGB; a grey reading's is its grey), and its palette once
+        # consensus ends (modes.palettes: --levels' greys, --colours' colours and shades).
         self.sensed_rgb: tuple[float, float, float] = (math.nan, math.nan, math.nan)
-        self.colours: tuple[tuple[int, int, int], ...] = ()
-        self.shades: tuple[int, int] = (0, 0)
-        self._w2 = orientation.inhibitor_weights(self.params)
+        self.shows = RobotPalette()
 
     # ---- the simulated link -------------------------------------------------
 
@@ -147,24 +138,17 @@ class RobotCore:
         return self.sensed
 
     def describe(self, colors: Sequence[float | None]) -> float:
-        """`colors[s]` for slots 0-3 (0-7 with --orientation any): the delivered neighbour
-        values (None if none). Keeps the scores (or the structure tensor); the texture energy,
-        which --threshold auto averages before the vote."""
-        if self.place is not None:
-            received = self._filter(rng.STREAM_COLOR, 0, colors, range(self.near))
-            offsets = self.place.offsets[: self.near]
-            fitted = layout_rules.fitted_tensor(self.sensed, received, offsets)
-            self.tensor = fitted or (0.0, 0.0, 0.0)  # too few bearings: it abstains
-            self.energy = layout_rules.texture_energy(self.sensed, received, offsets)
-            return self.energy
-        received = self._filter(rng.STREAM_COLOR, 0, colors, DESCRIPTOR_SLOTS)
-        horizontal, vertical, self.energy = rules.descriptor(
-            self.sensed, received, self.params.profile
+        """`colors[s]` for its colour slots (0-3, 0-7 with --orientation any, the near ones on a
+        layout): the delivered neighbour values (None if none). Keeps the scores (or the
+        structure tensor); the texture energy, which --threshold auto averages before the
+        vote."""
+        received = self._filter(rng.STREAM_COLOR, 0, colors, self._colour_slots)
+        scores, tensor, self.energy = self.modes.descriptor.describe(
+            self.sensed, received, self.params.profile, self.place
         )
-        self.scores = (horizontal, vertical)
-        if self.params.orientation_any:
-            around = self._filter(rng.STREAM_COLOR, 0, colors, CONSENSUS_SLOTS)
-            self.tensor = orientation.raw_tensor(self.sensed, around)
+        self.scores = scores
+        if tensor is not None:
+            self.tensor = tensor
         return self.energy
 
     def average_energy(self, step: int, energies: Sequence[tuple[float, int] | None]) -> float:
@@ -174,21 +158,11 @@ class RobotCore:
         return self.energy
 
     def cast_vote(self) -> int:
-        """The vote, against the fixed threshold or (--threshold auto) the averaged energy's."""
-        params = self.params
-        if params.orientation_any:
-            reg = orientation.regulariser(params, self.energy)
-            self.p = orientation.normalised(*self.tensor, reg)
-            self.vote = orientation.choose(self.p)
-        else:
-            auto = params.threshold_auto
-            threshold = rules.auto_threshold(self.energy) if auto else params.threshold
-            self.vote = rules.vote_from(*self.scores, threshold)
-            self.p = rules.one_hot(self.vote)
-        if params.levels:  # the grey histogram, averaged with p
-            self.p = (*self.p, *levels.start_vector(self.sensed))
-        elif params.colours:  # the colour histogram, averaged with p
-            self.p = (*self.p, *colours.start_vector(self.sensed_rgb))
+        """The vote, against the fixed threshold or (--threshold auto) the averaged energy's,
+        and the vector it averages: p, then its histogram (--levels, --colours)."""
+        modes = self.modes
+        self.vote, p = modes.descriptor.vote(self.scores, self.tensor, self.energy)
+        self.p = (*p, *modes.histogram.start_vector(self.sensed, self.sensed_rgb))
         return self.vote
 
     # ---- phase 2: consensus -------------------------------------------------
@@ -200,37 +174,47 @@ class RobotCore:
         return self.p
 
     @property
-    def pattern_p(self) -> tuple[float, float, float]:
-        """p without --levels' histogram: what a robot reports and chooses its pattern from."""
-        return self.p[0], self.p[1], self.p[2]
+    def pattern_p(self) -> tuple[float, ...]:
+        """p without its histogram: what a robot reports and chooses its pattern from."""
+        return self.p[: self.modes.descriptor.width]
 
     def finish_consensus(self) -> int:
-        params = self.params
-        self.pattern = orientation.selector(params)(self.pattern_p)
-        if params.levels:
-            cuts, self.palette = levels.palette(self.p[3:], params.levels)
-            self.state = levels.initial_layers(self.sensed, cuts)
-        elif params.colours:
-            self.colours, self.shades = colours.robot_palette(
-                self.p[3:], self.sensed_rgb, params.colours
-            )
+        modes = self.modes
+        self.pattern = modes.descriptor.choose(self.pattern_p)
+        tail = self.p[modes.descriptor.width :]
+        self.shows = modes.palette.robot(tail, self.sensed, self.sensed_rgb)
+        if self.shows.initial is not None:
+            self.state = self.shows.initial
         return self.pattern
 
     @property
+    def palette(self) -> tuple[int, ...]:
+        """--levels: the greys it can show, darkest first (else none)."""
+        return self.shows.greys
+
+    @property
+    def colours(self) -> tuple[tuple[int, int, int], ...]:
+        """--colours: its palette's colours, sRGB darkest first (else none)."""
+        return self.shows.colours
+
+    @property
+    def shades(self) -> tuple[int, int]:
+        """--colours: the two of its colours it shows, where its pattern is on and off."""
+        return self.shows.shades
+
+    @property
     def display(self) -> int:
-        """The grey this robot shows: black on, white off; with --levels its palette's."""
-        if self.palette:
-            return levels.shown(self.state, self.palette)
-        return 0 if self.state == 1 else 255
+        """The grey this robot shows: black on, white off; with --levels its palette's (with
+        --colours its pattern's tone: black on, white off)."""
+        if self.modes.palette.colour:
+            return 0 if self.state == 1 else 255
+        return self.display_rgb[0]
 
     @property
     def display_rgb(self) -> tuple[int, int, int]:
         """The colour this robot shows: with --colours its palette's for its pattern's state,
         else its grey."""
-        if self.colours:
-            return colours.shown(self.state, self.shades, self.colours)
-        grey = self.display
-        return grey, grey, grey
+        return self.modes.palette.shown(self.state, self.shows)
 
     # ---- phase 3: pattern formation ------------------------------------------
 
@@ -249,37 +233,30 @@ class RobotCore:
         (--orientation any) `relays[s]` for slots 0-7: their relays for `step`, or None."""
         if self.pattern is None:
             self.finish_consensus()
+        pattern = self.pattern
+        assert pattern is not None
         received = self._filter(rng.STREAM_STATE, step, states, range(len(self.neighbors)))
         knights: list[int | None] = [None] * 8
-        if self.params.orientation_any and self.place is None:
+        if self.modes.relays:
             relayed = self._filter(rng.STREAM_RELAY, step, relays, CONSENSUS_SLOTS)
             knights = orientation.knight_states(relayed)
-        if not self.params.levels:
-            self.state = self._form_layer(self.state, received, knights)
+        layers = self.modes.palette.layers
+        if layers == 1:
+            self.state = self._form(self.state, pattern, received, knights)
             return self.state
         # --levels: each layer is one bit of the states, formed on its own.
         state = 0
-        for k in range(self.params.levels - 1):
+        for k in range(layers):
 
             def bit(v, k=k):
                 return None if v is None else (v >> k) & 1
 
-            layer = self._form_layer(
-                (self.state >> k) & 1, [bit(v) for v in received], [bit(v) for v in knights]
+            layer = self._form(
+                (self.state >> k) & 1,
+                pattern,
+                [bit(v) for v in received],
+                [bit(v) for v in knights],
             )
             state |= layer << k
         self.state = state
         return self.state
-
-    def _form_layer(self, state: int, received: Sequence, knights: Sequence) -> int:
-        assert self.pattern is not None  # form() finishes consensus first
-        if self.place is not None:
-            if self._kernel is None:
-                self._kernel = layout_rules.kernel(self.pattern, self.place.offsets, self.params)
-            roles, w2 = self._kernel
-            return layout_rules.formation_step(state, roles, w2, received, self.params)
-        if not self.params.orientation_any:
-            return rules.formation_step(state, self.pattern, received, self.params)
-        return orientation.formation_step(
-            state, self.pattern, received, knights, self.params, self._w2
-        )

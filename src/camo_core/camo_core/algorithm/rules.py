@@ -12,9 +12,16 @@ from typing import overload
 import numpy as np
 
 from camo_core.algorithm.params import CamoParams
-
-HORIZONTAL, VERTICAL, MOTTLED = 0, 1, 2
-PATTERN_NAMES = ("horizontal", "vertical", "mottled")
+from camo_core.algorithm.patterns import (
+    ACTIVATORS,
+    HORIZONTAL,
+    INHIBITORS,
+    MOTTLED,
+    PATTERNS,
+    TIE,
+    VERTICAL,
+    WIDTH,
+)
 
 # Slot pairs that stand in for each other when one is missing (docs/algorithm.md §2.2, 2.4).
 OPPOSITE_CARDINAL = {0: 2, 2: 0, 1: 3, 3: 1, 8: 10, 10: 8, 9: 11, 11: 9}
@@ -24,19 +31,6 @@ DIAGONAL_FALLBACKS: dict[int, tuple[int, int, int]] = {
     5: (4, 6, 7),
     6: (7, 5, 4),
     7: (6, 4, 5),
-}
-
-# docs/algorithm.md §2.4: activator and inhibitor slots per pattern (the robot itself is an
-# activator).
-ACTIVATORS: dict[int, tuple[int, ...]] = {
-    HORIZONTAL: (1, 3, 9, 11),
-    VERTICAL: (0, 2, 8, 10),
-    MOTTLED: (0, 1, 2, 3),
-}
-INHIBITORS: dict[int, tuple[int, ...]] = {
-    HORIZONTAL: (0, 2, 4, 5, 6, 7),
-    VERTICAL: (1, 3, 4, 5, 6, 7),
-    MOTTLED: (4, 5, 6, 7, 8, 9, 10, 11),
 }
 
 
@@ -95,10 +89,10 @@ def auto_threshold(energy: float) -> float:
     return max(MIN_THRESHOLD, THRESHOLD_SHARE * energy)
 
 
-def one_hot(pattern: int) -> tuple[float, float, float]:
-    p = [0.0, 0.0, 0.0]
+def one_hot(pattern: int) -> tuple[float, ...]:
+    p = [0.0] * WIDTH
     p[pattern] = 1.0
-    return p[0], p[1], p[2]
+    return tuple(p)
 
 
 # ---- phase 2: consensus ---------------------------------------------------------
@@ -164,16 +158,22 @@ def select_pattern(p: Sequence[float]) -> int: ...
 @overload
 def select_pattern(p: np.ndarray) -> np.ndarray: ...
 def select_pattern(p: Sequence[float] | np.ndarray) -> int | np.ndarray:
-    """The strictly largest entry of p; any tie for the largest goes to mottled.
+    """The pattern whose entry of p is strictly the largest; any tie for the largest goes to
+    patterns.TIE (mottled).
 
-    `p` is one robot's vector (an int comes back) or an array of them, last axis
-    [p_h, p_v, p_m] (an array of pattern codes comes back, for the whole grid).
+    `p` is one robot's vector (an int comes back) or an array of them, last axis one entry per
+    pattern (an array of pattern codes comes back, for the whole grid).
     """
     a = np.asarray(p, dtype=np.float64)
-    h, v, m = a[..., 0], a[..., 1], a[..., 2]
-    chosen = np.where(
-        (h > v) & (h > m), HORIZONTAL, np.where((v > h) & (v > m), VERTICAL, MOTTLED)
-    )
+    chosen = np.full(a.shape[:-1], TIE)
+    for k in range(WIDTH):
+        if k == TIE:
+            continue
+        largest = np.ones(a.shape[:-1], bool)
+        for j in range(WIDTH):
+            if j != k:
+                largest &= a[..., k] > a[..., j]
+        chosen = np.where(largest, k, chosen)
     return int(chosen) if chosen.ndim == 0 else chosen
 
 
@@ -201,7 +201,8 @@ def fill_states(received: Sequence[int | None]) -> list[int]:
 
 
 def w2_for(pattern: int, params: CamoParams) -> float:
-    return params.w2_mottled if pattern == MOTTLED else params.w2_stripes
+    """The inhibitor weight W2 of a pattern's kernel: the parameter its row names."""
+    return getattr(params, PATTERNS[pattern].w2)
 
 
 def formation_step(

@@ -9,7 +9,8 @@ not keys of a dict.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from camo_core.algorithm.params import CamoParams
@@ -100,39 +101,45 @@ def _ranges(value: Any, name: str, count: int) -> tuple[Tile, ...]:
     return tuple((int(a), int(b)) for a, b in value)
 
 
-def _texts(value: Any, name: str) -> tuple[str, ...]:
+def _texts(value: Any, name: str, count: int) -> tuple[str, ...]:
     if not isinstance(value, list | tuple) or not all(isinstance(v, str) for v in value):
         raise SetupError(f"{name} must be a list of text")
     return tuple(value)
 
 
+def _ids(value: Any, name: str, count: int) -> tuple[int, ...]:
+    if not isinstance(value, list | tuple) or not all(
+        isinstance(r, int) and not isinstance(r, bool) and 0 <= r < count for r in value
+    ):
+        raise SetupError(f"{name} must be a list of robot ids")
+    return tuple(value)
+
+
+def listed(check: Callable[[Any, str, int], tuple]) -> Any:
+    """A setup field that is a list, empty by default: `check(value, name, robots)` gives it as
+    a tuple from what JSON holds, or raises SetupError."""
+    return field(default=(), metadata={"check": check})
+
+
 @dataclass(frozen=True)
 class RunSetup:
-    """A run as its launcher publishes it: all a worker on another machine needs."""
+    """A run as its launcher publishes it: all a worker on another machine needs. Each field
+    is declared once: its check, its JSON form (to_dict, from_dict) follow from it."""
 
     run: str
     params: CamoParams
     protocol: ProtocolParams = field(default_factory=ProtocolParams)
-    backgrounds: tuple[str, ...] = ()  # every round's background: a built-in name or a file
-    remote: tuple[Tile, ...] = ()  # robots left to workers started by hand
-    tiles: tuple[Tile, ...] = ()  # the tiles the run's own processes host
-    background_digests: tuple[str, ...] = ()  # of the backgrounds its projector shows
-    bridged: tuple[int, ...] = ()  # robots that are real Droplets
+    backgrounds: tuple[str, ...] = listed(_texts)  # each round's: a built-in name or a file
+    remote: tuple[Tile, ...] = listed(_ranges)  # robots left to workers started by hand
+    tiles: tuple[Tile, ...] = listed(_ranges)  # the tiles the run's own processes host
+    background_digests: tuple[str, ...] = listed(_texts)  # of what its projector shows
+    bridged: tuple[int, ...] = listed(_ids)  # robots that are real Droplets
 
     def __post_init__(self) -> None:
         count = self.params.count
         object.__setattr__(self, "protocol", self.protocol.for_swarm(count))
-        object.__setattr__(self, "backgrounds", _texts(self.backgrounds, "backgrounds"))
-        object.__setattr__(self, "remote", _ranges(self.remote, "remote", count))
-        object.__setattr__(self, "tiles", _ranges(self.tiles, "tiles", count))
-        digests = _texts(self.background_digests, "background_digests")
-        object.__setattr__(self, "background_digests", digests)
-        bridged = self.bridged
-        if not isinstance(bridged, list | tuple) or not all(
-            isinstance(r, int) and not isinstance(r, bool) and 0 <= r < count for r in bridged
-        ):
-            raise SetupError("bridged must be a list of robot ids")
-        object.__setattr__(self, "bridged", tuple(bridged))
+        for name, check in LISTS.items():
+            object.__setattr__(self, name, check(getattr(self, name), name, count))
 
     @property
     def step_timeout(self) -> float:
@@ -145,16 +152,8 @@ class RunSetup:
     def to_dict(self) -> dict[str, Any]:
         """As JSON takes it: the protocol's parameters at the top level, as every camo wrote
         them."""
-        return {
-            "run": self.run,
-            "params": to_dict(self.params),
-            "backgrounds": list(self.backgrounds),
-            **to_dict(self.protocol),
-            "remote": [list(r) for r in self.remote],
-            "tiles": [list(t) for t in self.tiles],
-            "background_digests": list(self.background_digests),
-            "bridged": list(self.bridged),
-        }
+        lists = {name: _json(getattr(self, name)) for name in LISTS}
+        return {"run": self.run, "params": to_dict(self.params), **to_dict(self.protocol), **lists}
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict())
@@ -174,16 +173,8 @@ class RunSetup:
                 {k: data[k] for k in declared(ProtocolParams) if k in data},
                 "setup",
             )
-            return cls(
-                run=data.get("run", ""),
-                params=params,
-                protocol=protocol,
-                backgrounds=data.get("backgrounds", ()),
-                remote=data.get("remote", ()),
-                tiles=data.get("tiles", ()),
-                background_digests=data.get("background_digests", ()),
-                bridged=data.get("bridged", ()),
-            )
+            lists = {name: data.get(name, ()) for name in LISTS}
+            return cls(run=data.get("run", ""), params=params, protocol=protocol, **lists)
         except SetupError:
             raise
         except ParameterError as exc:
@@ -200,6 +191,15 @@ class RunSetup:
         if run is not None and setup.run != run:
             raise SetupError(f"the setup of run {setup.run}, not of {run}")
         return setup
+
+
+# The list fields of a setup, and their checks.
+LISTS = {f.name: f.metadata["check"] for f in fields(RunSetup) if "check" in f.metadata}
+
+
+def _json(value: tuple) -> list:
+    """A list field as JSON holds it: tuples as lists, all the way down."""
+    return [_json(v) if isinstance(v, tuple) else v for v in value]
 
 
 def contiguous(cells: list[int]) -> list[Tile]:

@@ -14,11 +14,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from camo_core.algorithm import colours, kernels, levels, orientation, rng, rules
+from camo_core.algorithm import kernels, orientation, rng
 from camo_core.algorithm.grid import NEIGHBOR_OFFSETS, NUM_SLOTS
+from camo_core.algorithm.modes import Modes, modes_of
+from camo_core.algorithm.modes.palettes import GridPalette
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult, p_stats
-from camo_core.algorithm.rules import select_pattern
 from camo_core.algorithm.sensing import apply_colour_noise, apply_noise
 
 PAD = 2  # slots reach two cells away
@@ -71,16 +72,19 @@ def simulate(
     progress: Progress | None = None,
     observe: Observer | None = None,
     raw_colours: np.ndarray | None = None,
+    modes: Modes | None = None,
 ) -> RunResult:
     """Run all phases on rows x cols block means (before measurement noise); `raw_colours`:
-    the blocks' mean colours (rows x cols x 3 sRGB; --colours needs them, and with them the
-    result knows how far the colours shown are from those sensed)."""
+    the blocks' mean colours (rows x cols x 3 sRGB; colour sensing needs them, and with them the
+    result knows how far the colours shown are from those sensed); `modes`: the run's
+    variations (modes.modes_of(params) unless given)."""
     start = time.perf_counter()
+    modes = modes or modes_of(params)
     rows, cols = params.rows, params.cols
     if raw_sensed.shape != (rows, cols):
         raise ValueError(f"sensed grid is {raw_sensed.shape}, expected {(rows, cols)}")
-    if raw_colours is None and params.colours:
-        raise ValueError("--colours needs the sensed colours (raw_colours)")
+    if raw_colours is None and modes.sensing.colour:
+        raise ValueError(f"{modes.sensing.name} sensing needs the sensed colours (raw_colours)")
     if raw_colours is not None and raw_colours.shape != (rows, cols, 3):
         raise ValueError(f"sensed colours are {raw_colours.shape}, expected {(rows, cols, 3)}")
     grid = Grid(rows, cols)
@@ -103,31 +107,24 @@ def simulate(
     sensed_rgb = None
     if raw_colours is not None:
         sensed_rgb = apply_colour_noise(raw_colours, params.seed, params.rho_meas, exempt)
-    votes, p0 = _vote(params, sensed, known_mask, degree)
+    votes, p0 = _vote(params, modes, sensed, known_mask, degree)
     initial = (sensed < 127).astype(np.uint8)
-    if params.levels:  # the grey histogram is averaged with p, in the same messages
-        p0 = np.concatenate([p0, levels.start_vectors(sensed)], axis=-1)
-    elif params.colours:  # the colour histogram likewise
-        assert sensed_rgb is not None  # --colours was given the colours (checked above)
-        p0 = np.concatenate([p0, colours.start_vectors(sensed_rgb)], axis=-1)
+    tails = modes.histogram.start_vectors(sensed, sensed_rgb)
+    if tails is not None:  # the histogram is averaged with p, in the same messages
+        p0 = np.concatenate([p0, tails], axis=-1)
 
     # Phase 2: consensus.
-    p, trace, spread = _consensus(params, p0, known_mask, degree, progress, observe)
-    p, histogram = p[..., :3], p[..., 3:]
-    selected = orientation.choose(p) if params.orientation_any else select_pattern(p)
-    greys = shown_colours = None
-    if params.levels:
-        cuts, greys = levels.palettes(histogram, params.levels)
-        initial = np.zeros((rows, cols), np.uint8)
-        for k in range(params.levels - 1):
-            initial |= (sensed < cuts[..., k]).astype(np.uint8) << np.uint8(k)
-    elif params.colours:
-        assert sensed_rgb is not None
-        shown_colours = colours.palettes(histogram, sensed_rgb, params.colours)
+    width = modes.descriptor.width
+    p, trace, spread = _consensus(params, width, p0, known_mask, degree, progress, observe)
+    p, histogram = p[..., :width], p[..., width:]
+    selected = modes.descriptor.choose(p)
+    palette = modes.palette.grid(histogram, sensed, sensed_rgb)
+    if palette.initial is not None:
+        initial = palette.initial
 
     # Phase 3: pattern formation.
     final = _formation(
-        grid, params, initial, selected, known_mask, progress, observe, greys, shown_colours
+        grid, params, modes, initial, selected, known_mask, progress, observe, palette
     )
 
     return RunResult(
@@ -141,15 +138,19 @@ def simulate(
         consensus_trace=trace,
         elapsed_s=time.perf_counter() - start,
         consensus_range=spread,
-        palette=greys,
+        palette=palette.greys,
         sensed_rgb=sensed_rgb,
-        palette_rgb=None if shown_colours is None else shown_colours[0],
-        shades=None if shown_colours is None else shown_colours[1],
+        palette_rgb=palette.colours,
+        shades=palette.shades,
     )
 
 
 def _vote(
-    params: CamoParams, sensed: np.ndarray, known_mask: np.ndarray, degree: np.ndarray
+    params: CamoParams,
+    modes: Modes,
+    sensed: np.ndarray,
+    known_mask: np.ndarray,
+    degree: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Each robot's vote (pattern code) and the p it starts consensus with: the one-hot vote,
     or with --orientation any its normalised structure tensor (and the vote that tensor says)."""
@@ -159,33 +160,9 @@ def _vote(
     prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_COLOR, 0))
     paper = params.profile == "paper"
     kernels.descriptors_all(sensed, known_mask, prefix, params.rho_comm, paper, *scores, energy)
-    threshold: np.ndarray | float
-    if params.threshold_auto:
+    if modes.threshold.averages_energy:
         energy = _average_energy(params, energy, known_mask, degree)
-        threshold = np.maximum(rules.MIN_THRESHOLD, rules.THRESHOLD_SHARE * energy)
-    else:
-        threshold = params.threshold
-    if params.orientation_any:
-        tensor = np.empty(shape), np.empty(shape), np.empty(shape)
-        kernels.tensors_all(sensed, known_mask, prefix, params.rho_comm, *tensor)
-        reg: np.ndarray | float
-        if params.threshold_auto:
-            scale = threshold / rules.MIN_THRESHOLD
-            reg = orientation.REGULARISER * scale * scale  # orientation.regulariser's order
-        else:
-            reg = orientation.REGULARISER
-        p0 = np.stack(orientation.normalised(*tensor, reg), axis=-1)
-        return orientation.choose(p0), p0
-    horizontal, vertical = scores
-    votes = np.where(
-        horizontal > threshold,
-        rules.HORIZONTAL,
-        np.where(vertical > threshold, rules.VERTICAL, rules.MOTTLED),
-    ).astype(np.int64)
-    p0 = np.zeros((*shape, 3))
-    for k in range(3):
-        p0[:, :, k] = votes == k
-    return votes, p0
+    return modes.descriptor.vote_all(sensed, known_mask, prefix, params.rho_comm, scores, energy)
 
 
 def _average_energy(
@@ -205,28 +182,31 @@ def _average_energy(
 
 def _consensus(
     params: CamoParams,
+    width: int,
     p0: np.ndarray,
     known_mask: np.ndarray,
     degree: np.ndarray,
     progress: Progress | None,
     observe: Observer | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Consensus steps on p0 (p, `width` entries, then any histogram): the averaged vectors,
+    and per step the mean p and its least and greatest over robots."""
     p = p0
     nxt = np.empty_like(p)
-    mean, least_greatest = p_stats(p[..., :3])
+    mean, least_greatest = p_stats(p[..., :width])
     trace, spread = [mean], [least_greatest]
     if observe:
-        observe("consensus", 0, p[..., :3])
+        observe("consensus", 0, p[..., :width])
     step_kernel = kernels.consensus_step if p.shape[-1] == 3 else kernels.consensus_step_n
     for step in range(params.consensus_steps):
         prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_CONSENSUS, step))
         step_kernel(p, nxt, known_mask, degree, prefix, params.rho_comm)
         p, nxt = nxt, p
-        mean, least_greatest = p_stats(p[..., :3])
+        mean, least_greatest = p_stats(p[..., :width])
         trace.append(mean)
         spread.append(least_greatest)
         if observe:
-            observe("consensus", step + 1, p[..., :3])
+            observe("consensus", step + 1, p[..., :width])
         if progress:
             progress("consensus", step + 1, params.consensus_steps)
     return p, np.array(trace), np.array(spread)
@@ -235,31 +215,25 @@ def _consensus(
 def _formation(
     grid: Grid,
     params: CamoParams,
+    modes: Modes,
     initial: np.ndarray,
     selected: np.ndarray,
     known_mask: np.ndarray,
     progress: Progress | None,
     observe: Observer | None,
-    greys: np.ndarray | None = None,
-    shown_colours: tuple[np.ndarray, np.ndarray] | None = None,
+    palette: GridPalette,
 ) -> np.ndarray:
-    """Formation steps; with --levels (`greys`: each robot's palette) on every layer of the
-    state's bits, each with the same losses (one state message carries them all), and the
-    observer sees the greys shown; with --colours (`shown_colours`: each robot's palette and
-    brackets) the observer sees the colours shown (rows x cols x 3)."""
+    """Formation steps, on every layer of the states' bits (--levels: each with the same
+    losses, as one state message carries them all); the observer sees what the robots show
+    (modes.palette: states, greys or colours)."""
     state = initial.copy()
     nxt = np.empty_like(state)
     layer, layer_next = np.empty_like(state), np.empty_like(state)
     w2 = np.array(orientation.inhibitor_weights(params))
-    layers = max(1, params.levels - 1)
-    if greys is not None:
-        shown = lambda s: levels.shown_grid(s, greys)  # noqa: E731
-    elif shown_colours is not None:
-        shown = lambda s: colours.shown_grid(s, shown_colours[1], shown_colours[0])  # noqa: E731
-    else:
-        shown = lambda s: s  # noqa: E731
+    layers = modes.palette.layers
+
     if observe:
-        observe("formation", 0, shown(state))
+        observe("formation", 0, modes.palette.frame(state, palette))
     for step in range(params.formation_steps):
         prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_STATE, step))
         relay_prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_RELAY, step))
@@ -273,7 +247,7 @@ def _formation(
             w2,
             params.profile == "droplet",
         )
-        if not params.levels:
+        if layers == 1:
             kernels.formation_step(state, nxt, *rule)
         else:
             nxt[:] = 0
@@ -283,7 +257,7 @@ def _formation(
                 nxt |= layer_next << np.uint8(k)
         state, nxt = nxt, state
         if observe:
-            observe("formation", step + 1, shown(state))
+            observe("formation", step + 1, modes.palette.frame(state, palette))
         if progress:
             progress("formation", step + 1, params.formation_steps)
     return state

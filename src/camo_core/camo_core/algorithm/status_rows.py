@@ -13,39 +13,34 @@ camo version) or from an array message's fields, checked row by row
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
 from itertools import chain
 from operator import attrgetter
 from typing import Any
 
 import numpy as np
 
-# The columns with one value per robot, and their dtype.
-SCALARS: dict[str, Any] = {
-    "sender_id": np.int64,
-    "phase": np.int64,
-    "step": np.int64,
-    "round": np.int64,
-    "sensed": np.float64,
-    "pattern": np.int64,
-    "state": np.int64,
-    "alive": np.bool_,
-    "known_slots": np.uint64,
-    "deadlines": np.int64,
-    "p_from": np.int64,
-    "state_from": np.int64,
-}
-# The variable-length ones: flattened, with a count per robot (p_trace counts steps of 3).
-LISTS: dict[str, tuple[str, Any, int]] = {
-    "silent": ("silent_count", np.int64, 1),
-    "p_trace": ("p_trace_count", np.float64, 3),
-    "state_trace": ("state_trace_count", np.int64, 1),
-    "palette": ("palette_count", np.int64, 1),
-    "sensed_rgb": ("sensed_rgb_count", np.float64, 3),
-    "palette_rgb": ("palette_rgb_count", np.int64, 3),
-    "shades": ("shades_count", np.int64, 2),
-}
+from camo_core.algorithm.robot_io import STATUS_COLUMNS, P
 
+# The columns of a status table, derived from the status's declaration (robot_io.Report): those
+# with one value per robot, and their dtype; the vector (p, its width's values a robot); the
+# variable-length lists, flattened, with a count per robot (name: its count column, dtype, and
+# values an entry, P: p's width).
+SCALARS: dict[str, Any] = {
+    name: meta["dtype"]
+    for name, meta in STATUS_COLUMNS.items()
+    if meta["array"] and meta["shape"] == "value"
+}
+VECTOR = next(name for name, meta in STATUS_COLUMNS.items() if meta["shape"] == "vector")
+LISTS: dict[str, tuple[str, Any, int | str]] = {
+    name: (f"{name}_count", meta["dtype"], meta["per"])
+    for name, meta in STATUS_COLUMNS.items()
+    if meta["shape"] == "list"
+}
+# Every column of a table: those above, the lists' counts, and two a table adds of reports:
+# a report whose row and column are not its sender's cell (wrong_cell), and one whose lists are
+# not whole entries or whose p is of another width than the others' (ragged).
+COLUMNS = (*SCALARS, VECTOR, *LISTS, *(count for count, _, _ in LISTS.values()))
+CHECKS = ("wrong_cell", "ragged")
 
 _SCALAR_FIELDS = attrgetter(*SCALARS)
 
@@ -54,40 +49,26 @@ class RowsError(ValueError):
     """Columns that do not make a table (lengths that disagree)."""
 
 
-@dataclass
 class StatusRows:
-    sender_id: np.ndarray
-    phase: np.ndarray
-    step: np.ndarray
-    round: np.ndarray
-    sensed: np.ndarray
-    p: np.ndarray  # (rows, 3)
-    pattern: np.ndarray
-    state: np.ndarray
-    alive: np.ndarray
-    known_slots: np.ndarray
-    deadlines: np.ndarray
-    p_from: np.ndarray
-    state_from: np.ndarray
-    silent_count: np.ndarray
-    silent: np.ndarray
-    p_trace_count: np.ndarray
-    p_trace: np.ndarray  # (steps, 3)
-    state_trace_count: np.ndarray
-    state_trace: np.ndarray
-    palette_count: np.ndarray
-    palette: np.ndarray
-    sensed_rgb_count: np.ndarray
-    sensed_rgb: np.ndarray  # (colours, 3)
-    palette_rgb_count: np.ndarray
-    palette_rgb: np.ndarray  # (colours, 3)
-    shades_count: np.ndarray
-    shades: np.ndarray  # (pairs, 2)
-    wrong_cell: np.ndarray  # a RobotStatus whose row and column are not its sender's cell
-    ragged: np.ndarray  # a RobotStatus whose p_trace is not 3 values a step
+    """Robots' reports as columns (COLUMNS and CHECKS, each a numpy array with an entry per
+    row; p is rows x its width, a list's values entries x values an entry)."""
+
+    def __init__(self, **columns: np.ndarray) -> None:
+        missing = set(COLUMNS + CHECKS) - set(columns)
+        if missing:
+            raise TypeError(f"status rows without {', '.join(sorted(missing))}")
+        self.__dict__.update(columns)
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        raise AttributeError(name)  # (the columns are set in __init__; this types them)
 
     def __len__(self) -> int:
         return len(self.sender_id)
+
+    @property
+    def width(self) -> int:
+        """p's width (the descriptor's: 3 for the paper's)."""
+        return self.p.shape[1]
 
     @classmethod
     def from_reports(cls, reports: Sequence, cols: int | None = None) -> StatusRows:
@@ -102,21 +83,29 @@ class StatusRows:
             name: np.array(column, dtype)
             for (name, dtype), column in zip(SCALARS.items(), by_column, strict=True)
         }
-        p = np.fromiter(chain.from_iterable(r.p for r in reports), np.float64)
-        columns["p"] = p.reshape(-1, 3)
-        ragged = np.zeros(len(reports), bool)
-        for name, (count, dtype, width) in LISTS.items():
+        # p: the first report's width; a report of another width is refused (ragged).
+        vectors = [getattr(r, VECTOR) for r in reports]
+        width = len(vectors[0]) if vectors else 3
+        ragged = np.fromiter((len(v) != width for v in vectors), bool, len(vectors))
+        if ragged.any():
+            vectors = [
+                (np.nan,) * width if bad else v for v, bad in zip(vectors, ragged, strict=True)
+            ]
+        p = np.fromiter(chain.from_iterable(vectors), np.float64)
+        columns[VECTOR] = p.reshape(-1, width)
+        for name, (count, dtype, per) in LISTS.items():
+            entry = width if per == P else int(per)
             values = [getattr(r, name, ()) for r in reports]
             lengths = np.fromiter(map(len, values), np.int64, len(values))
             # A trace that is not a whole number of steps is dropped, and its row refused.
-            uneven = lengths % width != 0
+            uneven = lengths % entry != 0 if entry else lengths != 0
             if uneven.any():
                 values = [() if bad else v for v, bad in zip(values, uneven, strict=True)]
                 lengths[uneven] = 0
                 ragged |= uneven
-            columns[count] = lengths // width
+            columns[count] = lengths // max(entry, 1)
             flat = np.fromiter(chain.from_iterable(values), dtype)
-            columns[name] = flat.reshape(-1, width) if width > 1 else flat
+            columns[name] = flat.reshape(-1, entry) if per != 1 else flat
         columns["ragged"] = ragged
         if cols is None:
             columns["wrong_cell"] = np.zeros(len(reports), bool)
@@ -140,19 +129,21 @@ class StatusRows:
             if len(column) != n:
                 raise RowsError(f"a status array's {name} has {len(column)} rows, not {n}")
             columns[name] = column
-        p = np.asarray(msg.p, np.float64)
-        if len(p) != 3 * n:
-            raise RowsError("a status array's p is not 3 values a row")
-        columns["p"] = p.reshape(n, 3)
-        for name, (count, dtype, width) in LISTS.items():
+        p = np.asarray(getattr(msg, VECTOR), np.float64)
+        width = len(p) // n if n else 3
+        if len(p) != width * n or (n and width == 0):
+            raise RowsError(f"a status array's {VECTOR} is not the same number of values a row")
+        columns[VECTOR] = p.reshape(n, width)
+        for name, (count, dtype, per) in LISTS.items():
+            entry = width if per == P else int(per)
             counts = np.asarray(getattr(msg, count, ()), np.int64)
             values = np.asarray(getattr(msg, name, ()), dtype)
             if len(counts) == 0 and len(values) == 0:  # an array of an older camo: none
                 counts = np.zeros(n, np.int64)
-            if len(counts) != n or int(counts.sum()) * width != len(values):
+            if len(counts) != n or int(counts.sum()) * entry != len(values):
                 raise RowsError(f"a status array's {name} does not match its counts")
             columns[count] = counts
-            columns[name] = values.reshape(-1, width) if width > 1 else values
+            columns[name] = values.reshape(-1, entry) if per != 1 else values
         columns["wrong_cell"] = columns["ragged"] = np.zeros(n, bool)
         return cls(**columns)
 
@@ -160,7 +151,7 @@ class StatusRows:
         """The columns as a StatusArray's fields (lists of plain numbers)."""
         out: dict[str, Any] = {name: getattr(self, name).tolist() for name in SCALARS}
         out["alive"] = self.alive.astype(np.uint8).tolist()
-        out["p"] = self.p.ravel().tolist()
+        out[VECTOR] = getattr(self, VECTOR).ravel().tolist()
         for name, (count, _, _) in LISTS.items():
             out[count] = getattr(self, count).tolist()
             out[name] = getattr(self, name).ravel().tolist()
@@ -169,8 +160,7 @@ class StatusRows:
     def select(self, keep: np.ndarray) -> StatusRows:
         """The rows where `keep` holds."""
         columns: dict[str, Any] = {}
-        for f in fields(self):
-            name = f.name
+        for name in COLUMNS + CHECKS:
             if name in LISTS:
                 counts = getattr(self, LISTS[name][0])
                 columns[name] = getattr(self, name)[np.repeat(keep, np.maximum(counts, 0))]

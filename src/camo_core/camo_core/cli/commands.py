@@ -13,10 +13,9 @@ import sys
 
 import numpy as np
 
-from camo_core.algorithm.layout import colours_at, layout_for, sense_at
+from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.perrobot import run_per_robot
 from camo_core.algorithm.result import pattern_said
-from camo_core.algorithm.sensing import sense_colours, sense_image
 from camo_core.algorithm.simulator import simulate
 from camo_core.cli import bench
 from camo_core.cli.options import (
@@ -68,25 +67,20 @@ def sensed_overrides(
 
 def cmd_sim(args: argparse.Namespace) -> int:
     params = params_from(args)
+    modes = modes_of(params)
     image, label = image_from(args)
     exempt = None
-    if params.layout:
-        if args.sensed:
-            raise UsageError("--sensed names grid cells: it does not go with --layout")
-        layout = layout_for(params)
-        raw = sense_at(image, layout, params.profile).reshape(params.rows, params.cols)
-        raw_colours = colours_at(image, layout).reshape(params.rows, params.cols, 3)
-    else:
-        raw = sense_image(image, params.rows, params.cols, params.profile)
-        raw_colours = sense_colours(image, params.rows, params.cols)
-        overrides = sensed_overrides(args.sensed, params.rows, params.cols)
-        if overrides:
-            # Real readings: they replace the image's value and get no simulated noise.
-            exempt = np.zeros(raw.shape, bool)
-            for (row, col), (value, rgb) in overrides.items():
-                raw[row, col] = value
-                raw_colours[row, col] = rgb
-                exempt[row, col] = True
+    if args.sensed and not modes.layout.grid:
+        raise UsageError("--sensed names grid cells: it does not go with --layout")
+    raw, raw_colours = modes.layout.sense(image, params.profile)
+    overrides = sensed_overrides(args.sensed, params.rows, params.cols)
+    if overrides:
+        # Real readings: they replace the image's value and get no simulated noise.
+        exempt = np.zeros(raw.shape, bool)
+        for (row, col), (value, rgb) in overrides.items():
+            raw[row, col] = value
+            raw_colours[row, col] = rgb
+            exempt[row, col] = True
     folder = out_dir(args)
     big = params.count >= 256 * 256
     bar = (
@@ -94,12 +88,12 @@ def cmd_sim(args: argparse.Namespace) -> int:
     )
     progress = (lambda phase, step, total: bar.update(note=phase)) if bar else None
     snapshots = Snapshots(params)
-    if params.layout:  # no vectorised kernels for positions: the robots' own rules, one by one
-        result = run_per_robot(params, raw, observe=snapshots, raw_colours=raw_colours)
-    else:
+    if modes.layout.grid:
         result = simulate(
             params, raw, exempt, progress=progress, observe=snapshots, raw_colours=raw_colours
         )
+    else:  # no vectorised kernels for positions: the robots' own rules, one by one
+        result = run_per_robot(params, raw, observe=snapshots, raw_colours=raw_colours)
     summary = result.summary(arrays=True)
     write_summary(summary, folder)
     write_params_file(args.options_parser, args, folder)
@@ -107,11 +101,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     marks = None if exempt is None else {"real reading": exempt}
     figures.run_figure(result, image, folder / "figure.png", title=title, marks=marks)
     dead = np.zeros(params.count, bool)  # the simulator loses messages, never robots
-    sensed = (
-        result.sensed_rgb if params.colours and result.sensed_rgb is not None else result.sensed
-    )
+    sensed = modes.sensing.shown(result.sensed, result.sensed_rgb)
     write_animation(snapshots, sensed, dead, folder / "run.gif", title, marks)
-    how = "robot by robot " if params.layout else ""
+    how = "" if modes.layout.grid else "robot by robot "
     print(
         f"pattern: {pattern_said(summary)}; wrote {folder}/summary.json, "
         f"figure.png and run.gif; simulated {how}in {result.elapsed_s:.3f} s"

@@ -31,10 +31,10 @@ from PIL import Image
 if TYPE_CHECKING:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-from camo_core.algorithm import colours, levels
-from camo_core.results.figures import PATTERN_COLORS, draw_discs, mark
-from camo_core.algorithm.layout import layout_for
+from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.patterns import PATTERN_COLORS
+from camo_core.results.figures import draw_discs, mark
 from camo_core.results.tensor_colours import direction_legend, tensor_rgb
 
 MAX_FRAMES = 80
@@ -62,9 +62,10 @@ class Snapshots:
 
     def __init__(self, params: CamoParams) -> None:
         self.params = params
+        self.modes = modes_of(params)
         # A layout's robots are drawn at their positions, every one of them.
         side = max(params.rows, params.cols)
-        self.stride = 1 if params.layout else max(1, math.ceil(side / MAX_SIDE))
+        self.stride = max(1, math.ceil(side / MAX_SIDE)) if self.modes.layout.grid else 1
         consensus, formation = shown_steps(params.consensus_steps, params.formation_steps)
         self.wanted = {"consensus": set(consensus), "formation": set(formation)}
         self.frames: dict[tuple[int, int], tuple[str, np.ndarray]] = {}
@@ -82,19 +83,12 @@ class Snapshots:
         if phase == "consensus":
             p = self.cells(values)
             known = ~np.isnan(p).any(axis=-1)
-            colours = tensor_rgb if self.params.orientation_any else (lambda p: p @ PALETTE)
-            rgb = np.where(known[..., None], colours(np.nan_to_num(p)), UNKNOWN)
+            # A tensor's direction, or the mix of the pattern colours a p holds.
+            paint = tensor_rgb if self.modes.descriptor.oriented else (lambda p: p @ PALETTE)
+            rgb = np.where(known[..., None], paint(np.nan_to_num(p)), UNKNOWN)
             total, order = self.params.consensus_steps, 0
-        else:
-            cells = self.cells(values)
-            if self.params.colours:  # the colours the robots show (-1: unknown)
-                rgb = np.where(cells < 0, 0.5, cells.astype(float) / 255)
-            elif self.params.levels:  # the greys the robots show (-1: unknown)
-                grey = np.where(cells < 0, 0.5, cells.astype(float) / 255)
-                rgb = np.repeat(grey[..., None], 3, axis=-1)
-            else:
-                grey = np.where(cells < 0, 0.5, np.where(cells == 1, 0.0, 1.0))
-                rgb = np.repeat(grey[..., None], 3, axis=-1)
+        else:  # states, greys or colours shown (-1: unknown)
+            rgb = self.modes.palette.frame_rgb(self.cells(values))
             total, order = self.params.formation_steps, 1
         self.frames[(order, step)] = (f"{phase} step {step}/{total}", rgb)
 
@@ -104,15 +98,10 @@ class Snapshots:
         snapshots = cls(record.params)
         for step in sorted(snapshots.wanted["consensus"]):
             snapshots("consensus", step, record.p_trace[step])
+        palette, shape = record.grid_palette(), (record.params.rows, record.params.cols)
         for step in sorted(snapshots.wanted["formation"]):
-            states = record.state_trace[step]
-            if record.params.levels:
-                shown = levels.shown_grid(np.maximum(states, 0), record.palette)
-                states = np.where(states < 0, -1, shown)
-            elif record.params.colours:
-                shown = colours.shown_grid(np.maximum(states, 0), record.shades, record.palette_rgb)
-                states = np.where(states[..., None] < 0, -1, shown)
-            snapshots("formation", step, states)
+            states = record.state_trace[step].reshape(shape)
+            snapshots("formation", step, record.modes.palette.frame(states, palette))
         return snapshots
 
     def shown(self) -> list[tuple[str, np.ndarray]]:
@@ -135,7 +124,7 @@ def write_animation(
     coloured = grey.size == 3 * snapshots.params.count
     fig, (left, right) = plt.subplots(1, 2, figsize=(6.4, 3.9), dpi=80)
     params = snapshots.params
-    positions = layout_for(params).positions if params.layout else None
+    positions = snapshots.modes.layout.positions
     if positions is None:
         if coloured:
             left.imshow(snapshots.cells(grey) / 255.0, interpolation="nearest")
@@ -161,7 +150,7 @@ def write_animation(
     on_top = [caption, *(c for c in right.collections if c is not shown)]  # drawn over the frame
     for artist in on_top:
         artist.set_animated(True)
-    if snapshots.params.orientation_any:
+    if snapshots.modes.descriptor.oriented:
         handles += direction_legend()
     else:
         handles += [matplotlib.patches.Patch(color=c, label=n) for n, c in PATTERN_COLORS.items()]

@@ -15,13 +15,18 @@ import matplotlib.patches
 import matplotlib.pyplot as plt
 import numpy as np
 
-from camo_core.algorithm import colours, levels
+from camo_core.algorithm.modes.palettes import GridPalette
 from camo_core.algorithm.orientation import CODES, COHERENCE_MIN, ORIENTED, STEP_DEG
+from camo_core.algorithm.patterns import MOTTLED, PATTERN_COLORS
 from camo_core.algorithm.result import RunResult
-from camo_core.algorithm.rules import MOTTLED
 from camo_core.results.tensor_colours import direction_legend, tensor_at, tensor_rgb
 
-PATTERN_COLORS = {"horizontal": "tab:blue", "vertical": "tab:green", "mottled": "tab:orange"}
+# The initial state's panel, by palette: the greys or colours a robot starts from.
+INITIAL_LABELS = {
+    "": "initial state (dark: sensed < 127)",
+    "greys": "initial greys (each robot's class)",
+    "colours": "initial colours (dark: sensed grey < 127)",
+}
 TENSOR_COLORS = {"Jxx": "tab:blue", "Jyy": "tab:green", "Jxy": "tab:purple"}
 
 # A panel is about 260 px wide in the saved figure; a grid or image with a side above this is
@@ -97,9 +102,9 @@ def run_plot(
         shown = shown if shown.ndim == 2 else shown[:, :, ::-1]
         axes[0].imshow(shown, cmap="gray", vmin=0, vmax=255, **extent)
     axes[0].set_title("background")
-    palette, shades, sensed_rgb = result.palette_rgb, result.shades, result.sensed_rgb
-    coloured = bool(result.params.colours) and palette is not None and shades is not None
-    sensed = sensed_rgb if coloured and sensed_rgb is not None else result.sensed
+    modes = result.modes
+    coloured = modes.palette.colour and result.palette_rgb is not None and result.shades is not None
+    sensed = modes.sensing.shown(result.sensed, result.sensed_rgb) if coloured else result.sensed
     if result.positions is not None:
         draw_discs(axes[1], result.positions, sensed)
     else:
@@ -107,23 +112,18 @@ def run_plot(
     what = "colour" if coloured else "grey"
     axes[1].set_title(f"sensed {what} ({result.params.rows}x{result.params.cols} robots)")
     _consensus_panel(axes[2], result)
+    palette = GridPalette(result.palette, result.palette_rgb, result.shades)
+    shows = modes.palette.shows if result.palette is not None or coloured else ""
     for ax, states, label in (
-        (axes[3], result.initial, "initial state (dark: sensed < 127)"),
+        (axes[3], result.initial, INITIAL_LABELS[shows]),
         (axes[4], result.final, f"generated pattern ({result.majority_label})"),
     ):
         shown = np.where(states == 1, 0, 255).astype(float)
-        if result.palette is not None:  # --levels: the greys shown, from the layers on
-            shown = levels.shown_grid(states, result.palette).astype(float)
+        if shows:  # the greys or colours shown
+            shown = modes.palette.shown_grid(states, palette).astype(float)
             if ax is axes[4]:
-                label = f"shown greys ({result.majority_label}), {result.params.levels} levels"
-            else:
-                label = "initial greys (each robot's class)"
-        elif palette is not None and shades is not None:  # --colours: the colours shown
-            shown = colours.shown_grid(states, shades, palette).astype(float)
-            if ax is axes[4]:
-                label = f"shown colours ({result.majority_label}), {result.params.colours} colours"
-            else:
-                label = "initial colours (dark: sensed grey < 127)"
+                label = f"shown {modes.palette.shows} ({result.majority_label}), "
+                label += modes.palette.describe()
         if result.alive is not None:
             shown[~result.alive] = 128
         if result.positions is not None:
@@ -199,7 +199,7 @@ def _direction(ax, degrees: int, height: float, width: float, y: float, x: float
 def _consensus_panel(ax, result: RunResult) -> None:
     """Each pattern's mean p over robots by consensus step, the band from the least to the
     greatest robot's p around it, and the p = 0.5 line the paper draws."""
-    if result.params.orientation_any:
+    if result.modes.descriptor.oriented:
         _tensor_panel(ax, result)
         return
     trace = result.consensus_trace

@@ -9,13 +9,15 @@ from pathlib import Path
 import numpy as np
 
 from camo_core.results import figures
+from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult
 from camo_core.results.summary import write_summary
 
 
 def run_title(label: str, params: CamoParams, robots: str = "robots") -> str:
-    layout = f", layout {params.layout}" if params.layout else ""
+    where = modes_of(params).layout.name
+    layout = f", layout {where}" if where else ""
     return (
         f"{label}: {params.rows}x{params.cols} {robots}, {params.profile} profile, "
         f"seed {params.seed}, rho_meas {params.rho_meas:g}, rho_comm {params.rho_comm:g}{layout}"

@@ -13,10 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from camo_core.algorithm import colours
 from camo_core.algorithm.change import params_of_round
-from camo_core.algorithm.layout import layout_for
-from camo_core.algorithm.orientation import selector
+from camo_core.algorithm.modes import modes_of
+from camo_core.algorithm.modes.palettes import GridPalette
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult, mean_p, p_stats
 from camo_core.algorithm.robot_io import CONSENSUS, DONE, FORMATION
@@ -31,12 +30,14 @@ class RoundRecord:
     started: float = field(default_factory=time.monotonic)
 
     def __post_init__(self) -> None:
-        self.select = selector(self.params)  # a robot's choice from its p
+        self.modes = modes_of(self.params)
+        self.select = self.modes.descriptor.choose  # a robot's choice from its p
         n, steps = self.params.count, self.params.consensus_steps
+        width = self.modes.descriptor.width
         self.sensed = np.full(n, np.nan)
-        self.p_trace = np.full((steps + 1, n, 3), np.nan)
+        self.p_trace = np.full((steps + 1, n, width), np.nan)
         self.state_trace = np.full((self.params.formation_steps + 1, n), -1, np.int64)
-        self.p_latest = np.full((n, 3), np.nan)
+        self.p_latest = np.full((n, width), np.nan)
         self.initial = np.full(n, -1, np.int64)
         self.state = np.full(n, -1, np.int64)
         self.selected = np.full(n, -1, np.int64)
@@ -48,11 +49,14 @@ class RoundRecord:
         # When each robot voted and finished, by its own clock (s since the epoch): a monitor
         # that hears a report late still times the swarm right.
         # --levels: each robot's palette (the K greys it can show), as it reported it.
-        self.palette = np.zeros((n, max(self.params.levels, 1)), np.int64)
+        palette = self.modes.palette
+        self.greys = 0 if palette.colour else palette.k  # greys of a palette (--levels)
+        self.colours = palette.k if palette.colour else 0  # colours of a palette (--colours)
+        self.palette = np.zeros((n, max(self.greys, 1)), np.int64)
         # The colours robots sensed (sRGB), and with --colours their palettes (K colours) and
         # the two of them each shows (where its pattern is on, where it is off).
         self.sensed_rgb = np.full((n, 3), np.nan)
-        self.palette_rgb = np.zeros((n, max(self.params.colours, 1), 3), np.int64)
+        self.palette_rgb = np.zeros((n, max(self.colours, 1), 3), np.int64)
         self.shades = np.zeros((n, 2), np.int64)
         self.voted_at = np.full(n, np.nan)
         self.done_at = np.full(n, np.nan)
@@ -88,11 +92,11 @@ class RoundRecord:
         self.initial[i[now]] = rows.state[now]
         forming = phase == FORMATION
         self.state_trace[step[forming], i[forming]] = rows.state[forming]
-        if self.params.levels:
-            full = rows.palette_count == self.params.levels
+        if self.greys:
+            full = rows.palette_count == self.greys
             if full.any():
                 mine = np.repeat(full, rows.palette_count)
-                self.palette[i[full]] = rows.palette[mine].reshape(-1, self.params.levels)
+                self.palette[i[full]] = rows.palette[mine].reshape(-1, self.greys)
         self._colours(rows)
         # The steps since each robot's last report (statuses of an older camo have none: they
         # came one a step).
@@ -108,7 +112,7 @@ class RoundRecord:
         sensed = rows.sensed_rgb_count == 1
         if sensed.any():
             self.sensed_rgb[i[sensed]] = rows.sensed_rgb[np.repeat(sensed, rows.sensed_rgb_count)]
-        k = self.params.colours
+        k = self.colours
         if not k:
             return
         full = rows.palette_rgb_count == k
@@ -185,20 +189,27 @@ class RoundRecord:
             unknown = np.isnan(p).any(axis=1)
             chosen = self.select(np.nan_to_num(p))
             frames.append((f"c{step}", np.where(unknown, -1, chosen).reshape(shape)))
+        palette = self.grid_palette()
         for step, states in enumerate(self.state_trace):
-            frame: np.ndarray
-            if self.params.colours:
-                shown = colours.shown_grid(np.maximum(states, 0), self.shades, self.palette_rgb)
-                frame = np.where(states[:, None] < 0, -1, shown).reshape((*shape, 3))
-            else:
-                frame = states.reshape(shape)
-            frames.append((f"f{step}", frame))
+            grid = states.reshape(shape)
+            if self.modes.palette.colour:  # a strip of states, or of the colours shown
+                grid = self.modes.palette.frame(grid, palette)
+            frames.append((f"f{step}", grid))
         return frames
 
     @property
     def sensed_shown(self) -> np.ndarray:
         """What a GIF shows as sensed: the robots' colours with --colours, else their greys."""
-        return self.sensed_rgb if self.params.colours else self.sensed
+        return self.modes.sensing.shown(self.sensed, self.sensed_rgb)
+
+    def grid_palette(self) -> GridPalette:
+        """The robots' palettes as reported, as the whole grid's (rows x cols x ...)."""
+        shape = (self.params.rows, self.params.cols)
+        return GridPalette(
+            greys=self.palette.reshape((*shape, -1)) if self.greys else None,
+            colours=self.palette_rgb.reshape((*shape, -1, 3)) if self.colours else None,
+            shades=self.shades.reshape((*shape, 2)) if self.colours else None,
+        )
 
     def result(self, dead: np.ndarray, partial: bool = False) -> RunResult:
         """What the swarm computed, in the reference simulator's form; dead robots masked out.
@@ -207,6 +218,7 @@ class RoundRecord:
         their latest report, and the consensus trace ends where the slowest robot was.
         """
         shape = (self.params.rows, self.params.cols)
+        palette = self.grid_palette()
         if partial:
             alive = ~dead & (self.phase >= CONSENSUS)
             # A robot still in consensus shows what its current p would select.
@@ -232,23 +244,25 @@ class RoundRecord:
             params=self.params,
             sensed=self.sensed.reshape(shape),
             votes=votes.reshape(shape),
-            p=self.p_latest.reshape((*shape, 3)),
+            p=self.p_latest.reshape((*shape, self.modes.descriptor.width)),
             selected=selected.reshape(shape),
             # With --levels the layers are set once the palette is known: formation's start.
-            initial=(self.state_trace[0] if self.params.levels else self.initial).reshape(shape),
+            initial=(self.state_trace[0] if self.greys else self.initial).reshape(shape),
             final=self.state.reshape(shape),
-            consensus_trace=np.array(trace).reshape(-1, 3),
+            consensus_trace=np.array(trace).reshape(-1, self.modes.descriptor.width),
             elapsed_s=time.monotonic() - self.started,
             alive=None if alive.all() else alive.reshape(shape),
-            palette=self.palette.reshape((*shape, -1)) if self.params.levels else None,
-            positions=layout_for(self.params).positions if self.params.layout else None,
-            consensus_range=np.array(spread).reshape(-1, 3, 2) if spread else None,
+            palette=palette.greys,
+            positions=self.modes.layout.positions,
+            consensus_range=(
+                np.array(spread).reshape(-1, self.modes.descriptor.width, 2) if spread else None
+            ),
             # Known only where every robot that took part said what it sensed.
             sensed_rgb=self.sensed_rgb.reshape((*shape, 3))
             if not np.isnan(self.sensed_rgb[alive]).any()
             else None,
-            palette_rgb=self.palette_rgb.reshape((*shape, -1, 3)) if self.params.colours else None,
-            shades=self.shades.reshape((*shape, 2)) if self.params.colours else None,
+            palette_rgb=palette.colours,
+            shades=palette.shades,
         )
 
 
@@ -323,3 +337,33 @@ class Backgrounds(dict):
     def unpin(self, number: int) -> None:
         self.pinned.discard(number)
         self._let_go()
+
+
+# Notices of a continuous run: round -> (the robot that noticed its change first, when the scene
+# changed, when it noticed: ROS time, s since the epoch).
+Notices = dict[int, tuple[int, float, float]]
+
+
+def round_fields(
+    index: int,
+    frame: int,
+    backgrounds: Backgrounds,
+    notices: Notices,
+    record: RoundRecord,
+    partial: bool = False,
+) -> dict:
+    """What a continuous run's round adds to its summary.json, written live (the launcher) and
+    from a bag (`camo render`) alike: which round it is and which frame it camouflaged, that
+    frame's SHA-256, when the scene changed, when and by whom that was noticed, and when every
+    robot was done (ROS time, s since the epoch; None for a round the run stopped in)."""
+    noticed = notices.get(frame)
+    clocks = record.timing()
+    return {
+        "round": index,
+        "frame": frame,
+        "background_sha256": backgrounds.digests.get(frame),
+        "changed_at": noticed[1] if noticed else backgrounds.times.get(frame),
+        "noticed_at": noticed[2] if noticed else None,
+        "noticed_by": noticed[0] if noticed else None,
+        "done_at": clocks[1] if clocks is not None and not partial else None,
+    }
