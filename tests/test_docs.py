@@ -136,6 +136,8 @@ def test_every_command_of_the_doc_works(doc, tmp_path):
     }
     background: list[subprocess.Popen] = []
     ran = 0
+    for shared in ("docs", "tools"):  # scripts the docs run, by their path from the clone's root
+        (tmp_path / shared).symlink_to(ROOT / shared)
     for command in doc_commands(doc):
         how, _ = rule_of(command)
         if how == "skip":
@@ -187,3 +189,18 @@ def test_each_command_answers_help_from_a_fresh_shell(command):
     )
     assert out.returncode == 0, out.stderr[-1500:]
     assert out.stdout.startswith("usage:"), out.stdout[:300]
+
+
+def python_blocks(path: Path) -> list[str]:
+    """The ```python code blocks of a file, each as its text."""
+    return re.findall(r"```python\n(.*?)```", path.read_text(), flags=re.S)
+
+
+def test_the_worked_mode_example_shows_the_code_the_docs_test_runs():
+    # docs/extending.md's own mode is docs/examples/own_energy_threshold.py, which the docs'
+    # command runs (test_every_command_of_the_doc_works): what the page shows is that code.
+    page = ROOT / "docs" / "extending.md"
+    example = (ROOT / "docs" / "examples" / "own_energy_threshold.py").read_text()
+    shown = [b for b in python_blocks(page) if "class OwnEnergyThreshold" in b]
+    assert len(shown) == 1 and shown[0] in example
+    assert "./camo python docs/examples/own_energy_threshold.py" in doc_commands(page)

@@ -34,9 +34,10 @@ from camo_core.algorithm.status_rows import rows_of_message
 from camo_core.cli.options import Parser, add_out_options, out_dir
 from camo_core.exceptions import CamoError
 from camo_core.results import figures
-from camo_core.results.animation import Snapshots, join_animations, write_animation
+from camo_core.results.animation import join_animations, write_animation
 from camo_core.results.output import run_title, write_round
 from camo_core.results.record import Backgrounds, Rounds, round_fields
+from camo_core.results.snapshots import Snapshots
 from camo_msgs.msg import Notices
 from camo_nodes.topics.images import frame_number, image_from_msg, pixels_sha256
 

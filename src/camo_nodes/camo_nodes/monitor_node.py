@@ -43,9 +43,10 @@ from camo_core.algorithm.status_rows import RowsError, StatusRows
 from camo_core.algorithm.validation import rows_problems
 from camo_core.cli.options import Parser, add_out_options, out_dir, seconds
 from camo_core.exceptions import CamoError
-from camo_core.results.animation import Snapshots, write_animation
+from camo_core.results.animation import write_animation
 from camo_core.results.output import run_title, write_round
 from camo_core.results.record import Backgrounds, RoundRecord, Rounds
+from camo_core.results.snapshots import Snapshots
 from camo_core.shutdown import StopFlag
 from camo_msgs.msg import Host, Notices, StatusArray
 from camo_nodes import scene

@@ -19,13 +19,13 @@ class Pattern:
     activators: tuple[int, ...]  # slots (docs/algorithm.md §1) that excite; the robot itself too
     inhibitors: tuple[int, ...]  # slots that inhibit
     w2: str  # the CamoParams field holding its inhibitor weight W2
-    colour: str  # its colour in figures and GIFs (a matplotlib colour)
+    colour: str  # its colour in figures and GIFs, #rrggbb (matplotlib's tab10 for the three)
 
 
 PATTERNS: tuple[Pattern, ...] = (
-    Pattern(0, "horizontal", (1, 3, 9, 11), (0, 2, 4, 5, 6, 7), "w2_stripes", "tab:blue"),
-    Pattern(1, "vertical", (0, 2, 8, 10), (1, 3, 4, 5, 6, 7), "w2_stripes", "tab:green"),
-    Pattern(2, "mottled", (0, 1, 2, 3), (4, 5, 6, 7, 8, 9, 10, 11), "w2_mottled", "tab:orange"),
+    Pattern(0, "horizontal", (1, 3, 9, 11), (0, 2, 4, 5, 6, 7), "w2_stripes", "#1f77b4"),
+    Pattern(1, "vertical", (0, 2, 8, 10), (1, 3, 4, 5, 6, 7), "w2_stripes", "#2ca02c"),
+    Pattern(2, "mottled", (0, 1, 2, 3), (4, 5, 6, 7, 8, 9, 10, 11), "w2_mottled", "#ff7f0e"),
 )
 WIDTH = len(PATTERNS)  # entries of a vote p
 PATTERN_NAMES = tuple(p.name for p in PATTERNS)

@@ -66,7 +66,21 @@ def descriptor(
     return across_y - across_x, across_x - across_y, (across_x + across_y) / 2
 
 
-def vote_from(horizontal_score: float, vertical_score: float, threshold: float) -> int:
+@overload
+def vote_from(horizontal_score: float, vertical_score: float, threshold: float) -> int: ...
+@overload
+def vote_from(
+    horizontal_score: np.ndarray, vertical_score: np.ndarray, threshold: np.ndarray | float
+) -> np.ndarray: ...
+def vote_from(horizontal_score, vertical_score, threshold):
+    """The vote from a descriptor's scores (docs/algorithm.md §2.2): one robot's (an int), or
+    the whole grid's (arrays: an array of pattern codes)."""
+    if isinstance(horizontal_score, np.ndarray):
+        return np.where(
+            horizontal_score > threshold,
+            HORIZONTAL,
+            np.where(vertical_score > threshold, VERTICAL, MOTTLED),
+        ).astype(np.int64)
     if horizontal_score > threshold:
         return HORIZONTAL
     if vertical_score > threshold:

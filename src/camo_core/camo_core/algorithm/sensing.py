@@ -135,7 +135,10 @@ def to_rgb(image: np.ndarray) -> np.ndarray:
 
 def sense_colours(image: np.ndarray, rows: int, cols: int) -> np.ndarray:
     """The mean colour of the image block each robot covers (rows x cols x 3, sRGB float64),
-    as block_means takes the mean grey."""
+    as block_means takes the mean grey. A grey image's colours are its greys' means (the same
+    numbers as its three channels' means, a third of the work)."""
+    if image.ndim == 2:
+        return np.repeat(block_means(image.astype(np.float64), rows, cols)[:, :, None], 3, axis=2)
     return block_means(to_rgb(image), rows, cols)
 
 

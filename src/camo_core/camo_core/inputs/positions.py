@@ -8,7 +8,6 @@ import csv
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import KDTree
 
 from camo_core.exceptions import CamoError
 from camo_core.inputs.files import checked_file, shown
@@ -84,5 +83,7 @@ def closest_pair(positions: np.ndarray) -> float | None:
     """The distance between the two closest robots (None for fewer than two)."""
     if len(positions) < 2:
         return None
+    from scipy.spatial import KDTree  # a second's import: only a layout file needs it
+
     distances, _ = KDTree(positions).query(positions, k=2)
     return float(distances[:, 1].min())

@@ -4,11 +4,14 @@ write them."""
 from __future__ import annotations
 
 import math
+import multiprocessing
+import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from camo_core.results import figures
+from camo_core.exceptions import CamoError
 from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult
@@ -44,6 +47,8 @@ def write_round(
 ) -> dict:
     """summary.json (with `incomplete` saying how far a stopped run got, and `extra` keys) and
     figure.png (with `marks`: the robots it marks, as figures.run_figure takes them)."""
+    from camo_core.results import figures  # matplotlib: imported by what draws
+
     summary = result.summary()
     if incomplete is not None:
         # What robots never said is unknown, not a number: null, never NaN.
@@ -53,3 +58,40 @@ def write_round(
     write_summary(summary, folder)
     figures.run_figure(result, image, folder / "figure.png", title=title, marks=marks)
     return summary
+
+
+class Parallel:
+    """`work()` in a forked process of its own (where fork is there; else at once, here), so
+    that what a run writes at its end shares the machine's cores. `wait` joins it: an error in
+    it is one line here."""
+
+    def __init__(self, work: Callable[[], None]) -> None:
+        self.process = None
+        if "fork" not in multiprocessing.get_all_start_methods():
+            work()
+            return
+        self.process = multiprocessing.get_context("fork").Process(
+            target=_run_reporting, args=(work,), daemon=True
+        )
+        self.process.start()
+
+    def wait(self, what: str) -> None:
+        if self.process is None:
+            return
+        try:
+            self.process.join()
+        finally:
+            if self.process.is_alive():  # Ctrl-C in the join: it is stopped with this process
+                self.process.terminate()
+                self.process.join()
+        if self.process.exitcode != 0:
+            raise CamoError(f"writing {what} failed (exit code {self.process.exitcode})")
+
+
+def _run_reporting(work: Callable[[], None]) -> None:
+    """A forked worker's body: an error is one line on stderr and exit code 1."""
+    try:
+        work()
+    except Exception as exc:  # noqa: BLE001 - whatever it is, one line, as the parent says
+        print(f"camo: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        sys.exit(1)

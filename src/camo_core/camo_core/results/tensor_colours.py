@@ -3,11 +3,6 @@ saturation; used by figure.png, run.gif and a bag's timeline."""
 
 from __future__ import annotations
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.colors
-import matplotlib.patches
 import numpy as np
 
 
@@ -20,11 +15,15 @@ def tensor_rgb(p: np.ndarray) -> np.ndarray:
         coherence = np.nan_to_num(np.sqrt(x * x + y * y) / (jxx + jyy))
     hue = ((90 - np.degrees(np.arctan2(y, x)) / 2) % 180) / 180
     hsv = np.stack([hue, np.clip(coherence / 0.5, 0, 1), np.full(hue.shape, 0.95)], axis=-1)
+    import matplotlib.colors  # imported by what draws (a simulator's frames need not draw)
+
     return matplotlib.colors.hsv_to_rgb(hsv)
 
 
 def direction_legend() -> list:
     """Legend patches for tensor_rgb's colours."""
+    import matplotlib.patches
+
     angles = (0, 45, 90, 135)
     # matplotlib takes an RGB array as a colour, though its ColorType stub lists only tuples.
     patches = [

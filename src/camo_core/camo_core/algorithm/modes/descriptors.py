@@ -102,12 +102,7 @@ class Axes:
     def vote_all(self, sensed, known_mask, prefix, rho, scores, energy):
         """vote for every robot: (votes, p0), from the grid's scores and energies."""
         horizontal, vertical = scores
-        threshold = self.threshold.of_grid(energy)
-        votes = np.where(
-            horizontal > threshold,
-            rules.HORIZONTAL,
-            np.where(vertical > threshold, rules.VERTICAL, rules.MOTTLED),
-        ).astype(np.int64)
+        votes = rules.vote_from(horizontal, vertical, self.threshold.of_grid(energy))
         p0 = np.zeros((*sensed.shape, self.width))
         for k in range(self.width):
             p0[:, :, k] = votes == k

@@ -1,0 +1,84 @@
+"""The frames of a round's GIF (run.gif), taken as the round goes: what both drivers hand the
+animation (results/animation.py draws them). No matplotlib here: a simulator run takes its
+frames before anything is drawn, and drawing can happen in another process."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from camo_core.algorithm.modes import modes_of
+from camo_core.algorithm.params import CamoParams
+from camo_core.algorithm.patterns import PATTERN_COLORS
+from camo_core.results.tensor_colours import tensor_rgb
+
+MAX_FRAMES = 80
+MAX_SIDE = 256  # robots per side a frame shows: one pixel each at most, in a 3 inch panel
+UNKNOWN = np.array([0.5, 0.5, 0.5])
+# The patterns' colours (the table's, "#rrggbb"), as RGB in 0..1: a p is painted their mix.
+PALETTE = np.array([[int(c[k : k + 2], 16) / 255 for k in (1, 3, 5)] for c in PATTERN_COLORS.values()])
+
+
+def shown_steps(consensus_steps: int, formation_steps: int) -> tuple[list[int], list[int]]:
+    """The consensus steps (0 is before the first) and formation steps a GIF shows: all of
+    them, or MAX_FRAMES evenly spread with the first and the last."""
+    total = consensus_steps + formation_steps + 2
+    keep = np.unique(np.linspace(0, total - 1, min(total, MAX_FRAMES)).round().astype(int))
+    consensus = [int(k) for k in keep if k <= consensus_steps]
+    formation = [int(k) - consensus_steps - 1 for k in keep if k > consensus_steps]
+    return consensus, formation
+
+
+class Snapshots:
+    """The frames of a round's GIF, taken as the round goes. Call it with ("consensus", step,
+    p) for the p-vectors before consensus step `step` (rows x cols x width or robots x width, NaN:
+    unknown) and ("formation", step, state) (-1: unknown); it keeps the steps it shows."""
+
+    def __init__(self, params: CamoParams) -> None:
+        self.params = params
+        self.modes = modes_of(params)
+        # A layout's robots are drawn at their positions, every one of them.
+        side = max(params.rows, params.cols)
+        self.stride = max(1, math.ceil(side / MAX_SIDE)) if self.modes.layout.grid else 1
+        consensus, formation = shown_steps(params.consensus_steps, params.formation_steps)
+        self.wanted = {"consensus": set(consensus), "formation": set(formation)}
+        self.frames: dict[tuple[int, int], tuple[str, np.ndarray]] = {}
+
+    def cells(self, values: np.ndarray) -> np.ndarray:
+        """Per robot values as the grid a frame shows (every `stride`-th robot)."""
+        values = np.asarray(values)
+        rows, cols = self.params.rows, self.params.cols
+        shape = (rows, cols) if values.size == rows * cols else (rows, cols, -1)
+        return values.reshape(shape)[:: self.stride, :: self.stride]
+
+    def __call__(self, phase: str, step: int, values: np.ndarray) -> None:
+        if step not in self.wanted[phase]:
+            return
+        if phase == "consensus":
+            p = self.cells(values)
+            known = ~np.isnan(p).any(axis=-1)
+            # A tensor's direction, or the mix of the pattern colours a p holds.
+            paint = tensor_rgb if self.modes.descriptor.oriented else (lambda p: p @ PALETTE)
+            rgb = np.where(known[..., None], paint(np.nan_to_num(p)), UNKNOWN)
+            total, order = self.params.consensus_steps, 0
+        else:  # states, greys or colours shown (-1: unknown)
+            rgb = self.modes.palette.frame_rgb(self.cells(values))
+            total, order = self.params.formation_steps, 1
+        self.frames[(order, step)] = (f"{phase} step {step}/{total}", rgb)
+
+    @classmethod
+    def of_record(cls, record) -> Snapshots:
+        """The frames of a swarm's round (a `record.RoundRecord`)."""
+        snapshots = cls(record.params)
+        for step in sorted(snapshots.wanted["consensus"]):
+            snapshots("consensus", step, record.p_trace[step])
+        palette, shape = record.grid_palette(), (record.params.rows, record.params.cols)
+        for step in sorted(snapshots.wanted["formation"]):
+            states = record.state_trace[step].reshape(shape)
+            snapshots("formation", step, record.modes.palette.frame(states, palette))
+        return snapshots
+
+    def shown(self) -> list[tuple[str, np.ndarray]]:
+        """(caption, RGB grid) per frame, in order."""
+        return [self.frames[key] for key in sorted(self.frames)]
