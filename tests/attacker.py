@@ -32,7 +32,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
-from camo_core.algorithm.status_rows import StatusRows
+from camo_core.swarm.status_rows import StatusRows
 from camo_msgs.msg import (
     Color,
     Colors,

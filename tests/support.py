@@ -19,9 +19,9 @@ import numpy as np
 import psutil
 
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.protocol import StepProtocol
-from camo_core.algorithm.robot_io import Message
 from camo_core.algorithm.sensing import Reading
+from camo_core.swarm.protocol import StepProtocol
+from camo_core.swarm.robot_io import Message
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -222,7 +222,7 @@ class StatusListener:
         time.time())."""
         from types import SimpleNamespace
 
-        from camo_core.algorithm.status_rows import StatusRows
+        from camo_core.swarm.status_rows import StatusRows
 
         rows = StatusRows.from_message(msg)
         said = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9

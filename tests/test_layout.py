@@ -51,8 +51,15 @@ ALLOWED = {
     },
 }
 # camo_core's jobs, each using only those below it: the command-line layer, results (summary
-# files, figures, animation), the algorithm and its step protocol.
-CORE_LAYERS = ("camo_core.cli", "camo_core.results", "camo_core.algorithm")
+# files, figures, animation), the swarm runtime (the step protocol and what it exchanges), the
+# algorithm (the rules, their modes and the two simulator drivers), outside input's loaders.
+CORE_LAYERS = (
+    "camo_core.cli",
+    "camo_core.results",
+    "camo_core.swarm",
+    "camo_core.algorithm",
+    "camo_core.inputs",
+)
 
 BLOCK_ROS = """
 import importlib.abc, sys
@@ -111,7 +118,7 @@ def test_camo_core_imports_and_runs_with_ros_blocked():
 
 
 def test_the_step_protocol_loads_no_rclpy():
-    code = "import sys, camo_core.algorithm.protocol; print('rclpy' in sys.modules)"
+    code = "import sys, camo_core.swarm.protocol; print('rclpy' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.stdout.strip() == "False", out.stderr
 
@@ -241,8 +248,8 @@ def test_each_parameter_is_spelled_in_at_most_two_modules():
     from the declaration. Spelled as a key (`"rho_comm"`), an option (`"--rho-comm"`) or a ROS
     argument (`"rho_comm:=..."`), a name may stand in its declaration and one more module."""
     from camo_core.algorithm.params import CamoParams
-    from camo_core.algorithm.run_setup import ProtocolParams
     from camo_core.schema import declared
+    from camo_core.swarm.run_setup import ProtocolParams
 
     exempt = re.compile(r"(bench\w*|soak)\.py$|camo_sweep/errors\.py$")  # benches, presets
     names = [*declared(CamoParams), *declared(ProtocolParams)]

@@ -22,7 +22,7 @@ import numpy as np
 
 from camo_core.algorithm.change import Watch, false_alarm_rate
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.run_setup import ProtocolParams
+from camo_core.swarm.run_setup import ProtocolParams
 
 DEFAULTS = ProtocolParams()
 # (rho_meas, frame noise sigma, readings a frame, readings between joins; 0: none)

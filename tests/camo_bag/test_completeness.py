@@ -12,7 +12,7 @@ from support import BAG_COLS, BAG_ROWS, BAG_RUN, SWARM, bag_tool
 from camo_bag.completeness import examine, message_fields
 from camo_bag.container import BagWriter, TopicInfo
 from camo_bag.loader import read_messages, read_summary
-from camo_core.algorithm.robot_io import PHASE_OF
+from camo_core.swarm.robot_io import PHASE_OF
 
 
 def copy_bag(source, target, drop=lambda topic, data: False, edit=None) -> None:
@@ -190,7 +190,7 @@ def test_a_bag_without_statuses_or_result_names_every_robot_and_writes_null_not_
             return [data]
         from rclpy.serialization import deserialize_message, serialize_message
 
-        from camo_core.algorithm.status_rows import StatusRows
+        from camo_core.swarm.status_rows import StatusRows
         from camo_msgs.msg import StatusArray
 
         msg = deserialize_message(data, StatusArray)
@@ -275,7 +275,7 @@ def test_a_long_continuous_runs_ledger_holds_a_few_numbers_a_round():
 
     from camo_bag.ledger import ACTIVE_ROUNDS, Ledger
     from camo_core.algorithm.params import CamoParams
-    from camo_core.algorithm.robot_io import messages_per_round
+    from camo_core.swarm.robot_io import messages_per_round
 
     params = CamoParams(rows=4, cols=4, consensus_steps=12, formation_steps=4)
     ledger = Ledger()

@@ -299,7 +299,7 @@ def test_a_stopped_continuous_run_writes_its_finished_rounds_then_the_one_under_
     from PIL import Image as PILImage
     from support import ros_context
 
-    from camo_core.algorithm.robot_io import CONSENSUS
+    from camo_core.swarm.robot_io import CONSENSUS
 
     with ros_context() as context:
         run = StoppedRun(tmp_path, context)

@@ -33,7 +33,7 @@ from support import (
 )
 
 from camo_bringup import launcher, run_config, worker
-from camo_core.algorithm.robot_io import CONSENSUS
+from camo_core.swarm.robot_io import CONSENSUS
 
 
 def summaries(tmp_path, options: list[str], procs: int) -> tuple[dict, dict]:

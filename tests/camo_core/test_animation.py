@@ -6,8 +6,8 @@ from support import PROCESS, Bus, run_camo
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.simulator import simulate
-from camo_core.results.snapshots import MAX_FRAMES, Snapshots, shown_steps
 from camo_core.results.record import RoundRecord
+from camo_core.results.snapshots import MAX_FRAMES, Snapshots, shown_steps
 
 
 def gif_frames(path) -> list[bytes]:

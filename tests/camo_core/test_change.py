@@ -10,13 +10,13 @@ from hypothesis import strategies as st
 
 from camo_core.algorithm.backgrounds import background
 from camo_core.algorithm.change import Watch, noticed, params_of_round, round_seed
-from camo_core.algorithm.mailbox import Mailbox
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.protocol import StepProtocol
-from camo_core.algorithm.robot_io import DONE, NOTHING, SENSING, Message
-from camo_core.algorithm.run_setup import ProtocolParams
 from camo_core.algorithm.sensing import ProjectedSensor, Projection, sense_image
 from camo_core.algorithm.simulator import simulate
+from camo_core.swarm.mailbox import Mailbox
+from camo_core.swarm.protocol import StepProtocol
+from camo_core.swarm.robot_io import DONE, NOTHING, SENSING, Message
+from camo_core.swarm.run_setup import ProtocolParams
 
 WINDOW, THRESHOLD = ProtocolParams().change_window, ProtocolParams().change_threshold  # a run's
 

@@ -13,11 +13,11 @@ from support import COMPUTE, PROCESS, Bus, run_camo
 from camo_core.algorithm import colours
 from camo_core.algorithm.params import CamoParams, ParameterError
 from camo_core.algorithm.perrobot import run_per_robot
-from camo_core.algorithm.robot_io import DONE, Message
 from camo_core.algorithm.sensing import sense_colours, sense_image
 from camo_core.algorithm.simulator import simulate
-from camo_core.algorithm.status_rows import StatusRows
-from camo_core.algorithm.validation import message_problem, rows_problems
+from camo_core.swarm.robot_io import DONE, Message
+from camo_core.swarm.status_rows import StatusRows
+from camo_core.swarm.validation import message_problem, rows_problems
 
 FIELDS = ("sensed", "sensed_rgb", "votes", "p", "selected", "initial", "final", "palette_rgb")
 FIELDS += ("shades", "display_rgb")

@@ -9,10 +9,10 @@ from support import COMPUTE, PROCESS, Bus, assert_drivers_agree, brick_courses, 
 from camo_core.algorithm import levels
 from camo_core.algorithm.backgrounds import background, stripes
 from camo_core.algorithm.params import CamoParams, ParameterError
-from camo_core.algorithm.robot_io import DONE, Message
 from camo_core.algorithm.sensing import sense_image
 from camo_core.algorithm.simulator import simulate
-from camo_core.algorithm.validation import message_problem
+from camo_core.swarm.robot_io import DONE, Message
+from camo_core.swarm.validation import message_problem
 
 FIELDS = ("sensed", "votes", "p", "selected", "initial", "final", "palette", "display")
 

@@ -6,7 +6,7 @@ import math
 from hypothesis import given
 from hypothesis import strategies as st
 
-from camo_core.algorithm.liveness import HEARTBEAT_PERIOD, Liveness, PhiAccrual, phi
+from camo_core.swarm.liveness import HEARTBEAT_PERIOD, Liveness, PhiAccrual, phi
 
 
 class Clock:

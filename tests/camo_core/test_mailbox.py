@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from support import FixedSensor
 
-from camo_core.algorithm.mailbox import Mailbox
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.protocol import StepProtocol
-from camo_core.algorithm.robot_io import DONE, NOTHING
 from camo_core.algorithm.simulator import simulate
+from camo_core.swarm.mailbox import Mailbox
+from camo_core.swarm.protocol import StepProtocol
+from camo_core.swarm.robot_io import DONE, NOTHING
 
 
 def test_a_step_is_forgotten_once_every_reader_took_it_and_a_late_message_is_not_kept():

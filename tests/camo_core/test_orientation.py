@@ -18,9 +18,9 @@ from camo_core.algorithm import orientation, rules
 from camo_core.algorithm.backgrounds import stripes
 from camo_core.algorithm.orientation import ORIENTED, ROLES, choose, raw_tensor
 from camo_core.algorithm.params import CamoParams, ParameterError
-from camo_core.algorithm.robot_io import DONE
 from camo_core.algorithm.sensing import sense_image
 from camo_core.algorithm.simulator import simulate
+from camo_core.swarm.robot_io import DONE
 
 FIELDS = ("sensed", "votes", "p", "selected", "initial", "final", "consensus_trace")
 

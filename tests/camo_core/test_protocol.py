@@ -7,7 +7,9 @@ from support import Bus, FixedSensor
 
 from camo_core.algorithm import rng
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.protocol import (
+from camo_core.algorithm.sensing import Reading
+from camo_core.algorithm.simulator import simulate
+from camo_core.swarm.protocol import (
     CONSENSUS,
     DISCOVERY,
     DONE,
@@ -15,9 +17,7 @@ from camo_core.algorithm.protocol import (
     TICK,
     StepProtocol,
 )
-from camo_core.algorithm.robot_io import Message
-from camo_core.algorithm.sensing import Reading
-from camo_core.algorithm.simulator import simulate
+from camo_core.swarm.robot_io import Message
 
 
 def robot(params: CamoParams, row: int, col: int, value: float = 100.0, **kwargs) -> StepProtocol:

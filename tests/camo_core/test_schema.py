@@ -10,11 +10,11 @@ import pytest
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import SUMMARY_KEYS
-from camo_core.algorithm.run_setup import ProtocolParams, RunSetup, SetupError
 from camo_core.cli.options import Parser, add_options, options_of
 from camo_core.exceptions import UsageError
 from camo_core.schema import ParameterError, check_fields, declared, from_dict, param, to_dict
 from camo_core.schema import values as role_values
+from camo_core.swarm.run_setup import ProtocolParams, RunSetup, SetupError
 
 
 @dataclass(frozen=True)

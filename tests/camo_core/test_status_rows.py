@@ -8,9 +8,9 @@ import pytest
 from support import Bus
 
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.status_rows import RowsError, StatusRows, rows_of_message
-from camo_core.algorithm.validation import rows_problems
 from camo_core.results.record import RoundRecord
+from camo_core.swarm.status_rows import RowsError, StatusRows, rows_of_message
+from camo_core.swarm.validation import rows_problems
 
 
 def bus_reports(params: CamoParams, seed: int) -> list:

@@ -49,7 +49,7 @@ def test_faint_courses_are_striped_with_auto_where_the_fixed_threshold_sees_noth
 
 
 def test_the_step_protocol_in_any_delivery_order_equals_the_simulator_with_auto():
-    from camo_core.algorithm.protocol import DONE
+    from camo_core.swarm.protocol import DONE
 
     for rows, cols, rho, order in [(3, 4, 0.0, 1), (5, 5, 0.3, 2), (1, 1, 0.0, 0)]:
         params = CamoParams(rows=rows, cols=cols, rho_comm=rho, rho_meas=rho, seed=4,

@@ -3,8 +3,8 @@ stall of its own process off every robot's deadline."""
 
 import math
 
-from camo_core.algorithm.protocol import RECHECK, TICK
-from camo_core.algorithm.ticks import Ticks
+from camo_core.swarm.protocol import RECHECK, TICK
+from camo_core.swarm.ticks import Ticks
 
 
 class Robot:

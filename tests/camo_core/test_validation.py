@@ -6,9 +6,9 @@ import math
 import pytest
 
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.protocol import CONSENSUS, DISCOVERY, FORMATION, SENSING
-from camo_core.algorithm.robot_io import Message
-from camo_core.algorithm.validation import message_problem, phase_problem
+from camo_core.swarm.protocol import CONSENSUS, DISCOVERY, FORMATION, SENSING
+from camo_core.swarm.robot_io import Message
+from camo_core.swarm.validation import message_problem, phase_problem
 
 PARAMS = CamoParams(rows=4, cols=5, consensus_steps=20, formation_steps=6)
 
@@ -122,8 +122,8 @@ def test_a_table_of_statuses_gets_each_rows_own_problem():
     bad row beside good ones refuses that row only."""
     from types import SimpleNamespace
 
-    from camo_core.algorithm.status_rows import StatusRows
-    from camo_core.algorithm.validation import report_problem, rows_problems
+    from camo_core.swarm.status_rows import StatusRows
+    from camo_core.swarm.validation import report_problem, rows_problems
 
     params = CamoParams(rows=3, cols=3, consensus_steps=4, formation_steps=3, levels=4)
     good = dict(phase=2, step=1, sensed=100.0, p=[0.2, 0.3, 0.5], state=1, pattern=0)

@@ -7,7 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from support import ROOT
 
-from camo_core.algorithm.validation import REPORT_TOLERANCE, probability_vector
+from camo_core.swarm.validation import REPORT_TOLERANCE, probability_vector
 from camo_droplet.firmware import FirmwareState
 
 TRANSCRIPT = ROOT / "tests" / "data" / "firmware_transcript.txt"

@@ -68,7 +68,7 @@ def test_each_message_type_round_trips(monkeypatch):
 
 
 def test_robot_status_constants_are_the_protocols_phases_and_the_rules_patterns():
-    from camo_core.algorithm import protocol
+    from camo_core.swarm import protocol
 
     assert [
         RobotStatus.PHASE_DISCOVERY,
@@ -111,7 +111,7 @@ def test_status_messages_hold_each_declared_status_column_with_its_type():
     # The status columns are declared once (robot_io.Report); the messages must carry each
     # with its declared type: a RobotStatus one robot's values, a StatusArray a column of them
     # (lists flattened, with a count a row), and nothing else beside the header and name.
-    from camo_core.algorithm.robot_io import STATUS_COLUMNS
+    from camo_core.swarm.robot_io import STATUS_COLUMNS
 
     single, array = {}, {}
     for name, meta in STATUS_COLUMNS.items():

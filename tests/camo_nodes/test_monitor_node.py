@@ -80,7 +80,7 @@ def status(**fields):
 
     from rclpy.serialization import serialize_message
 
-    from camo_core.algorithm.status_rows import StatusRows
+    from camo_core.swarm.status_rows import StatusRows
     from camo_msgs.msg import StatusArray
 
     report = SimpleNamespace(**{"sensed": 100.0, "p": [1.0, 0.0, 0.0], **fields})

@@ -10,8 +10,8 @@ from rclpy.node import Node
 from support import domain
 
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.run_setup import ProtocolParams
 from camo_core.schema import ParameterError
+from camo_core.swarm.run_setup import ProtocolParams
 from camo_nodes.robot_node import ROBOT_PARAMETERS, RobotCell, robot_setup
 from camo_nodes.topics.parameters import (
     JoinParams,

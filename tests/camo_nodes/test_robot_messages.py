@@ -6,7 +6,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
 
-from camo_core.algorithm.robot_io import PHASE_OF, Message
+from camo_core.swarm.robot_io import PHASE_OF, Message
 from camo_nodes.topics.robot_messages import (
     ARRAY_TYPES,
     COLUMN_TYPES,

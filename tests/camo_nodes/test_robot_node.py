@@ -40,7 +40,7 @@ def test_a_processs_robots_report_about_2000_times_a_second_at_most_however_many
     test_protocol.py): the periods host_robots gives a process's robots, as many as it hosts."""
     import camo_nodes.robot_node as robot_node
     from camo_core.algorithm.params import CamoParams
-    from camo_core.algorithm.run_setup import ProtocolParams
+    from camo_core.swarm.run_setup import ProtocolParams
     from camo_nodes.topics.names import RunTopics
 
     def transport(node, params, topics, tiles, *args):  # what host_robots asks of it, no DDS

@@ -10,7 +10,7 @@ from rclpy.serialization import serialize_message
 from support import ros_context
 
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.robot_io import CONSENSUS, DONE, NOTHING, Message, Output
+from camo_core.swarm.robot_io import CONSENSUS, DONE, NOTHING, Message, Output
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.transport import (
     MAX_STATUS_BYTES,

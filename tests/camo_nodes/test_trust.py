@@ -19,7 +19,7 @@ from support import (
     wait_for_line,
 )
 
-from camo_core.algorithm.run_setup import RunSetup
+from camo_core.swarm.run_setup import RunSetup
 from camo_msgs.msg import Host
 from camo_nodes.topics.runs import setup_from
 from camo_nodes.trust import BackgroundCheck, Hosts, Rejections, merged

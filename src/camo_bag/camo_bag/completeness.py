@@ -23,10 +23,10 @@ from camo_bag.ledger import ARRAY_KINDS, COLUMN_KINDS, SINGLE_KINDS, Ledger
 from camo_bag.loader import Bag, open_bag
 from camo_bag.msgdefs import full_name, message_class
 from camo_bag.upgrade import installed_decoder
-from camo_core.algorithm.protocol import DONE
-from camo_core.algorithm.run_setup import RunSetup, SetupError
-from camo_core.algorithm.status_rows import rows_of_message
 from camo_core.exceptions import CamoError
+from camo_core.swarm.protocol import DONE
+from camo_core.swarm.run_setup import RunSetup, SetupError
+from camo_core.swarm.status_rows import rows_of_message
 from camo_msgs.msg import RobotStatus
 from camo_nodes.topics.images import frame_number
 from camo_nodes.topics.names import PARAMS_SUFFIX

@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.robot_io import messages_per_round
-from camo_core.algorithm.run_setup import contiguous
+from camo_core.swarm.robot_io import messages_per_round
+from camo_core.swarm.run_setup import contiguous
 from camo_nodes.topics.robot_messages import ARRAY_TYPES, COLUMN_TYPES, MESSAGE_TYPES
 
 MAX_STEP = 1_000_000  # before the run's parameters are known: no step of a run is beyond this

@@ -30,7 +30,6 @@ from camo_bag.container import DAMAGE, BagError, BagMessage
 from camo_bag.ledger import gaps_of_round
 from camo_bag.loader import Bag, open_bag
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.status_rows import rows_of_message
 from camo_core.cli.options import Parser, add_out_options, out_dir
 from camo_core.exceptions import CamoError
 from camo_core.results import figures
@@ -38,6 +37,7 @@ from camo_core.results.animation import join_animations, write_animation
 from camo_core.results.output import run_title, write_round
 from camo_core.results.record import Backgrounds, Rounds, round_fields
 from camo_core.results.snapshots import Snapshots
+from camo_core.swarm.status_rows import rows_of_message
 from camo_msgs.msg import Notices
 from camo_nodes.topics.images import frame_number, image_from_msg, pixels_sha256
 

@@ -39,10 +39,10 @@ from camo_bringup.run_config import default_procs, split_cells
 from camo_core.algorithm.backgrounds import SIZE, forest
 from camo_core.algorithm.grid import neighbor_ids
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.robot_io import Message
 from camo_core.cli.options import Parser
 from camo_core.exceptions import EXIT_USAGE, CamoError
 from camo_core.inputs.numeric import integer
+from camo_core.swarm.robot_io import Message
 from camo_msgs.msg import Vote, Votes
 from camo_nodes.topics.names import RunTopics, tile_name
 from camo_nodes.topics.qos import history_qos

@@ -33,10 +33,10 @@ from rclpy.node import Node
 from rclpy.task import Future
 from std_msgs.msg import String
 
-from camo_core.algorithm.robot_io import CONSENSUS
 from camo_core.algorithm.sensing import sense_image
 from camo_core.exceptions import CamoError
 from camo_core.inputs.images import MAX_IMAGE_PIXELS
+from camo_core.swarm.robot_io import CONSENSUS
 from camo_msgs.action import Camouflage
 from camo_nodes.topics.images import image_from_msg
 

@@ -30,11 +30,11 @@ from camo_bringup.processes import ProcessGroup
 from camo_bringup.round_report import continuous_round, report_round, write_partial
 from camo_bringup.run_config import RunConfig, build_parser, config_from
 from camo_bringup.session import Session
-from camo_core.algorithm.robot_io import CONSENSUS
-from camo_core.algorithm.run_setup import contiguous
 from camo_core.cli.params_file import write_params_file
 from camo_core.exceptions import EXIT_USAGE, CamoError
 from camo_core.shutdown import StopFlag
+from camo_core.swarm.robot_io import CONSENSUS
+from camo_core.swarm.run_setup import contiguous
 from camo_nodes.monitor_node import MonitorNode
 from camo_nodes.shm import remove_stale
 

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from camo_bringup.run_config import RunConfig, worker_groups
-from camo_core.algorithm.run_setup import contiguous
+from camo_core.swarm.run_setup import contiguous
 from camo_nodes.robot_node import RobotCell
 from camo_nodes.topics.parameters import JoinParams, ros_arguments
 

@@ -13,10 +13,10 @@ import numpy as np
 
 from camo_bringup.run_config import RunConfig
 from camo_core.algorithm.result import pattern_said
-from camo_core.algorithm.robot_io import CONSENSUS
-from camo_core.algorithm.run_setup import contiguous
 from camo_core.results.animation import join_animations
 from camo_core.results.record import round_fields
+from camo_core.swarm.robot_io import CONSENSUS
+from camo_core.swarm.run_setup import contiguous
 from camo_nodes.monitor_node import MonitorNode
 
 

@@ -17,7 +17,6 @@ import numpy as np
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.run_setup import MAX_WAIT, ProtocolParams, RunSetup, contiguous
 from camo_core.algorithm.sensing import Calibration, image_digest, sense_image
 from camo_core.cli.options import (
     Parser,
@@ -34,6 +33,7 @@ from camo_core.inputs.files import checked_path, shown
 from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer, items
 from camo_core.results.folders import new_folder_problem
+from camo_core.swarm.run_setup import MAX_WAIT, ProtocolParams, RunSetup, contiguous
 from camo_nodes.topics.names import RunTopics, check_run_id, new_run_id
 from camo_nodes.topics.parameters import ros_arguments
 from camo_nodes.topics.startup import add_network_options, network_env, use_camo_dds_settings

@@ -21,10 +21,10 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from camo_core.algorithm.params import MAX_SIDE
-from camo_core.algorithm.run_setup import RunSetup
 from camo_core.cli.options import Parser, parse_ranges, seconds
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
+from camo_core.swarm.run_setup import RunSetup
 from camo_msgs.msg import Host as HostMsg
 from camo_nodes.polled import PolledTopics
 from camo_nodes.robot_node import host_robots

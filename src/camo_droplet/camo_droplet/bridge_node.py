@@ -28,12 +28,12 @@ from rclpy.signals import SignalHandlerOptions
 
 from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams, ParameterError
-from camo_core.algorithm.protocol import CONSENSUS, NO_PATTERN, SENSING
 from camo_core.algorithm.sensing import Calibration
-from camo_core.algorithm.status_rows import StatusRows
 from camo_core.exceptions import CamoError
 from camo_core.schema import check_fields, declared, param
 from camo_core.shutdown import StopFlag
+from camo_core.swarm.protocol import CONSENSUS, NO_PATTERN, SENSING
+from camo_core.swarm.status_rows import StatusRows
 from camo_droplet.firmware import FirmwareState
 from camo_droplet.link import DropletDisconnected, DropletError, DropletLink
 from camo_droplet.rig import DropletLed, DropletSensor, Reconnector, parse_rgb

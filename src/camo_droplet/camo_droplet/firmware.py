@@ -19,7 +19,7 @@ import re
 from dataclasses import dataclass, field
 
 from camo_core.algorithm.rules import select_pattern
-from camo_core.algorithm.validation import REPORT_TOLERANCE, probability_vector
+from camo_core.swarm.validation import REPORT_TOLERANCE, probability_vector
 
 PX_PY = re.compile(r"^Px:\s*(-?[\d.]+)\s+Py:\s*(-?[\d.]+)$")
 PATTERNS = re.compile(r"^Pre-pattern:\s*\[([^\]]*)\]\s*Cur-pattern:\s*\[([^\]]*)\]$")

@@ -3,7 +3,7 @@
 The robots of a process share its loop; when they keep it busy (thousands of
 them, a slow machine, a throttled container) their messages come late, but the
 process is alive, and its neighbours must wait for it rather than give up
-(`camo_core.algorithm.liveness`). The heartbeat thread wakes every
+(`camo_core.swarm.liveness`). The heartbeat thread wakes every
 HEARTBEAT_PERIOD, takes the interpreter's lock for a few microseconds and
 publishes one small message: a process that can still run Python at all
 beats. One that is killed, or stopped (SIGSTOP), or whose machine is gone,
@@ -17,7 +17,7 @@ import time
 
 from rclpy.node import Node
 
-from camo_core.algorithm.liveness import HEARTBEAT_PERIOD
+from camo_core.swarm.liveness import HEARTBEAT_PERIOD
 from camo_msgs.msg import Heartbeat
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.topics.qos import HEARTBEAT_WRITER

@@ -29,12 +29,12 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
 from camo_core.algorithm.change import Watch
-from camo_core.algorithm.liveness import HEARTBEAT_PERIOD
-from camo_core.algorithm.protocol import TICK
-from camo_core.algorithm.run_setup import ProtocolParams
 from camo_core.algorithm.sensing import Projection, image_digest
-from camo_core.algorithm.ticks import Ticks
 from camo_core.inputs.images import ImageError
+from camo_core.swarm.liveness import HEARTBEAT_PERIOD
+from camo_core.swarm.protocol import TICK
+from camo_core.swarm.run_setup import ProtocolParams
+from camo_core.swarm.ticks import Ticks
 from camo_msgs.msg import Notices
 from camo_nodes.topics.images import ImageEncodingError, frame_number, image_from_msg
 from camo_nodes.topics.names import RunTopics

@@ -36,11 +36,7 @@ from visualization_msgs.msg import MarkerArray
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult
-from camo_core.algorithm.robot_io import CONSENSUS, PHASE_NAMES
-from camo_core.algorithm.run_setup import RunSetup
 from camo_core.algorithm.sensing import image_digest
-from camo_core.algorithm.status_rows import RowsError, StatusRows
-from camo_core.algorithm.validation import rows_problems
 from camo_core.cli.options import Parser, add_out_options, out_dir, seconds
 from camo_core.exceptions import CamoError
 from camo_core.results.animation import write_animation
@@ -48,6 +44,10 @@ from camo_core.results.output import run_title, write_round
 from camo_core.results.record import Backgrounds, RoundRecord, Rounds
 from camo_core.results.snapshots import Snapshots
 from camo_core.shutdown import StopFlag
+from camo_core.swarm.robot_io import CONSENSUS, PHASE_NAMES
+from camo_core.swarm.run_setup import RunSetup
+from camo_core.swarm.status_rows import RowsError, StatusRows
+from camo_core.swarm.validation import rows_problems
 from camo_msgs.msg import Host, Notices, StatusArray
 from camo_nodes import scene
 from camo_nodes.polled import PolledTopics

@@ -1,6 +1,6 @@
 """One robot of the swarm as an rclpy node: an adapter around its step protocol.
 
-The protocol (camo_core.algorithm.protocol) decides when the robot steps and what it
+The protocol (camo_core.swarm.protocol) decides when the robot steps and what it
 sends; this node only carries events in and output out: messages its
 process's transport delivers, clock ticks, new backgrounds; messages to send,
 statuses to report, warnings to log. Its sensor and display are objects handed
@@ -24,13 +24,13 @@ from rclpy.signals import SignalHandlerOptions
 
 from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import MAX_SIDE, CamoParams, ParameterError
-from camo_core.algorithm.protocol import DUE_ONLY_LATER, StepProtocol
-from camo_core.algorithm.robot_io import NOTHING, Display, Output, Sensor
-from camo_core.algorithm.run_setup import ProtocolParams, RunSetup
 from camo_core.algorithm.sensing import ProjectedSensor, Projection
 from camo_core.exceptions import CamoError
 from camo_core.schema import param
 from camo_core.shutdown import StopFlag
+from camo_core.swarm.protocol import DUE_ONLY_LATER, StepProtocol
+from camo_core.swarm.robot_io import NOTHING, Display, Output, Sensor
+from camo_core.swarm.run_setup import ProtocolParams, RunSetup
 from camo_nodes.host import Host, host_node
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.topics.parameters import (

@@ -26,8 +26,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.robot_io import PHASE_NAMES
 from camo_core.results.record import RoundRecord
+from camo_core.swarm.robot_io import PHASE_NAMES
 
 FRAME = "map"
 SPACING = 0.1  # m between robot centres (a Droplet is 4.4 cm across)

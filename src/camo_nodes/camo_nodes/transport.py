@@ -25,7 +25,7 @@ Every take and every pump is bounded: a poll takes a few arrays per topic, a
 pump hands messages over for PUMP_BUDGET seconds, and the rest waits for the
 host loop's next turn, so that its timers, stop flag and heartbeats keep up
 whatever the load. The transport also judges its neighbours' processes by
-their heartbeats (`heartbeat.py`, `camo_core.algorithm.liveness`): `alive()`
+their heartbeats (`heartbeat.py`, `camo_core.swarm.liveness`): `alive()`
 is what a robot asks before it gives up on a late neighbour.
 """
 
@@ -41,10 +41,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 
 from camo_core.algorithm.layout import slot_ids
-from camo_core.algorithm.liveness import Liveness
-from camo_core.algorithm.mailbox import Key, Mailbox
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.robot_io import (
+from camo_core.swarm.liveness import Liveness
+from camo_core.swarm.mailbox import Key, Mailbox
+from camo_core.swarm.robot_io import (
     CONSENSUS,
     DONE,
     NOTHING,
@@ -54,9 +54,9 @@ from camo_core.algorithm.robot_io import (
     kinds_of,
     messages_per_round,
 )
-from camo_core.algorithm.run_setup import RunSetup
-from camo_core.algorithm.status_rows import StatusRows
-from camo_core.algorithm.validation import message_problem, phase_problem
+from camo_core.swarm.run_setup import RunSetup
+from camo_core.swarm.status_rows import StatusRows
+from camo_core.swarm.validation import message_problem, phase_problem
 from camo_msgs.msg import Heartbeat, Host, StatusArray
 from camo_nodes.heartbeat import HeartbeatThread
 from camo_nodes.polled import PolledTopics

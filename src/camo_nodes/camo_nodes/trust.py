@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 from rclpy.serialization import deserialize_message
 
-from camo_core.algorithm.run_setup import RunSetup
+from camo_core.swarm.run_setup import RunSetup
 from camo_msgs.msg import Host
 from camo_nodes.rcl_take import PREFIX
 

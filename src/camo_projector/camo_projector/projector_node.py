@@ -30,11 +30,11 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
-from camo_core.algorithm.run_setup import MAX_WAIT
 from camo_core.cli.options import Parser, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.inputs.images import load_image
 from camo_core.schema import check_fields, param, with_role
+from camo_core.swarm.run_setup import MAX_WAIT
 from camo_nodes.topics.images import (
     ImageEncodingError,
     frame_id,

@@ -18,8 +18,8 @@ from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.modes.palettes import GridPalette
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult, mean_p, p_stats
-from camo_core.algorithm.robot_io import CONSENSUS, DONE, FORMATION
-from camo_core.algorithm.status_rows import StatusRows
+from camo_core.swarm.robot_io import CONSENSUS, DONE, FORMATION
+from camo_core.swarm.status_rows import StatusRows
 
 
 @dataclass

@@ -1,5 +1,5 @@
 """Robot messages on the wire: the camo_msgs type of each kind, and the conversion between them
-and the protocol's messages (`camo_core.algorithm.robot_io.Message`).
+and the protocol's messages (`camo_core.swarm.robot_io.Message`).
 
 A tile topic carries a tile's messages of one kind as columns (`camo_msgs/Votes`, ...): per
 message its sender, step and round, and its value spread over the kind's value columns. Packing
@@ -14,7 +14,7 @@ from __future__ import annotations
 import time
 from array import array
 
-from camo_core.algorithm.robot_io import PHASE_OF, Message
+from camo_core.swarm.robot_io import PHASE_OF, Message
 from camo_msgs.msg import (
     Color,
     ColorArray,

@@ -10,8 +10,8 @@ import time
 import rclpy
 from std_msgs.msg import String
 
-from camo_core.algorithm.run_setup import RunSetup, SetupError
 from camo_core.exceptions import CamoError
+from camo_core.swarm.run_setup import RunSetup, SetupError
 
 from .names import RunTopics, check_run_id, runs_on_graph
 from .qos import LATCHED_READER

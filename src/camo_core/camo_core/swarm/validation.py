@@ -17,7 +17,7 @@ import numpy as np
 
 from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.robot_io import (
+from camo_core.swarm.robot_io import (
     CONSENSUS,
     DONE,
     FORMATION,
@@ -26,7 +26,7 @@ from camo_core.algorithm.robot_io import (
     SENSING,
     Message,
 )
-from camo_core.algorithm.status_rows import StatusRows
+from camo_core.swarm.status_rows import StatusRows
 
 TOLERANCE = 1e-9  # a consensus p sums to 1 up to rounding
 REPORT_TOLERANCE = 1e-3  # a Droplet's own firmware prints p with 4 decimals

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from camo_core.algorithm.robot_io import STATUS_COLUMNS, P
+from camo_core.swarm.robot_io import STATUS_COLUMNS, P
 
 # The columns of a status table, derived from the status's declaration (robot_io.Report): those
 # with one value per robot, and their dtype; the vector (p, its width's values a robot); the

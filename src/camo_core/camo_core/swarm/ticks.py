@@ -15,7 +15,7 @@ import math
 from collections.abc import Sequence
 from typing import Protocol
 
-from camo_core.algorithm.protocol import RECHECK, STALL, TICK
+from camo_core.swarm.protocol import RECHECK, STALL, TICK
 
 
 class Ticked(Protocol):

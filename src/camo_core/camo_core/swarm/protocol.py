@@ -40,10 +40,10 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from camo_core.algorithm.change import params_of_round
-from camo_core.algorithm.mailbox import Key, Mailbox
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot import RobotCore
-from camo_core.algorithm.robot_io import (
+from camo_core.swarm.mailbox import Key, Mailbox
+from camo_core.swarm.robot_io import (
     CONSENSUS,
     DISCOVERY,
     DONE,
