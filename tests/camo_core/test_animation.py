@@ -28,7 +28,7 @@ def test_sim_writes_a_small_animation_that_changes_over_many_frames(tmp_path):
     gif = tmp_path / "run.gif"
     assert "run.gif" in out.stdout and gif.stat().st_size < 2 * 1024 * 1024
     frames = gif_frames(gif)
-    assert len(frames) == 35 + 10 + 2  # every consensus and formation step, and both starts
+    assert len(frames) == 35 + 10 + 2 + 1  # every step, both starts and the chosen patterns
     assert len(set(frames)) >= 10
 
 
@@ -52,7 +52,7 @@ def test_the_swarms_frames_equal_the_simulators():
     simulate(params, grid, observe=simulated)
     swarm = Snapshots.of_record(record)
     assert [c for c, _ in swarm.shown()] == [c for c, _ in simulated.shown()]
-    assert len(swarm.shown()) == 12 + 6 + 2
+    assert len(swarm.shown()) == 12 + 6 + 2 + 1  # the steps, both starts, the choice
     for (caption, a), (_, b) in zip(swarm.shown(), simulated.shown(), strict=True):
         assert np.array_equal(a, b), caption
 

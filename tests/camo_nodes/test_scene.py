@@ -33,7 +33,7 @@ def record() -> RoundRecord:
 def test_each_robot_is_a_cube_at_its_cell_in_the_grey_it_shows():
     dead = np.zeros(6, bool)
     array = scene.markers(record(), dead, set(), Time(sec=5))
-    cubes, outlines = array.markers
+    cubes, outlines, _ = array.markers
     assert cubes.type == Marker.CUBE_LIST and cubes.header.frame_id == "map"
     assert len(cubes.points) == len(cubes.colors) == 6
     right_below = cubes.points[4]  # row 1, col 1
@@ -120,3 +120,20 @@ def test_with_colours_each_cube_shows_its_palette_colour_and_before_that_its_sen
     assert np.allclose(rgb[0], np.array([10, 80, 20]) / 255)  # on: its darker colour
     assert np.allclose(rgb[1], np.array([240, 200, 100]) / 255)  # off: its lighter colour
     assert np.allclose(rgb[2], np.array([200, 50, 25]) / 255)  # no state yet: what it sensed
+
+
+def test_each_robot_carries_a_tile_in_the_colour_of_its_chosen_pattern():
+    # Finished robots show their choice; one still in consensus what its p says; one that has
+    # not voted nothing (a clear tile).
+    from camo_core.results.snapshots import code_colours
+
+    rec = record()
+    rec.selected[:] = [1, 2, -1, -1, -1, -1]
+    rec.p_latest[2] = [0.7, 0.2, 0.1]  # robot 2, in consensus: horizontal so far
+    tiles = scene.markers(rec, np.zeros(6, bool), set(), Time()).markers[2]
+    assert tiles.type == Marker.CUBE_LIST and tiles.ns == "camo/patterns"
+    colours = code_colours()
+    got = [(round(c.r, 3), round(c.g, 3), round(c.b, 3), c.a) for c in tiles.colors]
+    for robot, code in ((0, 1), (1, 2), (2, 0)):
+        assert got[robot][:3] == tuple(round(v, 3) for v in colours[code]) and got[robot][3] == 1
+    assert all(got[robot][3] == 0.0 for robot in (3, 4, 5))

@@ -1,13 +1,14 @@
 """The swarm as ROS tools draw robots: a 3D scene (visualization_msgs) and a health report per
 robot (diagnostic_msgs), both built from what the monitor has heard.
 
-The scene is two markers in the frame `map` (RViz's default fixed frame; Foxglove's 3D panel
+The scene is three markers in the frame `map` (RViz's default fixed frame; Foxglove's 3D panel
 follows it): a cube per robot at its grid position (column along x, row down along -y, one
 `SPACING` apart), coloured as it shows (its state once it draws the pattern, in its
 palette's grey or colour with --levels or --colours; what it sensed before; mid-grey and faint
-until it reports), and a red outline around each dead
-robot and a blue one around each robot that is a real Droplet. A cube list and a line list
-keep it two markers at any swarm size.
+until it reports), a red outline around each dead
+robot and a blue one around each robot that is a real Droplet, and on each robot a small tile in
+the colour of its chosen pattern. Two cube lists and a line list keep it three markers at any
+swarm size.
 
 Diagnostics follow rqt_robot_monitor's and Foxglove's conventions: one DiagnosticStatus per
 robot, named `camo/robot_<row>_<col>`, OK, WARN when it let a step deadline pass, ERROR when it
@@ -27,6 +28,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams
 from camo_core.results.record import RoundRecord
+from camo_core.results.snapshots import code_colours
 from camo_core.swarm.robot_io import PHASE_NAMES
 
 FRAME = "map"
@@ -100,7 +102,37 @@ def markers(record: RoundRecord, dead: np.ndarray, bridged: set[int], stamp: Tim
         outlines.colors += [colour] * len(edges)
     if not outlines.points:
         outlines.action = Marker.DELETE  # an empty line list is not drawable
-    return MarkerArray(markers=[cubes, outlines])
+    return MarkerArray(markers=[cubes, outlines, patterns(record, stamp)])
+
+
+def chosen_codes(record: RoundRecord) -> np.ndarray:
+    """Each robot's pattern code: its choice once it has finished consensus, before that the
+    pattern its latest p says, -1 before it votes."""
+    codes = record.selected.copy()
+    voting = (codes < 0) & ~np.isnan(record.p_latest).any(axis=1)
+    if voting.any():
+        codes[voting] = record.select(record.p_latest[voting])
+    return codes
+
+
+def patterns(record: RoundRecord, stamp: Time) -> Marker:
+    """A small tile on each robot in the colour of its chosen pattern (figure.png's "chosen
+    pattern" colours): the regions of a --scope local swarm, at a glance."""
+    colours = code_colours(record.modes.descriptor.oriented)
+    codes = chosen_codes(record)
+    none = (codes < 0) | (codes >= len(colours) - 1)
+    tiles = Marker(ns="camo/patterns", id=2, type=Marker.CUBE_LIST, action=Marker.ADD)
+    tiles.header.frame_id, tiles.header.stamp = FRAME, stamp
+    tiles.pose.orientation.w = 1.0
+    tiles.scale.x = tiles.scale.y = SIZE * 0.4
+    tiles.scale.z = HEIGHT / 2
+    tiles.points = [position(i, record.params, HEIGHT * 1.25) for i in range(record.params.count)]
+    rgb = colours[np.where(none, -1, codes)]
+    tiles.colors = [
+        ColorRGBA(r=r, g=g, b=b, a=0.0 if unknown else 1.0)
+        for (r, g, b), unknown in zip(rgb.tolist(), none.tolist(), strict=True)
+    ]
+    return tiles
 
 
 def diagnostics(

@@ -70,6 +70,7 @@ def run_per_robot(
         shown("consensus", step + 1, np.array([r.pattern_p for r in robots]))
     for robot in robots:
         robot.finish_consensus()
+    shown("chosen", 0, np.array([r.pattern for r in robots]))
     initial = np.array([r.state for r in robots], dtype=np.uint8).reshape(rows, cols)
     palette = _palette(modes, robots, rows, cols)
 

@@ -22,6 +22,7 @@ SUMMARY_KEYS = (
     *with_role(CamoParams, "summary"),
     "pattern",
     "votes",
+    "patterns",
     "mean_p",
     "sensed",
     "initial",
@@ -157,6 +158,18 @@ class RunResult:
         name_of = self.modes.descriptor.name_of
         return {name_of(k): int(np.count_nonzero(chosen == k)) for k in self.codes}
 
+    def chosen_names(self) -> np.ndarray:
+        """rows x cols: each robot's chosen pattern by name (None where a robot did not finish
+        or chose none)."""
+        codes = self.modes.descriptor.codes
+        names = np.array([None] * (codes.stop + 1), dtype=object)
+        names[list(codes)] = [self.modes.descriptor.name_of(k) for k in codes]
+        chosen = np.asarray(self.selected, dtype=np.int64)
+        known = (chosen >= 0) & (chosen < codes.stop)
+        if self.alive is not None:
+            known &= self.alive
+        return names[np.where(known, chosen, codes.stop)]
+
     @property
     def majority_code(self) -> int:
         """The selection most robots made; a tie for the most goes to mottled."""
@@ -199,6 +212,7 @@ class RunResult:
                 {"orientation_deg": self.orientation_deg} if self.modes.descriptor.oriented else {}
             ),
             "votes": self.selection_counts,
+            "patterns": self.chosen_names().tolist(),
             "mean_p": mean_p(p).tolist(),
             "sensed": grid(np.asarray(self.sensed, dtype=np.float64)),
             "initial": grid(self.initial.astype(int)),

@@ -25,8 +25,9 @@ from camo_core.algorithm.sensing import apply_colour_noise, apply_noise
 PAD = 2  # slots reach two cells away
 
 Progress = Callable[[str, int, int], None]
-# Shown every step: ("consensus", k, p before consensus step k) and ("formation", k, state
-# before formation step k); the arrays are reused afterwards (animation.Snapshots copies).
+# Shown every step: ("consensus", k, p before consensus step k), once ("chosen", 0, each
+# robot's pattern code) and ("formation", k, state before formation step k); the arrays are
+# reused afterwards (snapshots.Snapshots copies).
 Observer = Callable[[str, int, np.ndarray], None]
 
 
@@ -118,6 +119,8 @@ def simulate(
     p, trace, spread = _consensus(params, width, p0, known_mask, degree, progress, observe)
     p, histogram = p[..., :width], p[..., width:]
     selected = modes.descriptor.choose(p)
+    if observe:
+        observe("chosen", 0, selected)
     palette = modes.palette.grid(histogram, sensed, sensed_rgb)
     if palette.initial is not None:
         initial = palette.initial

@@ -19,7 +19,8 @@ from camo_core.algorithm.modes.palettes import GridPalette
 from camo_core.algorithm.orientation import CODES, COHERENCE_MIN, ORIENTED, STEP_DEG
 from camo_core.algorithm.patterns import MOTTLED, PATTERN_COLORS
 from camo_core.algorithm.result import RunResult
-from camo_core.results.tensor_colours import direction_legend, tensor_at, tensor_rgb
+from camo_core.results.snapshots import code_colours
+from camo_core.results.tensor_colours import direction_legend
 
 # The initial state's panel, by palette: the greys or colours a robot starts from.
 INITIAL_LABELS = {
@@ -90,13 +91,13 @@ def run_plot(
     title: str = "",
     marks: dict[str, np.ndarray] | None = None,
 ) -> matplotlib.figure.Figure:
-    """One row of five panels: background, sensed grid, consensus curves, initial and final
-    states.
+    """One row of six panels: background, sensed grid, consensus curves, each robot's chosen
+    pattern, initial and final states.
 
     marks: name (a key of MARK_STYLES) -> rows x cols bool, the robots to mark on the grids;
     dead robots (those not alive in the result) are always marked.
     """
-    fig, axes = plt.subplots(1, 5, figsize=(17, 3.9))
+    fig, axes = plt.subplots(1, 6, figsize=(20.4, 3.9))
     if image is not None:
         shown, extent = _shown(image, nearest=False)
         shown = shown if shown.ndim == 2 else shown[:, :, ::-1]
@@ -112,6 +113,8 @@ def run_plot(
     what = "colour" if coloured else "grey"
     axes[1].set_title(f"sensed {what} ({result.params.rows}x{result.params.cols} robots)")
     _consensus_panel(axes[2], result)
+    _chosen_panel(axes[3], result)
+    axes = np.delete(axes, 3)  # the states' panels follow, as in the paper's figure
     palette = GridPalette(result.palette, result.palette_rgb, result.shades)
     shows = modes.palette.shows if result.palette is not None or coloured else ""
     for ax, states, label in (
@@ -146,13 +149,40 @@ def run_plot(
     if handles:
         legend = {h.get_label(): h for h in handles}
         fig.legend(legend.values(), legend.keys(), loc="lower right", fontsize=8, ncol=4)
-    for ax in (axes[0], axes[1], axes[3], axes[4]):
-        ax.set_xticks([])
-        ax.set_yticks([])
+    for ax in fig.axes:
+        if ax is not axes[2]:
+            ax.set_xticks([])
+            ax.set_yticks([])
     if title:
         fig.suptitle(title)
     fig.tight_layout(rect=(0, 0.07 if handles else 0, 1, 1))
     return fig
+
+
+def _chosen_panel(ax, result: RunResult) -> None:
+    """Each robot's chosen pattern in its colour (a --scope local swarm's regions), grey where
+    a robot chose none; its legend names the patterns chosen."""
+    colours = code_colours()
+    chosen = np.asarray(result.selected, dtype=np.int64)
+    none = (chosen < 0) | (chosen >= CODES)
+    if result.alive is not None:
+        none |= ~result.alive
+    rgb = colours[np.where(none, CODES, chosen)]
+    if result.positions is not None:
+        draw_discs(ax, result.positions, rgb * 255)
+    else:
+        _grid_panel(ax, rgb * 255)
+    counts = result.selection_counts
+    named = [(k, n) for k, n in zip(result.codes, counts, strict=True) if counts[n]]
+    handles = [matplotlib.patches.Patch(color=colours[k], label=label_of(n)) for k, n in named]
+    ax.legend(handles=handles, fontsize=6.5, loc="lower left", framealpha=0.8)
+    ax.set_title("chosen pattern by robot")
+
+
+def label_of(name: str) -> str:
+    """A pattern's name as a legend says it ("stripes_30" is "stripes at 30°")."""
+    kind, _, angle = name.partition("_")
+    return f"stripes at {angle}°" if angle else kind
 
 
 def _grid_panel(ax, values: np.ndarray) -> None:
@@ -388,9 +418,7 @@ def timeline_figure(
     )
     for ax in axes.flat:
         ax.axis("off")
-    paper = [matplotlib.colors.to_rgb(c) for c in PATTERN_COLORS.values()]
-    angles = [tensor_rgb(np.array(tensor_at(k * STEP_DEG))) for k in range(CODES - ORIENTED)]
-    colors = np.array([*paper, *angles, (0.5, 0.5, 0.5)])
+    colors = code_colours()
     grey = {0: 1.0, 1: 0.0, -1: 0.5}
 
     def shown(g: np.ndarray) -> np.ndarray:  # states, or (--colours) the colours shown

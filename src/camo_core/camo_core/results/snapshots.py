@@ -11,13 +11,26 @@ import numpy as np
 from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.patterns import PATTERN_COLORS
-from camo_core.results.tensor_colours import tensor_rgb
+from camo_core.algorithm.orientation import CODES, ORIENTED, STEP_DEG
+from camo_core.results.tensor_colours import tensor_at, tensor_rgb
 
 MAX_FRAMES = 80
 MAX_SIDE = 256  # robots per side a frame shows: one pixel each at most, in a 3 inch panel
 UNKNOWN = np.array([0.5, 0.5, 0.5])
 # The patterns' colours (the table's, "#rrggbb"), as RGB in 0..1: a p is painted their mix.
-PALETTE = np.array([[int(c[k : k + 2], 16) / 255 for k in (1, 3, 5)] for c in PATTERN_COLORS.values()])
+PALETTE = np.array(
+    [[int(c[k : k + 2], 16) / 255 for k in (1, 3, 5)] for c in PATTERN_COLORS.values()]
+)
+
+
+def code_colours(oriented: bool = True) -> np.ndarray:
+    """RGB (0..1) of every pattern code, then of "none" (the last): the table's colours, then
+    for --orientation any each stripe direction's (as tensor_rgb paints its tensor; grey
+    unless `oriented`)."""
+    angles = np.tile(UNKNOWN, (CODES - ORIENTED, 1))
+    if oriented:
+        angles = np.array([tensor_rgb(np.array(tensor_at(k * STEP_DEG))) for k in range(len(angles))])
+    return np.array([*PALETTE, *angles, UNKNOWN])
 
 
 def shown_steps(consensus_steps: int, formation_steps: int) -> tuple[list[int], list[int]]:
@@ -33,7 +46,8 @@ def shown_steps(consensus_steps: int, formation_steps: int) -> tuple[list[int], 
 class Snapshots:
     """The frames of a round's GIF, taken as the round goes. Call it with ("consensus", step,
     p) for the p-vectors before consensus step `step` (rows x cols x width or robots x width, NaN:
-    unknown) and ("formation", step, state) (-1: unknown); it keeps the steps it shows."""
+    unknown), ("chosen", 0, pattern codes) once consensus ends (-1: none) and ("formation", step,
+    state) (-1: unknown); it keeps the steps it shows."""
 
     def __init__(self, params: CamoParams) -> None:
         self.params = params
@@ -42,7 +56,8 @@ class Snapshots:
         side = max(params.rows, params.cols)
         self.stride = max(1, math.ceil(side / MAX_SIDE)) if self.modes.layout.grid else 1
         consensus, formation = shown_steps(params.consensus_steps, params.formation_steps)
-        self.wanted = {"consensus": set(consensus), "formation": set(formation)}
+        self.wanted = {"consensus": set(consensus), "chosen": {0}, "formation": set(formation)}
+        self.colours = code_colours(self.modes.descriptor.oriented)
         self.frames: dict[tuple[int, int], tuple[str, np.ndarray]] = {}
 
     def cells(self, values: np.ndarray) -> np.ndarray:
@@ -62,9 +77,14 @@ class Snapshots:
             paint = tensor_rgb if self.modes.descriptor.oriented else (lambda p: p @ PALETTE)
             rgb = np.where(known[..., None], paint(np.nan_to_num(p)), UNKNOWN)
             total, order = self.params.consensus_steps, 0
+        elif phase == "chosen":  # each robot's pattern in its colour
+            codes = self.cells(values).astype(np.int64)
+            none = (codes < 0) | (codes >= len(self.colours) - 1)
+            self.frames[(1, 0)] = ("chosen pattern", self.colours[np.where(none, -1, codes)])
+            return
         else:  # states, greys or colours shown (-1: unknown)
             rgb = self.modes.palette.frame_rgb(self.cells(values))
-            total, order = self.params.formation_steps, 1
+            total, order = self.params.formation_steps, 2
         self.frames[(order, step)] = (f"{phase} step {step}/{total}", rgb)
 
     @classmethod
@@ -73,6 +93,7 @@ class Snapshots:
         snapshots = cls(record.params)
         for step in sorted(snapshots.wanted["consensus"]):
             snapshots("consensus", step, record.p_trace[step])
+        snapshots("chosen", 0, record.selected)
         palette, shape = record.grid_palette(), (record.params.rows, record.params.cols)
         for step in sorted(snapshots.wanted["formation"]):
             states = record.state_trace[step].reshape(shape)
