@@ -18,8 +18,10 @@ from types import SimpleNamespace
 import numpy as np
 import psutil
 
+from camo_core.algorithm.link import LinkBook
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import Reading
+from camo_core.swarm.mailbox import Mailbox
 from camo_core.swarm.protocol import StepProtocol
 from camo_core.swarm.robot_io import Message
 
@@ -344,14 +346,19 @@ class Bus:
         image_grid: np.ndarray,
         seed: int,
         colour_grid: np.ndarray | None = None,
+        shared_link: bool = False,
     ) -> None:
-        """`colour_grid`: the robots' colours (rows x cols x 3), besides their greys."""
+        """`colour_grid`: the robots' colours (rows x cols x 3), besides their greys;
+        `shared_link`: the link's draws made for all robots at once, as a process makes them
+        for its robots (each robot draws its own otherwise)."""
         self.random = random.Random(seed)
         self.robots = {}
+        book = LinkBook(list(range(params.count))) if shared_link else None
         for i in range(params.rows):
             for j in range(params.cols):
                 rgb = None if colour_grid is None else tuple(colour_grid[i, j].tolist())
-                p = StepProtocol(params, i, j, FixedSensor(float(image_grid[i, j]), rgb))
+                sensor = FixedSensor(float(image_grid[i, j]), rgb)
+                p = StepProtocol(params, i, j, sensor, mailbox=Mailbox(link=book))
                 self.robots[p.id] = p
         self.listeners: dict[tuple[int, str], list[StepProtocol]] = {}
         for p in self.robots.values():

@@ -231,16 +231,29 @@ def test_messages_from_strangers_and_other_kinds_slots_are_ignored():
 
 
 @pytest.mark.parametrize(
-    "params, order",
+    "params, order, shared_link",
     [
-        (CamoParams(rows=4, cols=5), 0),
-        (CamoParams(rows=5, cols=3, profile="droplet", rho_comm=0.3, rho_meas=0.2, seed=7), 1),
-        (CamoParams(rows=6, cols=6, rho_comm=0.5, seed=3, consensus_steps=12), 2),
+        (CamoParams(rows=4, cols=5), 0, False),
+        (
+            CamoParams(rows=5, cols=3, profile="droplet", rho_comm=0.3, rho_meas=0.2, seed=7),
+            1,
+            False,
+        ),
+        (CamoParams(rows=6, cols=6, rho_comm=0.5, seed=3, consensus_steps=12), 2, False),
+        # The link's draws made for all robots at once, as a process hosting them makes them.
+        (
+            CamoParams(rows=5, cols=3, profile="droplet", rho_comm=0.3, rho_meas=0.2, seed=7),
+            1,
+            True,
+        ),
+        (CamoParams(rows=6, cols=6, rho_comm=0.5, seed=3, consensus_steps=12), 2, True),
     ],
 )
-def test_protocols_on_a_bus_equal_the_simulator_whatever_the_delivery_order(params, order):
+def test_protocols_on_a_bus_equal_the_simulator_whatever_the_delivery_order(
+    params, order, shared_link
+):
     grid = np.random.default_rng(order).uniform(0, 255, (params.rows, params.cols))
-    bus = Bus(params, grid, seed=order)
+    bus = Bus(params, grid, seed=order, shared_link=shared_link)
     bus.run()
     assert all(p.phase == DONE and p.deadlines == 0 for p in bus.robots.values())
     reference = simulate(params, grid)

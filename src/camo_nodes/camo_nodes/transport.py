@@ -41,6 +41,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 
 from camo_core.algorithm.layout import slot_ids
+from camo_core.algorithm.link import LinkBook
 from camo_core.algorithm.params import CamoParams
 from camo_core.swarm.liveness import Liveness
 from camo_core.swarm.mailbox import Key, Mailbox
@@ -213,7 +214,9 @@ class Transport:
         self.status_pub = status_pub
         # Each message is kept once, in the mailbox the hosted robots share, and wakes the
         # robots that hear its sender (by robot id; `_robots`: their wake and emit).
-        self.mailbox = Mailbox(readers=len(self.hosted))
+        # The simulated link's draws are made for all of them at once (a lossy swarm steps as
+        # fast as a loss-free one).
+        self.mailbox = Mailbox(readers=len(self.hosted), link=LinkBook(sorted(self.hosted)))
         self.targets: dict[tuple[int, str], list[int]] = defaultdict(list)
         self._robots: dict[int, tuple[Wake, Emit]] = {}
         self.needed: set[int] = set()  # neighbours hosted elsewhere

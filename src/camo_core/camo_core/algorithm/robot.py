@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 from camo_core.algorithm import orientation, rng, rules
 from camo_core.algorithm.grid import CONSENSUS_SLOTS, robot_id
+from camo_core.algorithm.link import LinkDraws
 from camo_core.algorithm.modes import Modes, modes_of
 from camo_core.algorithm.modes.palettes import RobotPalette
 from camo_core.algorithm.params import CamoParams, ParameterError
@@ -31,6 +32,9 @@ class RobotCore:
     # The run's variations (modes.modes_of(params) unless given): what it senses, describes,
     # averages and shows, and where its neighbours are.
     modes: Modes = None  # type: ignore[assignment]  # modes_of(params) when not given
+    # The link's draws, made for all of its process's robots at once (link.LinkDraws); None:
+    # this robot draws its own.
+    link: LinkDraws | None = None
     # Filled in as the phases go by.
     known: list[bool] = field(default_factory=list)
     sensed: float = float("nan")
@@ -78,11 +82,14 @@ class RobotCore:
         key = (stream, step)
         cached = self._arrivals.get(key)
         if cached is None:
-            seed, me, rho = self.params.seed, self.id, self.params.rho_comm
-            cached = tuple(
-                src is not None and not rng.lost(seed, stream, step, src, me, rho)
-                for src in self.neighbors
-            )
+            if self.link is not None:
+                cached = self.link.arrivals(self.id, stream, step)
+            else:
+                seed, me, rho = self.params.seed, self.id, self.params.rho_comm
+                cached = tuple(
+                    src is not None and not rng.lost(seed, stream, step, src, me, rho)
+                    for src in self.neighbors
+                )
             self._arrivals[key] = cached
         return cached
 

@@ -15,6 +15,8 @@ from collections.abc import Mapping
 from types import MappingProxyType
 from typing import Any
 
+from camo_core.algorithm.link import LinkBook
+
 Key = tuple[int, str, int]  # (round, kind, step)
 EMPTY: Mapping[Any, Any] = MappingProxyType({})
 
@@ -24,8 +26,11 @@ class Mailbox:
     step's messages; a step's messages are forgotten once all of them have taken it, and a
     message that comes after that (a late one nobody waits for any more) is not kept."""
 
-    def __init__(self, readers: int = 1) -> None:
+    def __init__(self, readers: int = 1, link: LinkBook | None = None) -> None:
         self.readers = readers
+        # The link's draws for the robots that read it, made for all of them at once (None: each
+        # robot draws its own).
+        self.link = link
         self.boxes: dict[Key, dict[int, Any]] = {}
         self.spoke: dict[int, int] = {}  # messages put, per sender: a silent one speaks again
         self._taken: dict[Key, int] = {}  # readers that took each step (a few keys a round)

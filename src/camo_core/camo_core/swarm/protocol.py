@@ -37,6 +37,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
+from itertools import compress
+from operator import and_
 from typing import Any
 
 from camo_core.algorithm.change import params_of_round
@@ -147,14 +149,14 @@ class StepProtocol:
         self._awaiting: tuple[int, ...] | None = None
         self._awaiting_key: Key = (-1, "", -1)
         self._expected_ids: dict[tuple[str, int, bool], tuple[int, ...]] = {}
-        self.core = RobotCore(params, row, col)
+        # Delivered and not yet used, by step and sender: early messages wait for their step.
+        self.mailbox = mailbox or Mailbox()
+        self.core = self._core(params, row, col)
         self.sensor = sensor
         self.display = display or NoDisplay()
         self.step_timeout = step_timeout
         self.discovery_timeout = discovery_timeout
         self.slot_of = {n: s for s, n in enumerate(self.core.neighbors) if n is not None}
-        # Delivered and not yet used, by step and sender: early messages wait for their step.
-        self.mailbox = mailbox or Mailbox()
         self.silent: set[int] = set()
         # What each silent slot's robot had said when it fell silent (`Mailbox.spoke`).
         self._silent_since: dict[int, int] = {}
@@ -489,13 +491,11 @@ class StepProtocol:
             cached = self._expected_ids.get(cache_key)
             if cached is not None:
                 return cached
-        arriving = core.arrivals(STREAM[kind], step)
-        known, neighbors = core.known, core.neighbors
-        expected = tuple(
-            n
-            for s, n in enumerate(neighbors[:slots])
-            if n is not None and arriving[s] and (not known_only or known[s])
-        )
+        # A slot without a neighbour never arrives (nor is it known): the slots' flags pick the
+        # neighbours, in C.
+        arriving = core.arrivals(STREAM[kind], step)[:slots]
+        flags = map(and_, arriving, core.known) if known_only else arriving
+        expected = tuple(compress(core.neighbors[:slots], flags))
         if lossless:
             self._expected_ids[cache_key] = expected
         return expected
@@ -548,7 +548,7 @@ class StepProtocol:
         self.background_up = True  # a round's frame is projected, or about to be
         self.sensor.next_round(round_)
         core = self.core
-        self.core = RobotCore(params_of_round(self.base_params, round_), core.row, core.col)
+        self.core = self._core(params_of_round(self.base_params, round_), core.row, core.col)
         self._expected_ids.clear()
         self.energy_step = None
         self.relayed = None
@@ -557,6 +557,11 @@ class StepProtocol:
         self.traces = Traces()
         self._next(DISCOVERY, 0, now)
         self._send("hello", 0, (core.row, core.col))
+
+    def _core(self, params: CamoParams, row: int, col: int) -> RobotCore:
+        """The robot in a round: with its process's link draws where its mailbox has them."""
+        link = self.mailbox.link
+        return RobotCore(params, row, col, link=None if link is None else link.draws(params))
 
     # ---- output ---------------------------------------------------------------------
 
