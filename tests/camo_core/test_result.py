@@ -171,13 +171,14 @@ def test_large_grid_figure_is_drawn_from_resized_grids(tmp_path, monkeypatch):
     image = np.random.default_rng(0).integers(0, 256, (2200, 1200, 3), dtype=np.uint8)
     path = figures.run_figure(synthetic_run(rows, cols, dead=True), image, tmp_path / "big.png")
     figure = cv2.imread(str(path))
-    assert figure.shape == (390, 1700, 3)  # figsize 17 x 3.9 inches at 100 dpi
-    assert len(calls) == 4  # input image, sensed, initial, final
+    assert figure.shape == (390, 2040, 3)  # figsize 20.4 x 3.9 inches at 100 dpi
+    assert len(calls) == 5  # input image, sensed, chosen patterns, initial, final
     cap = figures.MAX_PANEL_PX
     assert calls[0][0] == (cap, cap, 3)  # each side on its own
     assert calls[0][1]["extent"] == (-0.5, 1199.5, 2199.5, -0.5)
+    assert calls[2][0] == (cap, cols, 3)  # the chosen patterns, in their colours
     for shape, kwargs in calls[1:]:
-        assert shape == (cap, cols)  # 1100 rows drawn as 512, 400 columns as they are
+        assert shape[:2] == (cap, cols)  # 1100 rows drawn as 512, 400 columns as they are
         assert kwargs["extent"] == (-0.5, cols - 0.5, rows - 0.5, -0.5)
     assert len(np.unique(figure)) > 2  # the panels hold something
 
@@ -187,6 +188,7 @@ def test_small_grid_figure_is_drawn_as_before(tmp_path, monkeypatch):
     calls = drawn_panels(monkeypatch)
     image = np.random.default_rng(0).integers(0, 256, (128, 192), dtype=np.uint8)
     path = figures.run_figure(synthetic_run(rows, cols), image, tmp_path / "small.png")
-    assert cv2.imread(str(path)).shape == (390, 1700, 3)
-    assert [shape for shape, _ in calls] == [(128, 192), (rows, cols), (rows, cols), (rows, cols)]
+    assert cv2.imread(str(path)).shape == (390, 2040, 3)
+    shapes = [shape for shape, _ in calls]
+    assert shapes == [(128, 192), (rows, cols), (rows, cols, 3), (rows, cols), (rows, cols)]
     assert not any("extent" in kwargs for _, kwargs in calls)

@@ -98,7 +98,7 @@ def test_roles_pick_the_parameters_that_have_them():
 def test_summary_json_holds_the_parameters_declared_for_it_first():
     summary_fields = [n for n, d in declared(CamoParams).items() if d.spec.summary]
     assert list(SUMMARY_KEYS[: len(summary_fields)]) == summary_fields
-    assert summary_fields == ["rows", "cols", "profile", "seed", "rho_meas", "rho_comm"]
+    assert summary_fields == ["rows", "cols", "profile", "seed", "rho_meas", "rho_comm", "scope"]
 
 
 def test_camo_params_from_options_resolve_auto_and_leave_none_to_the_profile():

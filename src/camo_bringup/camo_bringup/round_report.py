@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from camo_bringup.run_config import RunConfig
+from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.result import pattern_said
 from camo_core.results.animation import join_animations
 from camo_core.results.record import round_fields
@@ -43,7 +44,7 @@ def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dic
     folder = round_folder(config, index)
     summary = monitor.write(index, folder, config.labels[index])
     params = config.params
-    steps = params.consensus_steps + params.formation_steps
+    steps = modes_of(params).scope.steps(params) + params.formation_steps
     missed = int(monitor.record(index).deadlines.sum())
     clocks = monitor.record(index).timing()  # the robots' own, robust to a late monitor
     if clocks is not None:

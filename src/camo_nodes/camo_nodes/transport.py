@@ -96,7 +96,7 @@ def messages_per_robot(params: CamoParams, kind: str) -> int:
 
 def status_depth(params: CamoParams) -> int:
     """Statuses one robot sends in a round (one per step and phase change)."""
-    return params.consensus_steps + params.formation_steps + 8
+    return messages_per_round(params)["vote"] + params.formation_steps + 8
 
 
 def listener_qos() -> QoSProfile:

@@ -141,6 +141,34 @@ def consensus_step_n(p, out, known, degree, prefix, rho):
                 out[i, j, k] = acc[k] + keep * p[i, j, k]
 
 
+@njit(cache=True, parallel=True)
+def consensus_step_gated(p, out, known, degree, prefix, rho, label):
+    """consensus_step_n among neighbours of the robot's own label (--scope local's segment
+    consensus): another label's message counts as not received."""
+    rows, cols = degree.shape
+    size = p.shape[2]
+    for i in prange(rows):
+        acc = np.empty(size)
+        for j in range(cols):
+            for k in range(size):
+                acc[k] = 0.0
+            w_sum = 0.0
+            for s in range(8):
+                w = _weight(known, degree, i, j, s, prefix, rho)
+                if w == 0.0:
+                    continue
+                ni = i + DI[s]
+                nj = j + DJ[s]
+                if label[ni, nj] != label[i, j]:
+                    continue
+                for k in range(size):
+                    acc[k] = acc[k] + w * p[ni, nj, k]
+                w_sum = w_sum + w
+            keep = 1.0 - w_sum
+            for k in range(size):
+                out[i, j, k] = acc[k] + keep * p[i, j, k]
+
+
 @njit(cache=True, inline="always")
 def _state_in(state, known, i, j, s, prefix, rho):
     """State received from slot s of robot (i, j), or -1 if nothing arrived."""

@@ -121,7 +121,7 @@ def normalised(jxx, jyy, jxy, reg):
 
 # Stripes at 15k degrees have their double-angle vector (Jxx - Jyy, 2 Jxy) pointing at 180 - 30k
 # degrees: the nearest of these twelve directions is the largest dot product.
-_DIRECTIONS = tuple(
+DIRECTIONS = tuple(
     (
         math.cos(math.radians(180 - 2 * STEP_DEG * k)),
         math.sin(math.radians(180 - 2 * STEP_DEG * k)),
@@ -144,10 +144,10 @@ def choose(p: Sequence[float] | np.ndarray) -> int | np.ndarray:
     trace = jxx + jyy
     with np.errstate(divide="ignore", invalid="ignore"):
         coherence = np.sqrt(x * x + y * y) / trace
-    best = x * _DIRECTIONS[0][0] + y * _DIRECTIONS[0][1]
+    best = x * DIRECTIONS[0][0] + y * DIRECTIONS[0][1]
     k = np.zeros(best.shape, dtype=np.int64)
     for index in range(1, ANGLES):
-        c, s = _DIRECTIONS[index]
+        c, s = DIRECTIONS[index]
         score = x * c + y * s
         k = np.where(score > best, index, k)
         best = np.maximum(score, best)

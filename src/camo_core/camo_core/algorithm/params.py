@@ -10,6 +10,8 @@ from camo_core.inputs.positions import MAX_COORDINATE, file_positions
 from camo_core.schema import ParameterError, check_fields, declared, param, to_dict
 
 PROFILES = ("paper", "droplet")
+# --scope: one pattern for the whole swarm (the paper's), or each region of the scene its own.
+SCOPES = ("global", "local")
 # --orientation: the paper's two stripe directions (axes), or stripes at any angle (any).
 ORIENTATIONS = ("axes", "any")
 
@@ -111,6 +113,24 @@ class CamoParams:
     )
     positions: tuple[tuple[float, float], ...] = param(
         (), "a file layout's x, y per robot", cli=False, ros=False
+    )
+    # --scope local: each robot chooses from the evidence of its own region of the scene
+    # (docs/algorithm.md, "Scope local"); scope_scale is the smallest region, in robots.
+    scope: str = param(
+        "global",
+        "global: the paper's, one pattern the whole swarm agrees on; local: each region of the "
+        "scene its own pattern, chosen from its robots' evidence",
+        choices=SCOPES,
+        summary=True,
+    )
+    scope_scale: float = param(
+        2.0,
+        "--scope local's length scale L: regions narrower than about 2L robots join their "
+        "surroundings (larger: fewer, larger regions)",
+        low=0.5,
+        high=50.0,
+        unit="robots",
+        metavar="L",
     )
     consensus_steps: int = param(
         None,

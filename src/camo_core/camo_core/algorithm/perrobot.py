@@ -62,7 +62,7 @@ def run_per_robot(
 
     trace = [mean_p(np.array([r.pattern_p for r in robots]))]
     shown("consensus", 0, np.array([r.pattern_p for r in robots]))
-    for step in range(params.consensus_steps):
+    for step in range(modes.scope.steps(params)):
         sent = [(r.p, r.degree) for r in robots]
         for robot in robots:
             robot.consensus(step, [None if n is None else sent[n] for n in robot.neighbors])

@@ -18,6 +18,7 @@ from camo_core.algorithm.grid import CONSENSUS_SLOTS, robot_id
 from camo_core.algorithm.link import LinkDraws
 from camo_core.algorithm.modes import Modes, modes_of
 from camo_core.algorithm.modes.palettes import RobotPalette
+from camo_core.algorithm.modes.scopes import GlobalRobot, LocalRobot
 from camo_core.algorithm.params import CamoParams, ParameterError
 from camo_core.algorithm.sensing import noisy_colour, noisy_value
 
@@ -59,6 +60,7 @@ class RobotCore:
         self.neighbors, self.near, self.place = modes.layout.slots(self.id)
         self.known = [False] * len(self.neighbors)
         self._form = modes.layout.former(self.place, self.params)
+        self.vote_steps = modes.scope.steps(self.params)  # the steps of its consensus phase
         self._colour_slots = range(
             modes.layout.listen(modes.descriptor.colour_slots, self.near)["color"]
         )
@@ -71,6 +73,8 @@ class RobotCore:
         # consensus ends (modes.palettes: --levels' greys, --colours' colours and shades).
         self.sensed_rgb: tuple[float, float, float] = (math.nan, math.nan, math.nan)
         self.shows = RobotPalette()
+        # Its consensus (modes.scopes), from its vote on.
+        self.averaging: GlobalRobot | LocalRobot = GlobalRobot(self.p, 3)
 
     # ---- the simulated link -------------------------------------------------
 
@@ -169,7 +173,9 @@ class RobotCore:
         and the vector it averages: p, then its histogram (--levels, --colours)."""
         modes = self.modes
         self.vote, p = modes.descriptor.vote(self.scores, self.tensor, self.energy)
-        self.p = (*p, *modes.histogram.start_vector(self.sensed, self.sensed_rgb))
+        whole = (*p, *modes.histogram.start_vector(self.sensed, self.sensed_rgb))
+        self.averaging = modes.scope.robot(whole, modes.descriptor.width)
+        self.p = self.averaging.vector
         return self.vote
 
     # ---- phase 2: consensus -------------------------------------------------
@@ -177,18 +183,21 @@ class RobotCore:
     def consensus(self, step: int, votes: Sequence[Vote | None]) -> tuple[float, ...]:
         """`votes[s]` for slots 0-7: (p, degree) delivered for `step`, or None."""
         received = self._filter(rng.STREAM_CONSENSUS, step, votes, range(self.near))
-        self.p = rules.consensus_step(self.p, self.degree, received)
+        self.p = self.averaging.step(step, self.degree, received)
         return self.p
 
     @property
     def pattern_p(self) -> tuple[float, ...]:
-        """p without its histogram: what a robot reports and chooses its pattern from."""
-        return self.p[: self.modes.descriptor.width]
+        """p without its histogram: what a robot reports (with --scope local its evidence
+        until its segment's consensus)."""
+        return self.averaging.reported
 
     def finish_consensus(self) -> int:
         modes = self.modes
-        self.pattern = modes.descriptor.choose(self.pattern_p)
-        tail = self.p[modes.descriptor.width :]
+        width = modes.descriptor.width
+        result = self.averaging.result()
+        self.pattern = modes.scope.choose(modes.descriptor, result[:width])
+        tail = result[width:]
         self.shows = modes.palette.robot(tail, self.sensed, self.sensed_rgb)
         if self.shows.initial is not None:
             self.state = self.shows.initial

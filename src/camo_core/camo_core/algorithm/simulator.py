@@ -116,9 +116,9 @@ def simulate(
 
     # Phase 2: consensus.
     width = modes.descriptor.width
-    p, trace, spread = _consensus(params, width, p0, known_mask, degree, progress, observe)
+    p, trace, spread = _consensus(params, modes, p0, known_mask, degree, progress, observe)
     p, histogram = p[..., :width], p[..., width:]
-    selected = modes.descriptor.choose(p)
+    selected = modes.scope.choose(modes.descriptor, p)
     if observe:
         observe("chosen", 0, selected)
     palette = modes.palette.grid(histogram, sensed, sensed_rgb)
@@ -185,33 +185,33 @@ def _average_energy(
 
 def _consensus(
     params: CamoParams,
-    width: int,
+    modes: Modes,
     p0: np.ndarray,
     known_mask: np.ndarray,
     degree: np.ndarray,
     progress: Progress | None,
     observe: Observer | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Consensus steps on p0 (p, `width` entries, then any histogram): the averaged vectors,
-    and per step the mean p and its least and greatest over robots."""
-    p = p0
-    nxt = np.empty_like(p)
-    mean, least_greatest = p_stats(p[..., :width])
+    """The consensus phase on p0 (p, the descriptor's width, then any histogram), as the
+    scope has it: the averaged vectors, and per step the mean of what robots report and its
+    least and greatest over robots."""
+    width = modes.descriptor.width
+    steps = modes.scope.steps(params)
+    mean, least_greatest = p_stats(p0[..., :width])
     trace, spread = [mean], [least_greatest]
     if observe:
-        observe("consensus", 0, p[..., :width])
-    step_kernel = kernels.consensus_step if p.shape[-1] == 3 else kernels.consensus_step_n
-    for step in range(params.consensus_steps):
-        prefix = np.uint64(rng.prefix(params.seed, rng.STREAM_CONSENSUS, step))
-        step_kernel(p, nxt, known_mask, degree, prefix, params.rho_comm)
-        p, nxt = nxt, p
-        mean, least_greatest = p_stats(p[..., :width])
+        observe("consensus", 0, p0[..., :width])
+
+    def each_step(step: int, reported: np.ndarray) -> None:
+        mean, least_greatest = p_stats(reported)
         trace.append(mean)
         spread.append(least_greatest)
         if observe:
-            observe("consensus", step + 1, p[..., :width])
+            observe("consensus", step + 1, reported)
         if progress:
-            progress("consensus", step + 1, params.consensus_steps)
+            progress("consensus", step + 1, steps)
+
+    p = modes.scope.run(params, p0, width, known_mask, degree, each_step)
     return p, np.array(trace), np.array(spread)
 
 

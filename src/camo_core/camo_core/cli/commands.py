@@ -84,7 +84,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     folder = out_dir(args)
     big = params.count >= 256 * 256
     bar = (
-        ProgressBar(params.consensus_steps + params.formation_steps, "simulating") if big else None
+        ProgressBar(modes.scope.steps(params) + params.formation_steps, "simulating")
+        if big
+        else None
     )
     progress = (lambda phase, step, total: bar.update(note=phase)) if bar else None
     snapshots = Snapshots(params)

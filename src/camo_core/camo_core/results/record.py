@@ -10,6 +10,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -31,8 +32,9 @@ class RoundRecord:
 
     def __post_init__(self) -> None:
         self.modes = modes_of(self.params)
-        self.select = self.modes.descriptor.choose  # a robot's choice from its p
-        n, steps = self.params.count, self.params.consensus_steps
+        # A robot's choice from its p.
+        self.select = partial(self.modes.scope.choose, self.modes.descriptor)
+        n, steps = self.params.count, self.modes.scope.steps(self.params)
         width = self.modes.descriptor.width
         self.sensed = np.full(n, np.nan)
         self.p_trace = np.full((steps + 1, n, width), np.nan)

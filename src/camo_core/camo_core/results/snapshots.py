@@ -55,7 +55,8 @@ class Snapshots:
         # A layout's robots are drawn at their positions, every one of them.
         side = max(params.rows, params.cols)
         self.stride = max(1, math.ceil(side / MAX_SIDE)) if self.modes.layout.grid else 1
-        consensus, formation = shown_steps(params.consensus_steps, params.formation_steps)
+        self.consensus_steps = self.modes.scope.steps(params)
+        consensus, formation = shown_steps(self.consensus_steps, params.formation_steps)
         self.wanted = {"consensus": set(consensus), "chosen": {0}, "formation": set(formation)}
         self.colours = code_colours(self.modes.descriptor.oriented)
         self.frames: dict[tuple[int, int], tuple[str, np.ndarray]] = {}
@@ -76,7 +77,7 @@ class Snapshots:
             # A tensor's direction, or the mix of the pattern colours a p holds.
             paint = tensor_rgb if self.modes.descriptor.oriented else (lambda p: p @ PALETTE)
             rgb = np.where(known[..., None], paint(np.nan_to_num(p)), UNKNOWN)
-            total, order = self.params.consensus_steps, 0
+            total, order = self.consensus_steps, 0
         elif phase == "chosen":  # each robot's pattern in its colour
             codes = self.cells(values).astype(np.int64)
             none = (codes < 0) | (codes >= len(self.colours) - 1)

@@ -403,8 +403,8 @@ class StepProtocol:
         return True
 
     def _consensus_step(self, now: float, ticking: bool) -> bool:
-        core, params = self.core, self.params
-        if self.step == params.consensus_steps:
+        core = self.core
+        if self.step == core.vote_steps:
             core.finish_consensus()
             self.traces.states = [core.state]
             self._next(FORMATION, 0, now)
@@ -417,11 +417,11 @@ class StepProtocol:
         if pending and not self._ready(pending, self.step_timeout, now, ticking):
             return False
         p = core.consensus(step, self._take("vote", step, slots))
-        self.traces.p.extend(p[: self.traces.width])
+        self.traces.p.extend(core.pattern_p)
         self.step = step = step + 1  # _next(CONSENSUS, step + 1, now)
         self.wait_started, self._awaiting = now, None
         self._report(now)
-        if step < params.consensus_steps:
+        if step < core.vote_steps:
             self._out.send.append(Message("vote", core.id, self.round, step, (p, core.degree)))
         return True
 

@@ -60,7 +60,7 @@ def messages_per_round(params: CamoParams) -> dict[str, int]:
     sent = {"hello": 1, "color": 1}
     if modes.threshold.averages_energy:
         sent["energy"] = params.consensus_steps
-    sent |= {"vote": params.consensus_steps, "state": params.formation_steps}
+    sent |= {"vote": modes.scope.steps(params), "state": params.formation_steps}
     if modes.relays:  # a layout's robots hear two hops
         sent["relay"] = params.formation_steps
     return sent

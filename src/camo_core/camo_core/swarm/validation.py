@@ -52,10 +52,17 @@ def probability_vector(p: Sequence[float], tolerance: float = TOLERANCE) -> bool
 
 def vote_vector(params: CamoParams, tolerance: float = TOLERANCE):
     """The check of what a run's robots average: p (a probability vector, or with --orientation
-    any a structure tensor), followed by its histogram (--levels, --colours)."""
+    any a structure tensor), followed by its histogram (--levels, --colours); `head_only`: p
+    alone (what --scope local's robots average first)."""
     modes = modes_of(params)
     descriptor, histogram, width = modes.descriptor, modes.histogram, modes.descriptor.width
-    return lambda p: descriptor.p_ok(p[:width], tolerance) and histogram.ok(p[width:], tolerance)
+
+    def whole_ok(p, head_only: bool = False) -> bool:
+        if head_only:
+            return descriptor.p_ok(p, tolerance)
+        return descriptor.p_ok(p[:width], tolerance) and histogram.ok(p[width:], tolerance)
+
+    return whole_ok
 
 
 def states_of(params: CamoParams) -> range:
@@ -100,9 +107,10 @@ def _energy_problem(message: Message, params: CamoParams) -> str | None:
 
 def _vote_problem(message: Message, params: CamoParams) -> str | None:
     p, degree = message.value
-    if not 0 <= message.step < params.consensus_steps:
+    scope = modes_of(params).scope
+    if not 0 <= message.step < scope.steps(params):
         return "step out of range"
-    if not vote_vector(params)(p) or not _degree_ok(degree, params):
+    if not scope.vote_ok(message.step, p, vote_vector(params)) or not _degree_ok(degree, params):
         return "vote out of range"
     return None
 
@@ -206,7 +214,7 @@ def rows_problems(rows: StatusRows, params: CamoParams) -> list[str | None]:
     problems[values_bad] = "status values out of range"
     limit = np.where(
         rows.phase == CONSENSUS,
-        params.consensus_steps,
+        modes.scope.steps(params),
         np.where(rows.phase == FORMATION, params.formation_steps, np.iinfo(np.int64).max),
     )
     phase_bad = (rows.phase < SENSING) | (rows.phase > DONE) | (rows.step < 0)

@@ -3,8 +3,9 @@
 A run's `Modes` holds one object per variation: what a robot senses (grey or colour), its
 threshold (fixed or auto) and descriptor (the paper's axes, a structure tensor for stripes at
 any angle, or a fitted tensor on a layout), what consensus averages beside p (nothing, a grey or
-a colour histogram), its palette and display (two tones, --levels, --colours) and where its
-robots stand (the grid, or a --layout's positions). `modes_of(params)` chooses them; every
+a colour histogram), its palette and display (two tones, --levels, --colours), where its
+robots stand (the grid, or a --layout's positions) and how far a robot's evidence reaches (the
+whole swarm, or its region of the scene: --scope). `modes_of(params)` chooses them; every
 driver (the simulator, the per-robot driver and so the step protocol and the robot nodes, the
 Droplet bridge, results, figures and animation) asks the chosen objects instead of the flags
 that chose them. Adding a mode: its declaration (a CamoParams field), its object (a class
@@ -13,7 +14,7 @@ beside its siblings here), its line in `modes_of`, its tests and docs (docs/exte
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from typing import Any
 
@@ -37,6 +38,7 @@ from camo_core.algorithm.modes.palettes import (
     Palette,
     TwoTones,
 )
+from camo_core.algorithm.modes.scopes import GlobalScope, LocalScope, Scope
 from camo_core.algorithm.modes.sensing import ColourSensing, GreySensing, Sensing
 from camo_core.algorithm.params import CamoParams
 
@@ -49,6 +51,7 @@ class Modes:
     histogram: Histogram
     palette: Palette
     layout: Layout
+    scope: Scope = field(default_factory=GlobalScope)
 
     @property
     def relays(self) -> bool:
@@ -64,7 +67,12 @@ class Modes:
     def beyond_paper(self) -> list[str]:
         """The variations that are not the paper's, as the options that chose them (what a
         Droplet's own firmware, which runs the paper's rules, lacks)."""
-        chosen = (self.threshold.chosen_by, self.descriptor.chosen_by, self.palette.chosen_by)
+        chosen = (
+            self.threshold.chosen_by,
+            self.descriptor.chosen_by,
+            self.palette.chosen_by,
+            self.scope.chosen_by,
+        )
         return [said for said in chosen if said]
 
     def with_(self, **changes: Any) -> Modes:
@@ -96,7 +104,10 @@ def modes_of(params: CamoParams) -> Modes:
         )
     elif params.levels:
         histogram, palette = GreyHistogram(), LevelPalette(params.levels)
-    return Modes(sensing, threshold, descriptor, histogram, palette, layout)
+    scope: Scope = GlobalScope()
+    if params.scope == "local":
+        scope = LocalScope(params.scope_scale, descriptor.oriented)
+    return Modes(sensing, threshold, descriptor, histogram, palette, layout, scope)
 
 
 __all__ = [
@@ -108,10 +119,12 @@ __all__ = [
     "ColourSensing",
     "FittedTensor",
     "FixedThreshold",
+    "GlobalScope",
     "GreyHistogram",
     "GreySensing",
     "Grid",
     "LevelPalette",
+    "LocalScope",
     "Modes",
     "NoHistogram",
     "Positions",
