@@ -269,7 +269,15 @@ def test_each_parameter_is_spelled_in_at_most_two_modules():
 
 
 # The flags that choose a variation of the algorithm (camo_core.algorithm.modes.modes_of).
-MODE_FLAGS = ("colours", "levels", "layout", "orientation", "orientation_any", "threshold_auto")
+MODE_FLAGS = (
+    "colours",
+    "levels",
+    "layout",
+    "orientation",
+    "orientation_any",
+    "threshold_auto",
+    "scope",
+)
 # Where a flag may be read freely: its declaration, the mode objects that it chooses, and the
 # command line, which reads options as the user gave them.
 MODE_HOMES = re.compile(r"camo_core/algorithm/(modes/|params\.py)|camo_core/cli/|run_config\.py")

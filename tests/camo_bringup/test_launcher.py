@@ -133,6 +133,38 @@ def test_swarm_equals_reference_simulator(tmp_path, options, procs):
     assert (tmp_path / "run" / "figure.png").stat().st_size > 10_000
 
 
+def composite_scene(tmp_path, seed: int, cells: int):
+    """A scene of regions of different textures (tools/scenes.py), as an image file."""
+    import cv2
+
+    sys.path.insert(0, str(ROOT / "tools"))
+    from scenes import make_scene
+
+    path = tmp_path / f"scene_{seed}.png"
+    cv2.imwrite(str(path), make_scene(seed, cells=cells).image)
+    return str(path)
+
+
+@pytest.mark.slow(SWARM)
+@pytest.mark.parametrize(
+    "options, procs",
+    [
+        (["--rows", "16", "--cols", "16", "--rho-comm", "0.1", "--seed", "4"], 2),
+        (["--rows", "12", "--cols", "12", "--orientation", "any", "--levels", "3"], 1),
+    ],
+)
+def test_a_local_swarm_equals_the_simulator_with_loss_across_processes(tmp_path, options, procs):
+    # --scope local's segmentation and segment consensus in the robot nodes: every vote of its
+    # phases through the swarm's transport, lost ones too.
+    image = composite_scene(tmp_path, 24, int(options[1]))
+    swarm, sim = summaries(tmp_path, ["--scope", "local", "--image", image, *options], procs)
+    for key in sim:
+        if key != "elapsed_s":
+            assert swarm[key] == sim[key], key
+    assert swarm["scope"] == "local"
+    assert len({name for row in swarm["patterns"] for name in row}) > 1  # regions of its own
+
+
 @pytest.mark.slow(SWARM)
 def test_run_rejects_bad_options_in_one_line(tmp_path):
     out = camo_run("--procs", "0", "--out", str(tmp_path))

@@ -64,6 +64,32 @@ def test_votes_come_back_with_python_floats_whatever_their_width(sent):
     assert all(type(x) is float for m in back for x in m.value[0])  # not numpy scalars
 
 
+def mixed_votes():
+    """Votes of robots in different phases of a --scope local round: p, the classes' shares,
+    p with its class (of --levels' width, say)."""
+    value = st.one_of(*(st.tuples(st.tuples(*[unit] * w), st.integers(0, 8)) for w in (3, 13, 36)))
+    return messages("vote", value, 20)
+
+
+@given(sent=mixed_votes())
+def test_votes_of_different_widths_in_one_message_come_back_as_sent(sent):
+    assert through_the_wire("vote", sent) == sent
+
+
+def test_votes_whose_widths_do_not_add_up_are_refused_whole():
+    columns = Columns("vote")
+    for k, width in enumerate((3, 4, 3)):
+        columns.add(Message("vote", k, 0, k, ((0.25,) * width, 2)))
+    msg = deserialize_message(serialize_message(columns.take()), COLUMN_TYPES["vote"])
+    assert list(msg.width) == [3, 4, 3]
+    msg.width = [3, 4, 4]
+    with pytest.raises(RaggedColumns):
+        unpack("vote", msg)
+    msg.width = [3, 4]
+    with pytest.raises(RaggedColumns):
+        unpack("vote", msg)
+
+
 def ragged_copies(kind: str):
     """Columns messages of three votes (or states, ...) with one column an entry short."""
     sent = [Message(kind, k, 0, k, EXAMPLES[kind]) for k in range(3)]

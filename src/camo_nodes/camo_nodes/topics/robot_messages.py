@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time
 from array import array
+from itertools import accumulate
 
 from camo_core.swarm.robot_io import PHASE_OF, Message
 from camo_msgs.msg import (
@@ -86,6 +87,7 @@ class Columns:
         self.step: list[int] = []
         self.round: list[int] = []
         self.values: tuple[list, ...] = tuple([] for _ in VALUE_COLUMNS[kind])
+        self.widths: list[int] = []  # votes: each message's values of p
         self.add = getattr(self, f"_add_{kind}")
 
     def __len__(self) -> int:
@@ -103,6 +105,7 @@ class Columns:
         p, degree = message.value
         self.values[0].append(degree)
         self.values[1].extend(p)
+        self.widths.append(len(p))
 
     def _add_state(self, message: Message) -> None:
         self._head(message)
@@ -137,6 +140,9 @@ class Columns:
         for (name, code), values in zip(VALUE_COLUMNS[self.kind], self.values, strict=True):
             setattr(msg, name, array(code, values))
             values.clear()
+        if self.widths and min(self.widths) != max(self.widths):  # else: one width, implied
+            msg.width = array("I", self.widths)
+        self.widths = []
         self.sender, self.step, self.round = [], [], []
         stamp(msg)
         return msg
@@ -158,10 +164,20 @@ def unpack(kind: str, msg) -> list[Message]:
         raise RaggedColumns("columns of different lengths")
     if kind == "vote":
         degrees, p = columns
-        width = len(p) // n if n else 0
-        if len(degrees) != n or len(p) != width * n:
-            raise RaggedColumns("columns of different lengths")
-        values = [(tuple(p[k * width : (k + 1) * width]), degrees[k]) for k in range(n)]
+        widths = msg.width.tolist() if len(getattr(msg, "width", ())) else None
+        if widths is None:  # every message the same width
+            width = len(p) // n if n else 0
+            if len(degrees) != n or len(p) != width * n:
+                raise RaggedColumns("columns of different lengths")
+            values = [(tuple(p[k * width : (k + 1) * width]), degrees[k]) for k in range(n)]
+        else:
+            if len(degrees) != n or len(widths) != n or sum(widths) != len(p):
+                raise RaggedColumns("columns of different lengths")
+            ends = list(accumulate(widths))
+            values = [
+                (tuple(p[e - w : e]), degrees[k])
+                for k, (e, w) in enumerate(zip(ends, widths, strict=True))
+            ]
     elif kind == "relay":
         (states,) = columns
         if len(states) != RELAY_SLOTS * n:
