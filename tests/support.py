@@ -379,6 +379,18 @@ class Bus:
         for p in order:
             self.post(p.background(0.0))
             self.post(p.start(0.0))
+        self.deliver()
+
+    def show(self, image_grid: np.ndarray, frame: int) -> None:
+        """Project frame `frame` (its robots' greys): the robots camouflage it, a round more."""
+        order = list(self.robots.values())
+        self.random.shuffle(order)
+        for p in order:
+            p.sensor.value = float(image_grid[divmod(p.id, image_grid.shape[1])])
+            self.post(p.background(float(frame), frame))
+        self.deliver()
+
+    def deliver(self) -> None:
         while self.pending:
             k = self.random.randrange(len(self.pending))
             self.pending[k], self.pending[-1] = self.pending[-1], self.pending[k]

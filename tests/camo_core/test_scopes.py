@@ -1,15 +1,25 @@
 """--scope local: each region of a scene its own pattern, by a rule both drivers and the step
 protocol compute alike (docs/algorithm.md §2.9)."""
 
+import json
 import sys
 
 import numpy as np
 import pytest
-from support import ROOT, Bus
+from scipy import ndimage
+from support import PROCESS, ROOT, Bus, run_camo
 
 from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.change import params_of_round
 from camo_core.algorithm.modes import modes_of
-from camo_core.algorithm.modes.scopes import ROUNDS, LocalScope, strict_argmax, strict_argmax_all
+from camo_core.algorithm.modes.palettes import GridPalette
+from camo_core.algorithm.modes.scopes import (
+    ROUNDS,
+    LocalScope,
+    Previous,
+    strict_argmax,
+    strict_argmax_all,
+)
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.perrobot import run_per_robot
 from camo_core.algorithm.sensing import sense_colours, sense_image
@@ -133,3 +143,94 @@ def test_on_a_single_texture_local_chooses_what_global_chooses(name):
         local = simulate(CamoParams(rows=side, cols=side, scope="local"), grey)
         paper = simulate(CamoParams(rows=side, cols=side), grey)
         assert np.mean(local.selected == paper.selected) >= 0.95, (name, side)
+
+
+def changed_scene(seed: int, cells: int, region: int, other: int):
+    """A composite scene, and the same scene with one region's texture another scene's."""
+    before = make_scene(seed, cells=cells)
+    after = before.image.copy()
+    inside = before.region == region
+    after[inside] = make_scene(other, cells=cells).image[inside]
+    return before, after
+
+
+def previous_of(result, raw) -> Previous:
+    return Previous(raw, result.selected, result.final, GridPalette(result.palette))
+
+
+@pytest.mark.parametrize("options", [{}, {"rho_comm": 0.1}, {"levels": 3, "rho_comm": 0.1}])
+def test_a_change_in_one_region_re_camouflages_that_region_and_only_it(options):
+    before, after = changed_scene(1010, 32, 1, 1017)
+    params = CamoParams(rows=32, cols=32, scope="local", **options)
+    first_raw = sense_image(before.image, 32, 32, "paper")
+    first = simulate(params, first_raw)
+    later = params_of_round(params, 1)
+    raw = sense_image(after, 32, 32, "paper")
+    kept = simulate(later, raw, previous=previous_of(first, first_raw))
+    fresh = simulate(later, raw)
+    _, region, _ = robot_truth(before, 32, 32)
+    changed = region == 1
+    outside = ~ndimage.binary_dilation(changed, iterations=2)  # two cells clear of the change
+    moved = kept.display != first.display
+    assert moved[outside].mean() <= 0.05 < (fresh.display != first.display)[outside].mean()
+    assert moved[changed].mean() > 0.3  # the changed region shows its new camouflage
+    robots = run_per_robot(later, raw, previous=previous_of(first, first_raw))
+    for name in ("selected", "initial", "final", "display"):
+        assert np.array_equal(getattr(kept, name), getattr(robots, name)), name
+
+
+def test_the_paper_s_swarm_re_camouflages_whole_whatever_its_last_round():
+    params = CamoParams(rows=8, cols=8, rho_comm=0.1)
+    grey = sense_image(background("forest"), 8, 8, "paper")
+    first = simulate(params, grey)
+    again = simulate(params, grey, previous=previous_of(first, grey))
+    assert np.array_equal(again.final, simulate(params, grey).final)
+
+
+def test_step_protocols_keep_what_they_showed_where_a_later_frame_did_not_change():
+    before, after = changed_scene(1024, 12, 0, 1003)
+    params = CamoParams(rows=12, cols=12, scope="local", rho_comm=0.1)
+    first_raw = sense_image(before.image, 12, 12, "paper")
+    raw = sense_image(after, 12, 12, "paper")
+    bus = Bus(params, first_raw, seed=5, shared_link=True)
+    bus.run()
+    bus.show(raw, 1)
+    assert all(p.phase == DONE and p.round == 1 for p in bus.robots.values())
+    first = simulate(params, first_raw)
+    expected = simulate(params_of_round(params, 1), raw, previous=previous_of(first, first_raw))
+    robots = [bus.robots[i].core for i in range(params.count)]
+    assert np.array_equal(np.reshape([r.state for r in robots], (12, 12)), expected.final)
+    assert any(r.kept for r in robots) and not all(r.kept for r in robots)
+
+
+@pytest.mark.slow(PROCESS)
+def test_sim_after_a_round_folder_is_that_round_s_next(tmp_path):
+    # A continuous run's round_<k>/ holds summary.json and background.png: ./camo sim --after
+    # it, on the next round's frame and seed, is the next round.
+    import cv2
+
+    before, after = changed_scene(1010, 16, 1, 1017)
+    first, second = tmp_path / "first.png", tmp_path / "second.png"
+    cv2.imwrite(str(first), before.image)
+    cv2.imwrite(str(second), after)
+    options = ["--rows", "16", "--cols", "16", "--scope", "local", "--levels", "3"]
+    ran = run_camo("sim", "--image", str(first), *options, "--out", str(tmp_path / "r0"))
+    assert ran.returncode == 0, ran.stderr
+    cv2.imwrite(str(tmp_path / "r0" / "background.png"), before.image)
+    out = tmp_path / "r1"
+    ran = run_camo("sim", "--image", str(second), *options, "--after", str(tmp_path / "r0"),
+                   "--seed", "1", "--out", str(out))  # fmt: skip
+    assert ran.returncode == 0, ran.stderr
+    params = CamoParams(rows=16, cols=16, scope="local", levels=3)
+    first_raw = sense_image(before.image, 16, 16, "paper")
+    r0 = simulate(params, first_raw)
+    expected = simulate(
+        params.with_(seed=1),
+        sense_image(after, 16, 16, "paper"),
+        previous=previous_of(r0, first_raw),
+    )
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["final"] == expected.final.tolist()
+    assert summary["display"] == expected.display.tolist()
+    bad = run_camo("sim", "--image", str(second), *options, "--after", str(tmp_path))
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1

@@ -12,7 +12,8 @@ import time
 import numpy as np
 
 from camo_core.algorithm.modes import Modes, modes_of
-from camo_core.algorithm.modes.palettes import GridPalette
+from camo_core.algorithm.modes.palettes import GridPalette, RobotPalette
+from camo_core.algorithm.modes.scopes import Previous
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult, mean_p
 from camo_core.algorithm.robot import RobotCore
@@ -26,18 +27,24 @@ def run_per_robot(
     observe: Observer | None = None,
     raw_colours: np.ndarray | None = None,
     modes: Modes | None = None,
+    previous: Previous | None = None,
 ) -> RunResult:
     """`raw_sensed`: rows x cols block means before noise; `exempt`: real readings (no noise);
     `observe` is shown every step as the simulator shows it (`simulator.Observer`);
     `raw_colours`: the blocks' mean colours (rows x cols x 3; colour sensing needs them);
-    `modes`: the run's variations (modes.modes_of(params) unless given)."""
+    `modes`: the run's variations (modes.modes_of(params) unless given); `previous`: the
+    grid's last round (`simulator.simulate`'s)."""
     modes = modes or modes_of(params)
     if raw_colours is None and modes.sensing.colour:
         raise ValueError(f"{modes.sensing.name} sensing needs the sensed colours (raw_colours)")
     shown = observe or (lambda phase, step, values: None)
     start = time.perf_counter()
     rows, cols = params.rows, params.cols
-    robots = [RobotCore(params, i, j, modes) for i in range(rows) for j in range(cols)]
+    robots = [
+        RobotCore(params, i, j, modes, previous=_previous_of(previous, i, j))
+        for i in range(rows)
+        for j in range(cols)
+    ]
 
     for robot in robots:
         robot.discover([n is not None for n in robot.neighbors])
@@ -109,6 +116,27 @@ def run_per_robot(
         else None,
         palette_rgb=palette.colours,
         shades=palette.shades,
+    )
+
+
+def _previous_of(previous: Previous | None, row: int, col: int) -> Previous | None:
+    """One robot's part of the grid's last round (None: no last round)."""
+    if previous is None:
+        return None
+    palette = previous.palette
+
+    def of(values, convert):
+        return () if values is None else convert(values[row, col])
+
+    return Previous(
+        float(np.asarray(previous.raw)[row, col]),
+        int(np.asarray(previous.pattern)[row, col]),
+        int(np.asarray(previous.final)[row, col]),
+        RobotPalette(
+            greys=of(palette.greys, lambda g: tuple(int(v) for v in g)),
+            colours=of(palette.colours, lambda c: tuple(tuple(int(v) for v in rgb) for rgb in c)),
+            shades=of(palette.shades, lambda s: (int(s[0]), int(s[1]))) or (0, 0),
+        ),
     )
 
 

@@ -226,6 +226,8 @@ class RunResult:
         if self.modes.palette.colour and self.palette_rgb is not None:
             summary["sensed_rgb"] = grid(np.asarray(self.sensed_rgb, dtype=np.float64))
             summary["palette"] = grid(np.asarray(self.palette_rgb).astype(np.int64))
+        elif self.palette is not None:  # --levels: each robot's greys, darkest first
+            summary["palette"] = grid(np.asarray(self.palette).astype(np.int64))
         summary |= self.modes.layout.summary()  # where robots stood (grids are by robot id)
         if self.alive is not None:
             # A swarm run in which robots died: their cells hold null, and they are listed.

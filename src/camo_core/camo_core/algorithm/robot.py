@@ -18,7 +18,7 @@ from camo_core.algorithm.grid import CONSENSUS_SLOTS, robot_id
 from camo_core.algorithm.link import LinkDraws
 from camo_core.algorithm.modes import Modes, modes_of
 from camo_core.algorithm.modes.palettes import RobotPalette
-from camo_core.algorithm.modes.scopes import GlobalRobot, LocalRobot
+from camo_core.algorithm.modes.scopes import GlobalRobot, LocalRobot, Previous
 from camo_core.algorithm.params import CamoParams, ParameterError
 from camo_core.algorithm.sensing import noisy_colour, noisy_value
 
@@ -36,6 +36,9 @@ class RobotCore:
     # The link's draws, made for all of its process's robots at once (link.LinkDraws); None:
     # this robot draws its own.
     link: LinkDraws | None = None
+    # Its last finished round, in a later round of a --scope local run (scopes.Previous): what
+    # it keeps showing if nothing changed for it.
+    previous: Previous | None = None
     # Filled in as the phases go by.
     known: list[bool] = field(default_factory=list)
     sensed: float = float("nan")
@@ -73,6 +76,8 @@ class RobotCore:
         # consensus ends (modes.palettes: --levels' greys, --colours' colours and shades).
         self.sensed_rgb: tuple[float, float, float] = (math.nan, math.nan, math.nan)
         self.shows = RobotPalette()
+        self.raw = math.nan
+        self.kept = False  # it keeps its last round's state (--scope local, a later round)
         # Its consensus (modes.scopes), from its vote on.
         self.averaging: GlobalRobot | LocalRobot = GlobalRobot(self.p, 3)
 
@@ -140,6 +145,7 @@ class RobotCore:
         params = self.params
         rgb = (raw, raw, raw) if rgb is None else rgb
         colour = (float(rgb[0]), float(rgb[1]), float(rgb[2]))
+        self.raw = float(raw)  # before measurement noise: what a later round compares
         if exempt_from_noise:
             self.sensed, self.sensed_rgb = float(raw), colour
         else:
@@ -201,7 +207,16 @@ class RobotCore:
         self.shows = modes.palette.robot(tail, self.sensed, self.sensed_rgb)
         if self.shows.initial is not None:
             self.state = self.shows.initial
+        previous = self.previous
+        if previous is not None and modes.scope.keeps(previous, self.raw, self.pattern):
+            self.kept = True
+            self.state, self.shows = int(previous.final), previous.palette
         return self.pattern
+
+    def done(self) -> Previous:
+        """This round, as the next one compares with it."""
+        assert self.pattern is not None  # a finished round
+        return Previous(self.raw, self.pattern, self.state, self.shows)
 
     @property
     def palette(self) -> tuple[int, ...]:
@@ -251,6 +266,8 @@ class RobotCore:
             self.finish_consensus()
         pattern = self.pattern
         assert pattern is not None
+        if self.kept:  # what it showed, unchanged: its neighbours form against it
+            return self.state
         received = self._filter(rng.STREAM_STATE, step, states, range(len(self.neighbors)))
         knights: list[int | None] = [None] * 8
         if self.modes.relays:

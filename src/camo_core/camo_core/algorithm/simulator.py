@@ -18,6 +18,7 @@ from camo_core.algorithm import kernels, orientation, rng
 from camo_core.algorithm.grid import NEIGHBOR_OFFSETS, NUM_SLOTS
 from camo_core.algorithm.modes import Modes, modes_of
 from camo_core.algorithm.modes.palettes import GridPalette
+from camo_core.algorithm.modes.scopes import Previous
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult, p_stats
 from camo_core.algorithm.sensing import apply_colour_noise, apply_noise
@@ -74,11 +75,13 @@ def simulate(
     observe: Observer | None = None,
     raw_colours: np.ndarray | None = None,
     modes: Modes | None = None,
+    previous: Previous | None = None,
 ) -> RunResult:
     """Run all phases on rows x cols block means (before measurement noise); `raw_colours`:
     the blocks' mean colours (rows x cols x 3 sRGB; colour sensing needs them, and with them the
     result knows how far the colours shown are from those sensed); `modes`: the run's
-    variations (modes.modes_of(params) unless given)."""
+    variations (modes.modes_of(params) unless given); `previous`: the grid's last round, in a
+    later round of a --scope local run (robots that saw no change keep what they showed)."""
     start = time.perf_counter()
     modes = modes or modes_of(params)
     rows, cols = params.rows, params.cols
@@ -124,10 +127,15 @@ def simulate(
     palette = modes.palette.grid(histogram, sensed, sensed_rgb)
     if palette.initial is not None:
         initial = palette.initial
+    kept = None
+    if previous is not None:  # robots that saw no change keep their state and palette
+        kept = modes.scope.keeps(previous, raw_sensed, selected)
+        initial = np.where(kept, previous.final, initial).astype(np.uint8)
+        palette = palette.kept(kept, previous.palette)
 
     # Phase 3: pattern formation.
     final = _formation(
-        grid, params, modes, initial, selected, known_mask, progress, observe, palette
+        grid, params, modes, initial, selected, known_mask, progress, observe, palette, kept
     )
 
     return RunResult(
@@ -225,6 +233,7 @@ def _formation(
     progress: Progress | None,
     observe: Observer | None,
     palette: GridPalette,
+    kept: np.ndarray | None = None,
 ) -> np.ndarray:
     """Formation steps, on every layer of the states' bits (--levels: each with the same
     losses, as one state message carries them all); the observer sees what the robots show
@@ -258,6 +267,8 @@ def _formation(
                 np.bitwise_and(state >> np.uint8(k), 1, out=layer)
                 kernels.formation_step(layer, layer_next, *rule)
                 nxt |= layer_next << np.uint8(k)
+        if kept is not None:  # robots that keep their last round's state: unchanged
+            nxt[kept] = initial[kept]
         state, nxt = nxt, state
         if observe:
             observe("formation", step + 1, modes.palette.frame(state, palette))

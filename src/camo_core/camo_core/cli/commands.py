@@ -11,10 +11,14 @@ import gc
 import json
 import sys
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 
-from camo_core.algorithm.modes import modes_of
+from camo_core.algorithm.modes import Modes, modes_of
+from camo_core.algorithm.modes.palettes import GridPalette
+from camo_core.algorithm.modes.scopes import Previous
+from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.perrobot import run_per_robot
 from camo_core.algorithm.result import pattern_said
 from camo_core.algorithm.simulator import simulate
@@ -30,6 +34,8 @@ from camo_core.cli.options import (
 from camo_core.cli.params_file import write_params_file
 from camo_core.cli.progress import ProgressBar
 from camo_core.exceptions import UsageError, reported
+from camo_core.inputs.files import checked_file
+from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer, items, number
 from camo_core.results.output import Parallel, run_title
 from camo_core.results.snapshots import Snapshots
@@ -81,6 +87,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
             raw[row, col] = value
             raw_colours[row, col] = rgb
             exempt[row, col] = True
+    previous = previous_round(args.after, params, modes) if args.after else None
     folder = out_dir(args)
     big = params.count >= 256 * 256
     bar = (
@@ -92,10 +99,18 @@ def cmd_sim(args: argparse.Namespace) -> int:
     snapshots = Snapshots(params)
     if modes.layout.grid:
         result = simulate(
-            params, raw, exempt, progress=progress, observe=snapshots, raw_colours=raw_colours
+            params,
+            raw,
+            exempt,
+            progress=progress,
+            observe=snapshots,
+            raw_colours=raw_colours,
+            previous=previous,
         )
     else:  # no vectorised kernels for positions: the robots' own rules, one by one
-        result = run_per_robot(params, raw, observe=snapshots, raw_colours=raw_colours)
+        result = run_per_robot(
+            params, raw, observe=snapshots, raw_colours=raw_colours, previous=previous
+        )
     title = run_title(label, params)
     marks = None if exempt is None else {"real reading": exempt}
     sensed = modes.sensing.shown(result.sensed, result.sensed_rgb)
@@ -112,6 +127,42 @@ def cmd_sim(args: argparse.Namespace) -> int:
         f"figure.png and run.gif; simulated {how}in {result.elapsed_s:.3f} s"
     )
     return 0
+
+
+def previous_round(folder: str, params: CamoParams, modes: Modes) -> Previous:
+    """A round's folder (summary.json and background.png) as the next round compares with it:
+    its frame's greys (before noise), each robot's pattern, final state and palette."""
+    path = Path(folder)
+    summary_path = checked_file(path / "summary.json", "--after's summary", 1 << 31, UsageError)
+    try:
+        summary = json.loads(summary_path.read_bytes())
+    except (ValueError, RecursionError):
+        raise UsageError(f"--after {folder}: its summary.json is not JSON") from None
+    if not isinstance(summary, dict):
+        raise UsageError(f"--after {folder}: its summary.json is not a summary")
+    image = load_image(path / "background.png")
+    raw, _ = modes.layout.sense(image, params.profile)
+    shape = (params.rows, params.cols)
+    codes = {modes.descriptor.name_of(k): k for k in modes.descriptor.codes}
+    try:
+        pattern = np.array([[codes[n] for n in row] for row in summary["patterns"]])
+        final = np.array(summary["final"], dtype=np.int64)
+        palette = np.array(summary.get("palette", []), dtype=np.int64)
+        shown = np.array(summary["display"], dtype=np.int64)
+        if pattern.shape != shape or final.shape != shape:
+            raise ValueError
+    except (KeyError, TypeError, ValueError):
+        raise UsageError(
+            f"--after {folder}: its summary.json is not of a finished {shape[0]}x{shape[1]} "
+            "round with these options"
+        ) from None
+    grid = GridPalette()
+    if modes.palette.colour:  # the colour each robot showed, for the state it keeps
+        where = np.all(palette == shown[:, :, None, :], axis=-1).argmax(axis=-1)
+        grid = GridPalette(colours=palette, shades=np.stack([where, where], axis=-1))
+    elif modes.palette.k:
+        grid = GridPalette(greys=palette)
+    return Previous(raw, pattern, final, grid)
 
 
 def _draw(result, image, snapshots, folder, title, marks, sensed) -> None:
@@ -143,6 +194,14 @@ def add_sim_arguments(sim: Parser) -> Parser:
         help="this cell's sensed grey value (and colour) is a real reading (e.g. a bridged "
         "Droplet's, as its run's summary.json says): it replaces the image's and gets no "
         "measurement noise (repeatable)",
+    )
+    sim.add_argument(
+        "--after",
+        metavar="DIR",
+        default=None,
+        help="a later round of a --scope local run: the previous round's folder (its "
+        "summary.json and background.png, as ./camo run --continuous writes them); its robots "
+        "that saw no change keep what they showed",
     )
     sim.add_params_file_option("camo_sim")
     sim.set_defaults(func=cmd_sim, options_parser=sim)

@@ -42,6 +42,7 @@ from operator import and_
 from typing import Any
 
 from camo_core.algorithm.change import params_of_round
+from camo_core.algorithm.modes.scopes import Previous
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.robot import RobotCore
 from camo_core.swarm.mailbox import Key, Mailbox
@@ -98,6 +99,7 @@ class StepProtocol:
         "kinds",
         "known_alive",
         "last_report",
+        "last_round",
         "listen",
         "mailbox",
         "newer_background",
@@ -151,6 +153,7 @@ class StepProtocol:
         self._expected_ids: dict[tuple[str, int, bool], tuple[int, ...]] = {}
         # Delivered and not yet used, by step and sender: early messages wait for their step.
         self.mailbox = mailbox or Mailbox()
+        self.last_round: Previous | None = None  # its last finished round
         self.core = self._core(params, row, col)
         self.sensor = sensor
         self.display = display or NoDisplay()
@@ -433,6 +436,7 @@ class StepProtocol:
                 return False
             self._next(DONE, self.step, now)
             self._report(now, forced=True)
+            self.last_round = core.done()  # what a later round compares with (--scope local)
             return True
         if not self._formed(now, ticking):
             return False
@@ -559,9 +563,10 @@ class StepProtocol:
         self._send("hello", 0, (core.row, core.col))
 
     def _core(self, params: CamoParams, row: int, col: int) -> RobotCore:
-        """The robot in a round: with its process's link draws where its mailbox has them."""
-        link = self.mailbox.link
-        return RobotCore(params, row, col, link=None if link is None else link.draws(params))
+        """The robot in a round: with its process's link draws where its mailbox has them, and
+        its last finished round (a --scope local robot that saw no change keeps its display)."""
+        link = None if self.mailbox.link is None else self.mailbox.link.draws(params)
+        return RobotCore(params, row, col, link=link, previous=self.last_round)
 
     # ---- output ---------------------------------------------------------------------
 

@@ -130,6 +130,22 @@ class GridPalette:
     shades: np.ndarray | None = None
     initial: np.ndarray | None = None
 
+    def kept(self, where: np.ndarray, previous: GridPalette) -> GridPalette:
+        """This palette, but `previous`'s where `where` (robots that keep theirs)."""
+
+        def mixed(now, before):
+            if now is None or before is None:
+                return now
+            mask = where.reshape(where.shape + (1,) * (now.ndim - where.ndim))
+            return np.where(mask, before, now)
+
+        return GridPalette(
+            mixed(self.greys, previous.greys),
+            mixed(self.colours, previous.colours),
+            mixed(self.shades, previous.shades),
+            self.initial,
+        )
+
 
 class TwoTones:
     """The paper's: black where the pattern is on, white where it is off."""

@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -38,6 +40,10 @@ KAPPA = 0.25  # the imbalance e_h - e_v of stripes, beyond which a robot's textu
 ORIENTED_KAPPA = orientation.COHERENCE_MIN  # --orientation any's: coherence of a direction
 LAMBDA = 1.0  # how much a robot's own evidence counts against its neighbours' classes
 ROUNDS = 6  # clean-up rounds
+
+# A later round of a --scope local run: a robot keeps what it showed if its reading moved by at
+# most this (the change rule's own threshold, docs/algorithm.md §6) and it chose as before.
+KEEP_GREYS = 24.0
 
 Vector = tuple[float, ...]
 Received = Sequence[tuple[Sequence[float], int] | None]
@@ -93,6 +99,11 @@ class GlobalScope:
         """The pattern (code) a robot chooses from its averaged p (or codes, from an array of
         them): the descriptor's choice, the paper's."""
         return descriptor.choose(p)
+
+    def keeps(self, previous, raw, pattern) -> bool | np.ndarray:
+        """Whether a robot keeps what it showed in its previous round (the paper's swarm
+        re-camouflages whole: never)."""
+        return False if np.ndim(raw) == 0 else np.zeros(np.shape(raw), bool)
 
     def run(self, params, p0, width, known_mask, degree, each_step) -> np.ndarray:
         """The whole grid's consensus from p0 (rows x cols x (width + histogram)); each_step(k,
@@ -185,6 +196,20 @@ class LocalScope:
         )
         chosen = np.where((chosen == rules.MOTTLED) & (striped >= 0), striped, chosen)
         return int(chosen) if chosen.ndim == 0 else chosen
+
+    def keeps(self, previous, raw, pattern) -> bool | np.ndarray:
+        """A later round (`previous`: the robot's last finished round, or the grid's: its raw
+        reading, pattern code, final state and palette): a robot whose reading moved by at most
+        KEEP_GREYS and that chose the same pattern keeps its state and palette, and so what it
+        showed. A change confined to one region re-camouflages that region; elsewhere robots
+        keep their display (a robot next to the change forms against its kept neighbours).
+        One robot (scalars) or the grid (arrays) alike."""
+        if previous is None:
+            return False if np.ndim(raw) == 0 else np.zeros(np.shape(raw), bool)
+        same = (np.abs(np.asarray(raw) - previous.raw) <= KEEP_GREYS) & (
+            np.asarray(pattern) == previous.pattern
+        )
+        return bool(same) if np.ndim(same) == 0 else same
 
     # ---- phase B and C's arithmetic, one robot and the grid alike -----------------------------
 
@@ -302,6 +327,18 @@ class LocalRobot:
 
     def result(self) -> Vector:
         return self.x if self.x else self.p0
+
+
+@dataclass(frozen=True)
+class Previous:
+    """What a robot did in its last finished round (arrays: the grid's): its raw reading (grey,
+    before measurement noise), its pattern code, its final state and its palette (a
+    palettes.RobotPalette; the grid's a GridPalette)."""
+
+    raw: Any
+    pattern: Any
+    final: Any
+    palette: Any
 
 
 Scope = GlobalScope | LocalScope
