@@ -41,8 +41,8 @@ def pytest_configure(config):
     )
     config.addinivalue_line(
         "markers",
-        "alone(why): a test that times a swarm against the wall clock (support.TIMED): under "
-        "pytest-xdist no other test runs beside it",
+        "alone(why): a test that times a swarm against the wall clock or counts what the whole "
+        "machine holds (support.TIMED, MACHINE): under pytest-xdist no other test runs beside it",
     )
 
 
@@ -61,7 +61,9 @@ def pytest_collection_modifyitems(config, items):
 
 # ---- tests that must run alone ----------------------------------------------------------------
 # A test marked alone times a swarm against the wall clock (a round within 5 s of a switch, no
-# false round): the other worker's swarms, on the same two cores, would make it fail. Each
+# false round), or counts what the whole machine holds (stale files in /dev/shm): the other
+# worker's swarms, on the same two cores, would slow it, or its killed processes would leave
+# files that the test counts as its own. Each
 # test of a worker holds the session's lock `alone.lock` shared while it runs; a test marked
 # alone holds it exclusively, so it waits for the test the other worker is running and the
 # other worker waits for it. A test marked alone first takes `gate.lock` and keeps it until it

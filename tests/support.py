@@ -32,6 +32,7 @@ CLUSTER = "starts a Dask cluster"
 COMPUTE = "computes for seconds: large grids, many trials, serial timeouts or a type check"
 # Why a test runs alone in a parallel session (`@pytest.mark.alone(TIMED)`, tests/conftest.py).
 TIMED = "times a swarm against the wall clock: another test's processes would slow it"
+MACHINE = "counts what the whole machine holds (/dev/shm): another test's leftovers would count"
 FOXGLOVE_CLIENT = ROOT / "tests" / "foxglove_client"  # Foxglove's libraries, pinned (npm ci)
 
 
