@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import fcntl
+import functools
 import json
 import os
+import re
 import shutil
 import subprocess
+from contextlib import contextmanager
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
-from support import BAG_OPTIONS, FOXGLOVE_CLIENT, camo_run, run_keeping_output
+from support import BAG_OPTIONS, FOXGLOVE_CLIENT, ROOT, camo_run, run_keeping_output
 
 # Fuzz tests: the same inputs on every run (a failure in CI is one a developer can replay), no
 # example database written into the clone, and a bounded number of examples each.
@@ -34,14 +39,155 @@ def pytest_configure(config):
         "slow(why): a test that takes seconds, with the reason (support.SWARM, PROCESS, CLUSTER, "
         "COMPUTE); ./camo test --fast leaves it out",
     )
+    config.addinivalue_line(
+        "markers",
+        "alone(why): a test that times a swarm against the wall clock or counts what the whole "
+        "machine holds (support.TIMED, MACHINE): under pytest-xdist no other test runs beside it",
+    )
 
 
 def pytest_collection_modifyitems(config, items):
-    """A slow test names why it is slow."""
+    """A slow (or alone) test names why it is. In a pytest-xdist worker, the tests are in the
+    order they go out in (`in_parallel_order`)."""
     for item in items:
-        for mark in item.iter_markers("slow"):
+        for mark in (*item.iter_markers("slow"), *item.iter_markers("alone")):
             if not (mark.args and isinstance(mark.args[0], str) and mark.args[0].strip()):
-                raise pytest.UsageError(f"{item.nodeid}: @pytest.mark.slow(WHY) needs its reason")
+                raise pytest.UsageError(
+                    f"{item.nodeid}: @pytest.mark.{mark.name}(WHY) needs its reason"
+                )
+    if in_a_worker(config):
+        items[:] = in_parallel_order(items)
+
+
+# ---- tests that must run alone ----------------------------------------------------------------
+# A test marked alone times a swarm against the wall clock (a round within 5 s of a switch, no
+# false round), or counts what the whole machine holds (stale files in /dev/shm): the other
+# worker's swarms, on the same two cores, would slow it, or its killed processes would leave
+# files that the test counts as its own. Each
+# test of a worker holds the session's lock `alone.lock` shared while it runs; a test marked
+# alone holds it exclusively, so it waits for the test the other worker is running and the
+# other worker waits for it. A test marked alone first takes `gate.lock` and keeps it until it
+# has the lock, and every test goes through that gate: a stream of the other worker's tests
+# cannot keep it waiting.
+
+
+@contextmanager
+def locked(path: Path, how: int = fcntl.LOCK_EX):
+    """Holds the lock file `path` (flock: exclusively unless told) for the block."""
+    with open(path, "a") as handle:
+        fcntl.flock(handle, how)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """In a pytest-xdist worker: the test (set-up, call, tear-down) under the session's lock,
+    exclusively if it is marked alone."""
+    if not in_a_worker(item.config):
+        return (yield)
+    shared = item.config._tmp_path_factory.getbasetemp().parent
+    how = fcntl.LOCK_EX if item.get_closest_marker("alone") else fcntl.LOCK_SH
+    with open(shared / "alone.lock", "a") as lock:
+        with locked(shared / "gate.lock", fcntl.LOCK_EX):
+            fcntl.flock(lock, how)
+        try:
+            return (yield)
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+# ---- the order of a parallel session ------------------------------------------------------------
+# `./camo test` runs the tests in pytest-xdist workers (-n 2), each of which is sent the next
+# unit of work as it nearly runs out (`pytest_xdist_make_scheduler`). The units go out longest
+# first, so that no long test starts last while the other worker idles. A unit is one test,
+# or a whole module that has a fixture of module scope (made once, then used in the module's
+# order: tests/camo_sweep/test_sweep.py's sweep, say). A unit's length is the sum of its tests'
+# seconds in tests/durations.json (an earlier session's: `CAMO_DURATIONS=write ./camo test`
+# rewrites it), or for a test not there SLOW_GUESS s if it is marked slow, else FAST_GUESS.
+# (pytest-xdist's --dist loadgroup cannot do this with pytest 9.2: it renames items by setting
+# an attribute pytest no longer reads.)
+
+DURATIONS = Path(__file__).with_name("durations.json")
+SLOW_GUESS, FAST_GUESS = 5.0, 0.1
+MODULE_FIXTURE = re.compile(r"@pytest\.fixture\(scope=\"module\"")
+
+
+def known_durations() -> dict[str, float]:
+    try:
+        return json.loads(DURATIONS.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+@functools.cache
+def has_module_fixture(path: str) -> bool:
+    """Whether the test module at `path` (from the root) defines a fixture of module scope."""
+    try:
+        return bool(MODULE_FIXTURE.search((ROOT / path).read_text()))
+    except OSError:
+        return False
+
+
+def unit_of(nodeid: str) -> str:
+    """The unit of work a test belongs to: its module's path, or its own id."""
+    path = nodeid.split("::", 1)[0]
+    return path if has_module_fixture(path) else nodeid
+
+
+def in_parallel_order(items: list) -> list:
+    """The items by unit, longest unit first (a unit's tests in their own order)."""
+    seconds = known_durations()
+    units: dict[str, list] = {}
+    for item in items:
+        units.setdefault(unit_of(item.nodeid), []).append(item)
+
+    def guess(item) -> float:
+        fallback = SLOW_GUESS if item.get_closest_marker("slow") else FAST_GUESS
+        return seconds.get(item.nodeid, fallback)
+
+    ordered = sorted(units.values(), key=lambda unit: -sum(map(guess, unit)))
+    return [item for unit in ordered for item in unit]
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_xdist_make_scheduler(config, log):
+    """-n N (pytest-xdist's --dist load): units of work in the workers' order (longest first),
+    each sent whole to the first worker that is down to its last tests. Other --dist modes
+    are pytest-xdist's own."""
+    if config.getvalue("dist") != "load":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class Units(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return unit_of(nodeid)
+
+    config.option.loadscopereorder = False  # the workers' order is the one wanted
+    return Units(config, log)
+
+
+_took: dict[str, float] = {}
+
+
+def pytest_runtest_logreport(report):
+    """With CAMO_DURATIONS=write, each test's seconds (set-up, call and tear-down), for
+    tests/durations.json."""
+    if os.environ.get("CAMO_DURATIONS") == "write":
+        nodeid = report.nodeid
+        if nodeid.rfind("@") > nodeid.rfind("]"):  # pytest-xdist's group suffix
+            nodeid = nodeid.rsplit("@", 1)[0]
+        _took[nodeid] = _took.get(nodeid, 0.0) + report.duration
+
+
+def write_durations() -> None:
+    """tests/durations.json: those of its tests that take a second or more, as this session
+    timed them (the others as an earlier one did)."""
+    took = {**known_durations(), **{k: round(v, 1) for k, v in _took.items()}}
+    slow = {k: v for k, v in sorted(took.items()) if v >= 1.0}
+    DURATIONS.write_text(json.dumps(slow, indent=0) + "\n")
 
 
 @pytest.fixture(autouse=True)
@@ -64,13 +210,35 @@ def count_round_records(monkeypatch) -> list[int]:
     return made
 
 
+def in_a_worker(config) -> bool:
+    """Whether this process is a pytest-xdist worker (not the session's controller)."""
+    return hasattr(config, "workerinput")
+
+
+def session_folder(tmp_path_factory) -> Path:
+    """A folder every process of this session shares: pytest's temporary root, or with
+    pytest-xdist the folder that holds each worker's root (gw0/, gw1/, ...)."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
 @pytest.fixture(scope="session")
 def recorded(tmp_path_factory):
-    """One recorded run: (bag folder, live summary)."""
-    folder = tmp_path_factory.mktemp("recorded")
-    out = camo_run(*BAG_OPTIONS, "--out", str(folder / "live"), "--record", str(folder / "bag"))
-    assert out.returncode == 0, out.stderr[-2000:]
-    assert "lacks" not in out.stderr, out.stderr[-2000:]
+    """One recorded run: (bag folder, live summary). Made once a session, by the first test
+    process (pytest-xdist worker) that needs it, while the others wait for it; tests only
+    read it (they copy it before changing it)."""
+    shared = session_folder(tmp_path_factory)
+    folder = shared / "recorded"
+    with locked(shared / "recorded.lock"):
+        if not (folder / "made").exists():  # or an earlier attempt failed half-way
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            out = camo_run(
+                *BAG_OPTIONS, "--out", str(folder / "live"), "--record", str(folder / "bag")
+            )
+            assert out.returncode == 0, out.stderr[-2000:]
+            assert "lacks" not in out.stderr, out.stderr[-2000:]
+            (folder / "made").write_text(out.stderr)
     return folder / "bag", json.loads((folder / "live" / "summary.json").read_text())
 
 
@@ -99,29 +267,37 @@ def emulator(tmp_path):
 
 
 @pytest.fixture(scope="session")
-def foxglove_client():
-    """node and the client's npm packages, exactly as package-lock.json pins them."""
+def foxglove_client(tmp_path_factory):
+    """node and the client's npm packages, exactly as package-lock.json pins them (installed by
+    one test process at a time: two `npm ci` in one folder would undo each other's work)."""
     node, npm = shutil.which("node"), shutil.which("npm")
     assert node and npm, "the Foxglove client test needs Node 20 and npm"
     marker = FOXGLOVE_CLIENT / "node_modules" / ".package-lock.json"
     lock = FOXGLOVE_CLIENT / "package-lock.json"
-    if not marker.exists() or marker.stat().st_mtime < lock.stat().st_mtime:
-        done = subprocess.run(
-            [npm, "ci", "--no-audit", "--no-fund"],
-            cwd=FOXGLOVE_CLIENT,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
-        assert done.returncode == 0, done.stderr[-2000:]
+    with locked(session_folder(tmp_path_factory) / "foxglove_client.lock"):
+        if not marker.exists() or marker.stat().st_mtime < lock.stat().st_mtime:
+            done = subprocess.run(
+                [npm, "ci", "--no-audit", "--no-fund"],
+                cwd=FOXGLOVE_CLIENT,
+                capture_output=True,
+                text=True,
+                timeout=600,
+            )
+            assert done.returncode == 0, done.stderr[-2000:]
     return node
+
+
+# With pytest-xdist, /dev/shm is cleaned by the session's controller alone: before it starts its
+# workers and after they have finished, never while a worker's test has processes of its own
+# half-way through creating their files (a lock file made but not yet locked looks stale).
 
 
 def pytest_sessionstart(session):
     """Shared memory that killed processes of an earlier session left would hang this one's."""
     from camo_nodes.shm import remove_stale
 
-    remove_stale()
+    if not in_a_worker(session.config):
+        remove_stale()
 
 
 def pytest_sessionfinish(session, exitstatus):
@@ -129,4 +305,7 @@ def pytest_sessionfinish(session, exitstatus):
     of processes killed (those whose lock nobody holds, as `fastdds shm clean` does)."""
     from camo_nodes.shm import remove_stale
 
-    remove_stale()
+    if not in_a_worker(session.config):
+        remove_stale()
+        if _took:
+            write_durations()

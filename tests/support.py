@@ -32,6 +32,9 @@ SWARM = "starts ROS 2 processes: a swarm, a recorder or a node of its own"
 PROCESS = "runs a camo command in a process of its own"
 CLUSTER = "starts a Dask cluster"
 COMPUTE = "computes for seconds: large grids, many trials, serial timeouts or a type check"
+# Why a test runs alone in a parallel session (`@pytest.mark.alone(TIMED)`, tests/conftest.py).
+TIMED = "times a swarm against the wall clock: another test's processes would slow it"
+MACHINE = "counts what the whole machine holds (/dev/shm): another test's leftovers would count"
 FOXGLOVE_CLIENT = ROOT / "tests" / "foxglove_client"  # Foxglove's libraries, pinned (npm ci)
 
 
@@ -120,10 +123,30 @@ def sweep_table(folder) -> list[dict]:
 _next_domain = [0]
 
 
+def xdist_worker() -> tuple[int, int]:
+    """(this test process's number, how many there are): pytest-xdist's worker gwN of M, or
+    (0, 1) in a session without workers."""
+    name = os.environ.get("PYTEST_XDIST_WORKER", "")
+    count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    return (int(name[2:]) if name.startswith("gw") else 0), max(count, 1)
+
+
+def domains() -> range:
+    """This test process's share of the ROS domains 1..200: each pytest-xdist worker a slice of
+    its own, so that two workers of a session never run in one domain."""
+    worker, count = xdist_worker()
+    size = max(200 // count, 1)
+    first = 1 + (worker * size) % 200
+    return range(first, min(first + size, 201))
+
+
 def domain() -> int:
-    """A ROS domain of its own for each run, so parallel test processes do not hear each other."""
+    """A ROS domain of its own for each run, so parallel test processes do not hear each other:
+    the next of this process's share (`domains`), from a place its pid picks (other sessions
+    running at the same time start elsewhere)."""
     _next_domain[0] += 1
-    return 1 + (os.getpid() * 7 + _next_domain[0]) % 200
+    share = domains()
+    return share[(os.getpid() * 7 + _next_domain[0]) % len(share)]
 
 
 @contextmanager
@@ -307,8 +330,9 @@ def tile_range(topic: str) -> range:
     return range(int(first), int(last) + 1)
 
 
-# One recorded run that several bag tests read (the `recorded` fixture).
-BAG_RUN = f"bags_{os.getpid()}"
+# One recorded run that several bag tests read (the `recorded` fixture, made once a session and
+# read by every pytest-xdist worker: its run id is the session's, not the process's).
+BAG_RUN = f"bags_{os.environ.get('PYTEST_XDIST_TESTRUNUID', str(os.getpid()))[:12].lower()}"
 BAG_ROWS, BAG_COLS = 5, 6
 BAG_STEPS = 10  # droplet consensus steps
 BAG_FORMATION = 20  # droplet formation steps

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from support import COMPUTE, PROCESS, ROOT
+from support import ROOT
 
 SRC = ROOT / "src"
 PACKAGES = (
@@ -107,7 +107,6 @@ def allowed(name: str, rules: set[str]) -> bool:
     return any(name == rule or name.startswith(rule + ".") for rule in rules)
 
 
-@pytest.mark.slow(PROCESS)
 def test_camo_core_imports_and_runs_with_ros_blocked():
     out = subprocess.run(
         [sys.executable, "-c", BLOCK_ROS], capture_output=True, text=True, timeout=300
@@ -123,7 +122,6 @@ def test_the_step_protocol_loads_no_rclpy():
     assert out.stdout.strip() == "False", out.stderr
 
 
-@pytest.mark.slow(COMPUTE)
 @pytest.mark.parametrize("package", sorted(ALLOWED))
 def test_packages_meet_only_through_core_messages_and_the_topic_module(package):
     wrong = {
@@ -307,7 +305,6 @@ def console_scripts() -> list[tuple[str, str]]:
     return scripts
 
 
-@pytest.mark.slow(PROCESS)
 @pytest.mark.parametrize("package, script", console_scripts())
 def test_every_console_script_answers_help(package, script):
     path = ROOT / "ros2_ws" / "install" / package / "lib" / package / script
@@ -329,7 +326,6 @@ def test_ruff_lint_and_format_are_clean():
     assert form.returncode == 0, form.stdout[-3000:]
 
 
-@pytest.mark.slow(COMPUTE)
 def test_mypy_finds_no_type_error_in_camo_core():
     """pyproject.toml's [tool.mypy] checks the algorithm, the results and the command line."""
     out = subprocess.run(

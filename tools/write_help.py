@@ -75,8 +75,9 @@ is already up to date.
 usage: ./camo test [pytest arguments]
 
 Set up (as ./camo setup), then run the test suite with pytest in the project's environment;
-the arguments go to pytest (./camo test tests/camo_sweep -k resume, ./camo test -q). For
-pytest's own options: .venv/bin/python -m pytest --help.
+the arguments go to pytest (./camo test tests/camo_sweep -k resume, ./camo test -q). The tests
+run in two worker processes (pytest-xdist's -n 2); -n 0 runs them in one, -n N in N. --fast:
+only the tests not marked slow. For pytest's own options: .venv/bin/python -m pytest --help.
 """,
     "dask": """\
 usage: ./camo dask scheduler [Dask's options] | ./camo dask worker tcp://HOST:8786 [options]

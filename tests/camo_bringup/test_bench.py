@@ -5,7 +5,7 @@ import subprocess
 import sys
 
 import pytest
-from support import COMPUTE, ROOT, SWARM, domain
+from support import COMPUTE, ROOT, SWARM, TIMED, domain
 
 
 @pytest.mark.slow(COMPUTE)
@@ -102,6 +102,7 @@ def test_every_option_of_bench_ros_and_soak_with_a_bad_value_is_one_line(
 
 
 @pytest.mark.slow(SWARM)
+@pytest.mark.alone(TIMED)
 def test_bench_dynamic_times_a_change_against_a_switch_and_counts_false_rounds(tmp_path):
     import json
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from support import (
     SWARM,
+    TIMED,
     assert_like_sim,
     bag_tool,
     camo_run,
@@ -99,6 +100,7 @@ class Camera:
 
 
 @pytest.mark.slow(SWARM)
+@pytest.mark.alone(TIMED)
 def test_a_continuous_swarm_follows_a_camera_of_its_own_one_round_a_scene(tmp_path):
     # A camera that waits for no one, four scenes in turn, a run of a given length: a round
     # for each scene and no other (no false round, none missed, none superseded), each on a
@@ -145,6 +147,7 @@ def hashlib_of(pixels: np.ndarray) -> str:
 
 
 @pytest.mark.slow(SWARM)
+@pytest.mark.alone(TIMED)
 def test_a_static_noisy_camera_is_camouflaged_once(tmp_path):
     domain_id = domain()
     cam = camera(domain_id, tmp_path / "frames", "--fps", "15", "--noise", "8", "--seconds", "60")

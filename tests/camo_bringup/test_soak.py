@@ -10,13 +10,14 @@ import sys
 import time
 
 import pytest
-from support import PROCESS, ROOT
+from support import MACHINE, PROCESS, ROOT
 
 from camo_bringup.soak import camo_processes
 from camo_nodes.shm import remove_stale, stale_files
 
 
 @pytest.mark.slow(PROCESS)
+@pytest.mark.alone(MACHINE)
 def test_consecutive_runs_leave_no_process_no_shared_memory_and_the_same_result(tmp_path):
     out = subprocess.run(
         [sys.executable, "-m", "camo_bringup.soak", "--runs", "3", "--side", "3", "--json"]

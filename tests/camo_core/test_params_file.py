@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from support import PROCESS, SWARM
 
 from camo_core.cli.params_file import ParamsFileError, check_params_file, check_ros_args
+from camo_core.inputs.files import shown
 
 GOOD = """\
 /**:
@@ -84,8 +85,10 @@ def test_what_yaml_1_1_would_read_otherwise_in_a_params_file_is_one_line(tmp_pat
     path = write(tmp_path, NODE + values + "\n")
     with pytest.raises(ParamsFileError) as caught:
         check_params_file(path)
-    message = str(caught.value)
-    assert message.startswith(f"the parameters file {path} is not YAML") or str(path) in message
+    message = str(caught.value)  # the path as messages show one (longer than 80: shortened)
+    assert message.startswith(f"the parameters file {shown(path)} is not YAML") or (
+        str(path) in message
+    )
     assert said in message and "\n" not in message
     with pytest.raises(ParamsFileError, match=re.escape(said)):  # robot: --ros-args --params-file
         check_ros_args(["--ros-args", "--params-file", str(path)])

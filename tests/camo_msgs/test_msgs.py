@@ -1,10 +1,10 @@
 """Every camo_msgs type goes through real rclpy publishers and subscriptions in one process."""
 
-import os
 import time
 from pathlib import Path
 
 import pytest
+from support import domain
 
 rclpy = pytest.importorskip("rclpy")
 from camo_msgs.msg import Color, Hello, RobotStatus, State, Vote  # noqa: E402
@@ -37,7 +37,7 @@ def filled(msg_type):
 
 
 def test_each_message_type_round_trips(monkeypatch):
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(150 + os.getpid() % 50))
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain()))
     rclpy.init()
     try:
         node = rclpy.create_node("camo_msgs_round_trip")
