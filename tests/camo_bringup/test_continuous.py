@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from support import (
+    ROOT,
     SWARM,
     TIMED,
     assert_like_sim,
@@ -363,3 +364,53 @@ def test_the_end_of_a_duration_writes_the_round_under_way_and_exits_0(tmp_path):
     assert (row["round"], row["frame"], row["complete"]) == ("0", "0", "0")
     summary = json.loads((tmp_path / "run" / "round_0" / "summary.json").read_text())
     assert "incomplete" in summary and summary["noticed_by"] is not None
+
+
+@pytest.mark.slow(SWARM)
+def test_a_local_swarm_re_camouflages_only_the_region_whose_scene_changed(tmp_path):
+    # Two frames of a composite scene, the second with one region's texture changed: the second
+    # round re-camouflages that region; elsewhere robots keep what they showed. Each round equals
+    # ./camo sim on its frame with its seed, the second after the first (--after).
+    import cv2
+
+    sys.path.insert(0, str(ROOT / "tools"))
+    from scenes import make_scene, robot_truth
+
+    side = 16
+    before = make_scene(1010, cells=side)
+    after = before.image.copy()
+    changed = before.region == 1
+    after[changed] = make_scene(1017, cells=side).image[changed]
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    cv2.imwrite(str(frames / "0.png"), before.image)
+    cv2.imwrite(str(frames / "1.png"), after)
+    options = ["--rows", str(side), "--cols", str(side), "--scope", "local", "--rho-comm", "0.1"]
+    run = tmp_path / "run"
+    out = camo_run(
+        "--continuous", "--rounds", "2", "--images", str(frames / "*.png"), "--period", "6",
+        *options, "--procs", "2", "--out", str(run),
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert [r["frame"] for r in rounds_of(run)] == ["0", "1"]
+    shown = []
+    for k in (0, 1):
+        summary = json.loads((run / f"round_{k}" / "summary.json").read_text())
+        after_last = ["--after", str(run / f"round_{k - 1}")] if k else []
+        sim = run_camo(
+            "sim", "--image", str(run / f"round_{k}" / "background.png"), *after_last,
+            "--seed", str(summary["seed"]), *options, "--out", str(tmp_path / f"sim_{k}"),
+        )  # fmt: skip
+        assert sim.returncode == 0, sim.stderr
+        assert_like_sim(run / f"round_{k}", tmp_path / f"sim_{k}")
+        shown.append(np.array(summary["display"]))
+    _, region, _ = robot_truth(before, side, side)
+    moved = shown[1] != shown[0]
+    clear = ~_near(region == 1)  # robots two cells clear of the change
+    assert moved[clear].mean() <= 0.05 and moved[region == 1].mean() > 0.3
+
+
+def _near(mask: np.ndarray) -> np.ndarray:
+    from scipy import ndimage
+
+    return ndimage.binary_dilation(mask, iterations=2)

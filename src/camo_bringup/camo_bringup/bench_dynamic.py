@@ -14,11 +14,17 @@ swarm's extra cost is noticing.
 False rounds: a continuous run on a static scene streamed like a camera (frame noise, at 15
 frames a second) with measurement noise on every reading, for `--static-s` seconds: rounds
 beyond the first, per minute.
+
+With `--scope local` the scenes are one scene whose right half changes (forest beside desert,
+then beside leopard, in turn): each round must also keep what the left half showed. Said per
+side: the most and the mean share of the robots two or more cells clear of the change whose
+display changed with a round (at most 5% is the aim).
 """
 
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import os
 import statistics
@@ -31,9 +37,11 @@ import cv2
 import numpy as np
 
 from camo_core.algorithm.backgrounds import background
+from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import sense_colours, sense_image
 from camo_core.algorithm.simulator import simulate
+from camo_core.cli.commands import previous_round
 from camo_core.cli.options import Parser
 from camo_core.exceptions import EXIT_USAGE, CamoError
 from camo_core.inputs.images import load_image
@@ -41,6 +49,15 @@ from camo_core.inputs.numeric import integer
 from camo_core.results.summary import summary_bytes
 
 SCENES = ("forest", "desert")
+# --scope local: the left half stays, the right half changes.
+LEFT, RIGHTS = "forest", ("desert", "leopard")
+
+
+def half_scene(k: int) -> np.ndarray:
+    """Frame k of a local run's scenes: forest on the left, desert or leopard on the right."""
+    left = background(LEFT)
+    right = background(RIGHTS[k % 2])
+    return np.concatenate([left, right], axis=1)
 
 
 def sides(text: str) -> list[int]:
@@ -69,33 +86,45 @@ def period_for(side: int) -> float:
     return 2.5 + side * side / 1000.0
 
 
-def like_sim(folder: Path, side: int, rho: float) -> bool:
-    """Whether a continuous round (its folder) equals `./camo sim` on its frame with its seed."""
+def like_sim(folder: Path, side: int, rho: float, scope: str = "global") -> bool:
+    """Whether a continuous round (its folder) equals `./camo sim` on its frame with its seed
+    (with --scope local after the round before: `--after`)."""
     live = json.loads((folder / "summary.json").read_text())
-    params = CamoParams(rows=side, cols=side, rho_meas=rho, seed=live["seed"])
+    params = CamoParams(rows=side, cols=side, rho_meas=rho, seed=live["seed"], scope=scope)
     image = load_image(str(folder / "background.png"))
     grid = sense_image(image, side, side, params.profile)
-    result = simulate(params, grid, raw_colours=sense_colours(image, side, side))
+    before = folder.parent / f"round_{live['round'] - 1}"
+    previous = None
+    if scope == "local" and live["round"] > 0:
+        previous = previous_round(str(before), params, modes_of(params))
+    result = simulate(
+        params, grid, raw_colours=sense_colours(image, side, side), previous=previous
+    )
     sim = json.loads(summary_bytes(result.summary(arrays=True)))
     return all(live.get(key) == value for key, value in sim.items() if key != "elapsed_s")
 
 
 def following(
-    side: int, changes: int, domain: int, out: Path, rho: float
+    side: int, changes: int, domain: int, out: Path, rho: float, scope: str = "global"
 ) -> tuple[list[float], dict]:
     """Seconds from each change's frame to its round's last robot done (continuous), and what
     the rounds were: their frames, the changes without a round of their own, the rounds on no
-    change's frame or unfinished, how many equal the simulator."""
+    change's frame or unfinished, how many equal the simulator; with --scope local how much of
+    what the unchanged half showed changed."""
     scenes = out / "scenes"
     scenes.mkdir(parents=True, exist_ok=True)
     for k in range(changes + 1):  # forest, desert, forest, ...: each image a frame of its own
-        cv2.imwrite(str(scenes / f"{k:03d}.png"), background(SCENES[k % 2]))
+        scene = half_scene(k) if scope == "local" else background(SCENES[k % 2])
+        cv2.imwrite(str(scenes / f"{k:03d}.png"), scene)
+    # The run shows one frame more than the changes: the last scene again, no change (the
+    # images loop, and the first scene again would be a change no round is asked of).
+    cv2.imwrite(str(scenes / f"{changes + 1:03d}.png"), scene)
     period = period_for(side)
     argv = [
         # Its length, not a number of rounds: a change missed (or a round too many) is seen.
         "--continuous", "--duration", f"{period * (changes + 2):g}",
         "--images", str(scenes / "*.png"), "--period", str(period),
-        "--rows", str(side), "--cols", str(side),
+        "--rows", str(side), "--cols", str(side), "--scope", scope,
         "--rho-meas", str(rho), "--out", str(out / "run"),
     ]  # fmt: skip
     launch(argv, domain, timeout=120 + period * (changes + 4))
@@ -107,18 +136,45 @@ def following(
         "missed": sorted(set(range(1, changes + 1)) - set(frames)),  # frame k: change k
         "other": [f for f in frames if not 0 <= f <= changes or frames.count(f) > 1],
         "incomplete": [int(r["frame"]) for r in rows if r["complete"] != "1"],
-        "like_sim": sum(like_sim(out / "run" / f"round_{k}", side, rho) for k in range(len(rows))),
+        "like_sim": sum(
+            like_sim(out / "run" / f"round_{k}", side, rho, scope) for k in range(len(rows))
+        ),
         "rounds": len(rows),
     }
+    if scope == "local":
+        checks["kept"] = kept_shares(out / "run", len(rows), side)
     done = {int(r["frame"]): float(r["done_s"]) for r in rows if r["complete"] == "1"}
     return [done[f] for f in range(1, changes + 1) if f in done], checks  # round 0: no change
 
 
-def switched(side: int, changes: int, domain: int, out: Path, rho: float) -> list[float]:
-    """Seconds from each --then switch's frame to its round's last robot done (baseline)."""
-    then = [arg for k in range(changes) for arg in ("--then", SCENES[(k + 1) % 2])]
+def kept_shares(run: Path, rounds: int, side: int) -> list[float]:
+    """Per later round: the share of the robots two or more cells clear of the changed half
+    whose display changed from the round before."""
+    clear = np.zeros((side, side), bool)
+    clear[:, : side // 2 - 2] = True
+    shown = [
+        np.array(json.loads((run / f"round_{k}" / "summary.json").read_text())["display"])
+        for k in range(rounds)
+    ]
+    return [
+        float(np.mean((b != a).reshape(side, side, -1).any(-1)[clear]))
+        for a, b in itertools.pairwise(shown)
+    ]
+
+
+def switched(
+    side: int, changes: int, domain: int, out: Path, rho: float, scope: str = "global"
+) -> list[float]:
+    """Seconds from each --then switch's frame to its round's last robot done (baseline): the
+    same scenes (with --scope local its files, from the continuous run's folder)."""
+    if scope == "local":
+        scenes = sorted((out.parent / "continuous" / "scenes").glob("*.png"))[: changes + 1]
+        first, later = ["--image", str(scenes[0])], [str(path) for path in scenes[1:]]
+    else:
+        first, later = ["--pattern", SCENES[0]], [SCENES[(k + 1) % 2] for k in range(changes)]
+    then = [arg for name in later[:changes] for arg in ("--then", name)]
     argv = [
-        "--pattern", SCENES[0], *then, "--rows", str(side), "--cols", str(side),
+        *first, *then, "--rows", str(side), "--cols", str(side), "--scope", scope,
         "--rho-meas", str(rho), "--out", str(out / "run"),
     ]  # fmt: skip
     launch(argv, domain, timeout=120 + 20 * changes)
@@ -195,6 +251,13 @@ def main(argv: list[str] | None = None) -> int:
         "--rho-meas", type=float, default=0.15, help="measurement noise of every reading (0.15)"
     )
     parser.add_argument(
+        "--scope",
+        choices=("global", "local"),
+        default="global",
+        help="local: the scenes' right half changes, and how much of what the left half "
+        "showed changed is said",
+    )
+    parser.add_argument(
         "--out", type=Path, default=Path("results") / time.strftime("bench-dynamic-%Y%m%d-%H%M%S")
     )
     try:
@@ -221,13 +284,17 @@ def measure(args, domain: int) -> tuple[list[dict], dict | None]:
     for side in args.sides:
         out = args.out / f"{side}"
         print(f"camo bench dynamic: {side}x{side}, {args.changes} changes", file=sys.stderr)
-        delays, checks = following(side, args.changes, domain, out / "continuous", args.rho_meas)
+        delays, checks = following(
+            side, args.changes, domain, out / "continuous", args.rho_meas, args.scope
+        )
         print(
             f"camo bench dynamic: {side}x{side}: {checks_said(checks, args.changes)}",
             file=sys.stderr,
         )
         noticed = quantiles(delays)
-        then = quantiles(switched(side, args.changes, domain, out / "then", args.rho_meas))
+        then = quantiles(
+            switched(side, args.changes, domain, out / "then", args.rho_meas, args.scope)
+        )
         ratio = noticed["median_s"] / then["median_s"] if delays else None
         rows.append(
             {
@@ -263,6 +330,13 @@ def report(args, rows: list[dict], static: dict | None) -> None:
         print(f"| {r['robots']} | {' | '.join(map(figure, cells))} | {figure(r['ratio'])} |")
     for r in rows:
         print(f"{r['robots']} continuous: {checks_said(r['rounds'], args.changes)}")
+        kept = r["rounds"].get("kept")
+        if kept:
+            print(
+                f"{r['robots']} --scope local: robots clear of the change whose display changed: "
+                f"at most {100 * max(kept):.1f}%, mean {100 * statistics.mean(kept):.1f}% "
+                f"({len(kept)} changes)"
+            )
     if static:
         print(
             f"static noisy scene, {static['robots']}, {static['seconds']:g} s: {static['rounds']} "

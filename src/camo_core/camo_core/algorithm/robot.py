@@ -208,9 +208,10 @@ class RobotCore:
         if self.shows.initial is not None:
             self.state = self.shows.initial
         previous = self.previous
-        if previous is not None and modes.scope.keeps(previous, self.raw, self.pattern):
+        if previous is not None and modes.scope.keeps(previous, self.raw):
             self.kept = True
-            self.state, self.shows = int(previous.final), previous.palette
+            self.pattern, self.state = int(previous.pattern), int(previous.final)
+            self.shows = previous.palette
         return self.pattern
 
     def done(self) -> Previous:

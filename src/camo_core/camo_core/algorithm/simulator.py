@@ -122,16 +122,17 @@ def simulate(
     p, trace, spread = _consensus(params, modes, p0, known_mask, degree, progress, observe)
     p, histogram = p[..., :width], p[..., width:]
     selected = modes.scope.choose(modes.descriptor, p)
-    if observe:
-        observe("chosen", 0, selected)
     palette = modes.palette.grid(histogram, sensed, sensed_rgb)
     if palette.initial is not None:
         initial = palette.initial
     kept = None
-    if previous is not None:  # robots that saw no change keep their state and palette
-        kept = modes.scope.keeps(previous, raw_sensed, selected)
+    if previous is not None:  # robots that saw no change keep their camouflage
+        kept = np.asarray(modes.scope.keeps(previous, raw_sensed), dtype=bool)
+        selected = np.where(kept, previous.pattern, selected)
         initial = np.where(kept, previous.final, initial).astype(np.uint8)
         palette = palette.kept(kept, previous.palette)
+    if observe:
+        observe("chosen", 0, selected)
 
     # Phase 3: pattern formation.
     final = _formation(

@@ -248,8 +248,11 @@ class RoundRecord:
             votes=votes.reshape(shape),
             p=self.p_latest.reshape((*shape, self.modes.descriptor.width)),
             selected=selected.reshape(shape),
-            # With --levels the layers are set once the palette is known: formation's start.
-            initial=(self.state_trace[0] if self.greys else self.initial).reshape(shape),
+            # The state formation starts from: with --levels the layers set once the palette is
+            # known, with --scope local a kept state (else the sensed grey's, as reported).
+            initial=np.where(self.state_trace[0] >= 0, self.state_trace[0], self.initial).reshape(
+                shape
+            ),
             final=self.state.reshape(shape),
             consensus_trace=np.array(trace).reshape(-1, self.modes.descriptor.width),
             elapsed_s=time.monotonic() - self.started,

@@ -39,7 +39,7 @@ import math
 from collections.abc import Callable, Iterable
 from itertools import compress
 from operator import and_
-from typing import Any
+from typing import Any, cast
 
 from camo_core.algorithm.change import params_of_round
 from camo_core.algorithm.modes.scopes import Previous
@@ -499,7 +499,8 @@ class StepProtocol:
         # neighbours, in C.
         arriving = core.arrivals(STREAM[kind], step)[:slots]
         flags = map(and_, arriving, core.known) if known_only else arriving
-        expected = tuple(compress(core.neighbors[:slots], flags))
+        # (A slot that arrives has a neighbour: no None among them.)
+        expected = cast(tuple[int, ...], tuple(compress(core.neighbors[:slots], flags)))
         if lossless:
             self._expected_ids[cache_key] = expected
         return expected

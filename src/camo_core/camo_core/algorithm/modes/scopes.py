@@ -100,7 +100,7 @@ class GlobalScope:
         them): the descriptor's choice, the paper's."""
         return descriptor.choose(p)
 
-    def keeps(self, previous, raw, pattern) -> bool | np.ndarray:
+    def keeps(self, previous, raw) -> bool | np.ndarray:
         """Whether a robot keeps what it showed in its previous round (the paper's swarm
         re-camouflages whole: never)."""
         return False if np.ndim(raw) == 0 else np.zeros(np.shape(raw), bool)
@@ -197,18 +197,17 @@ class LocalScope:
         chosen = np.where((chosen == rules.MOTTLED) & (striped >= 0), striped, chosen)
         return int(chosen) if chosen.ndim == 0 else chosen
 
-    def keeps(self, previous, raw, pattern) -> bool | np.ndarray:
+    def keeps(self, previous, raw) -> bool | np.ndarray:
         """A later round (`previous`: the robot's last finished round, or the grid's: its raw
         reading, pattern code, final state and palette): a robot whose reading moved by at most
-        KEEP_GREYS and that chose the same pattern keeps its state and palette, and so what it
-        showed. A change confined to one region re-camouflages that region; elsewhere robots
-        keep their display (a robot next to the change forms against its kept neighbours).
-        One robot (scalars) or the grid (arrays) alike."""
+        KEEP_GREYS keeps its camouflage (its pattern, state and palette), whatever its votes
+        say this round: its scene did not change. A change confined to one region
+        re-camouflages that region; elsewhere robots keep their display (a robot next to the
+        change forms against its kept neighbours). One robot (scalars) or the grid (arrays)
+        alike."""
         if previous is None:
             return False if np.ndim(raw) == 0 else np.zeros(np.shape(raw), bool)
-        same = (np.abs(np.asarray(raw) - previous.raw) <= KEEP_GREYS) & (
-            np.asarray(pattern) == previous.pattern
-        )
+        same = np.abs(np.asarray(raw) - previous.raw) <= KEEP_GREYS
         return bool(same) if np.ndim(same) == 0 else same
 
     # ---- phase B and C's arithmetic, one robot and the grid alike -----------------------------
