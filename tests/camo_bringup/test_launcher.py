@@ -155,14 +155,22 @@ def composite_scene(tmp_path, seed: int, cells: int):
 )
 def test_a_local_swarm_equals_the_simulator_with_loss_across_processes(tmp_path, options, procs):
     # --scope local's segmentation and segment consensus in the robot nodes: every vote of its
-    # phases through the swarm's transport, lost ones too.
+    # phases through the swarm's transport, lost ones too; its bag renders the same.
+    from support import bag_tool
+
     image = composite_scene(tmp_path, 24, int(options[1]))
-    swarm, sim = summaries(tmp_path, ["--scope", "local", "--image", image, *options], procs)
-    for key in sim:
-        if key != "elapsed_s":
-            assert swarm[key] == sim[key], key
+    args = ["--scope", "local", "--image", image, *options]
+    run = camo_run(*args, "--procs", str(procs), "--out", str(tmp_path / "run"),
+                   "--record", str(tmp_path / "bag"))  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    sim = run_camo("sim", *args, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    swarm = assert_like_sim(tmp_path / "run", tmp_path / "sim")
     assert swarm["scope"] == "local"
     assert len({name for row in swarm["patterns"] for name in row}) > 1  # regions of its own
+    rendered = bag_tool("render", str(tmp_path / "bag"), "--out", str(tmp_path / "rendered"))
+    assert rendered.returncode == 0, rendered.stderr
+    assert_like_sim(tmp_path / "rendered", tmp_path / "sim")
 
 
 @pytest.mark.slow(SWARM)
