@@ -8,12 +8,24 @@ import pytest
 from support import COMPUTE, ROOT, SWARM, TIMED, domain
 
 
-@pytest.mark.slow(COMPUTE)
-def test_bare_exchange_crosses_processes_and_measures_set_up_rate_and_wall_time():
-    from camo_bringup.bench import bare_exchange
+@pytest.mark.slow(SWARM)
+def test_a_comparison_measures_the_bare_exchange_and_the_swarm_with_and_without_loss(tmp_path):
+    import json
 
-    bare = bare_exchange(4, 20, 2, domain())
-    assert 0 < bare["setup_s"] < bare["wall_s"] and 0 < bare["steps_per_s"] < 100_000
+    from camo_bringup.bench import compare, format_loss
+
+    row = compare(4, 2, domain(), tmp_path, 30, 1, loss=0.2)
+    runs = ("4_0", "4_0_loss")
+    assert 0 < row["bare_setup_s"] < row["bare_wall_s"] and 0 < row["bare_steps_per_s"] < 1e5
+    assert row["rate_ratio"] == row["swarm_steps_per_s"] / row["bare_steps_per_s"]
+    assert row["loss_ratio"] == row["lossy_steps_per_s"] / row["swarm_steps_per_s"] > 0
+    summaries = [json.loads((tmp_path / run / "summary.json").read_text()) for run in runs]
+    for summary in summaries:
+        summary.pop("elapsed_s")
+    assert summaries[0] != summaries[1]  # the lossy run lost messages
+    loss_free = {key: value for key, value in row.items() if key != "loss"}
+    table = format_loss([row, loss_free]).splitlines()  # rows measured without loss: none
+    assert len(table) == 3 and table[2].split()[:3] == ["4x4", "30", "0.20"]
 
 
 @pytest.mark.slow(COMPUTE)
@@ -56,8 +68,10 @@ def test_a_large_run_is_timed_weighed_per_process_and_compared_with_the_simulato
     (launcher, projector, workers) and whether it equals ./camo sim, in the table too."""
     from camo_bringup.bench import format_large, large_run
 
-    row = large_run(6, domain(), tmp_path)
+    # With loss and sensor noise, as bench ros's lossy large runs.
+    row = large_run(6, domain(), tmp_path, ["--rho-comm", "0.1", "--rho-meas", "0.05"])
     assert row["robots"] == "6x6" and row["equals_sim"] is True and row["deadlines"] == 0
+    assert row["links"] == "0.1 0.05"
     assert 0 < row["setup_s"] < row["wall_s"] and row["steps_per_s"] > 0
     processes = row["peak_mib"]["processes"]
     assert {"launcher", "projector_node", "worker 1"} <= set(processes)

@@ -14,9 +14,12 @@ tile topic, packed as the swarm packs them, as the swarm's do at best.
 
 Figures: set-up (launch until every robot has voted; bare: until the
 processes are matched), steps per second (every robot voting to every robot
-done; bare: its steps), and launch to exit. Large swarms (128x128 and 256x256
-by default) run once each, with the launcher's default processes, and add the
-largest resident set of a worker and of the whole run.
+done; bare: its steps), and launch to exit. Beside each swarm figure, the same
+run with lossy links (`--loss`, default 10% of messages lost) and its ratio to
+the loss-free one. Large swarms (128x128 and 256x256 by default) run once each,
+with the launcher's default processes, loss-free and with loss and sensor noise
+(`--loss`, `--noise`), and add the largest resident set of a worker and of the
+whole run.
 """
 
 from __future__ import annotations
@@ -192,31 +195,39 @@ def swarm_run(
     }
 
 
-def large_run(side: int, domain: int, out: Path) -> dict:
+def lossy(loss: float, noise: float = 0.0) -> list[str]:
+    """The options of a run with lossy links (and sensor noise)."""
+    return ["--rho-comm", str(loss)] + (["--rho-meas", str(noise)] if noise else [])
+
+
+def large_run(side: int, domain: int, out: Path, extra: list[str]) -> dict:
     """One whole run of a large swarm with the launcher's defaults (processes of at most
-    ROBOTS_PER_PROCESS robots), on the forest scaled to the grid when the grid outgrows it."""
+    ROBOTS_PER_PROCESS robots), on the forest scaled to the grid when the grid outgrows it,
+    with `extra` options (loss, noise)."""
     out.mkdir(parents=True, exist_ok=True)
     image = out / f"forest_{side}.png"
     size = max(SIZE, side)
     cv2.imwrite(str(image), cv2.resize(forest(), (size, size), interpolation=cv2.INTER_NEAREST))
     procs = default_procs(side * side)
-    row = swarm_run(side, None, domain, out / "run", extra=["--image", str(image)])
-    same = equals_sim(out / "run", image, side)
+    row = swarm_run(side, None, domain, out / "run", extra=["--image", str(image), *extra])
+    same = equals_sim(out / "run", image, side, extra)
     peaks = ", ".join(f"{k} {v:.0f}" for k, v in row["peak_mib"].get("processes", {}).items())
     print(
-        f"{side}x{side}: set-up {row['setup_s']:.1f} s, {row['steps_per_s']:.2f} steps/s, "
-        f"launch to exit {row['wall_s']:.1f} s, {procs} workers, equal to ./camo sim: {same}; "
-        f"peak MiB per process: {peaks}",
+        f"{side}x{side} {' '.join(extra) or 'loss-free'}: set-up {row['setup_s']:.1f} s, "
+        f"{row['steps_per_s']:.2f} steps/s, launch to exit {row['wall_s']:.1f} s, {procs} "
+        f"workers, equal to ./camo sim: {same}; peak MiB per process: {peaks}",
         file=sys.stderr,
     )
-    return {"robots": f"{side}x{side}", "procs": procs, "equals_sim": same, **row}
+    links = " ".join(extra[1::2]) if extra else "0"
+    return {"robots": f"{side}x{side}", "procs": procs, "equals_sim": same, "links": links, **row}
 
 
-def equals_sim(run: Path, image: Path, side: int) -> bool:
-    """The run's summary says what `./camo sim` on its image does, key by key (but the time)."""
+def equals_sim(run: Path, image: Path, side: int, extra: list[str] = ()) -> bool:
+    """The run's summary says what `./camo sim` on its image (and `extra` options) does, key
+    by key (but the time)."""
     sim = run.parent / "sim"
     done = subprocess.run(
-        [sys.executable, "-m", "camo_core.cli", "sim", "--image", str(image)]
+        [sys.executable, "-m", "camo_core.cli", "sim", "--image", str(image), *extra]
         + ["--rows", str(side), "--cols", str(side), "--out", str(sim), "--force"],
         capture_output=True,
         text=True,
@@ -231,14 +242,16 @@ def equals_sim(run: Path, image: Path, side: int) -> bool:
 
 def format_large(rows: list[dict]) -> str:
     lines = [
-        f"{'robots':>8} {'workers':>7} {'set-up s':>9} {'steps/s':>8} {'launch to exit s':>17} "
-        f"{'peak MiB: a worker / all':>25} {'deadlines':>9} {'equals sim':>10}"
+        f"{'robots':>8} {'loss noise':>10} {'workers':>7} {'set-up s':>9} {'steps/s':>8} "
+        f"{'launch to exit s':>17} {'peak MiB: a worker / all':>25} {'deadlines':>9} "
+        f"{'equals sim':>10}"
     ]
     for r in rows:
         peak = r["peak_mib"]
         memory = f"{peak.get('worker_max', 0):>8.0f} / {peak.get('all', 0):<6.0f}"
         lines.append(
-            f"{r['robots']:>8} {r['procs']:>7} {r['setup_s']:>9.1f} {r['steps_per_s']:>8.2f} "
+            f"{r['robots']:>8} {r['links']:>10} {r['procs']:>7} {r['setup_s']:>9.1f} "
+            f"{r['steps_per_s']:>8.2f} "
             f"{r['wall_s']:>17.1f} {memory:>25} {r['deadlines']:>9} "
             f"{'yes' if r.get('equals_sim') else 'NO':>10}"
         )
@@ -258,17 +271,23 @@ def compare(
     steps: int | None,
     repeat: int,
     packed: bool = False,
+    loss: float = 0.0,
 ) -> dict:
     """Medians of alternating swarm and bare runs (this shared machine's speed drifts); with
-    `packed`, of the packed bare exchange too."""
-    swarm, bare, packs = [], [], []
+    `packed`, of the packed bare exchange too; with `loss`, of the swarm with lossy links."""
+    swarm, bare, packs, losing = [], [], [], []
     bare_steps = steps or 45
     for k in range(repeat):
         swarm.append(swarm_run(side, procs, domain, out / f"{side}_{k}", steps))
+        if loss:
+            losing.append(
+                swarm_run(side, procs, domain, out / f"{side}_{k}_loss", steps, lossy(loss))
+            )
         bare.append(bare_exchange(side, bare_steps, procs, domain))
         if packed:
             packs.append(bare_exchange(side, bare_steps, procs, domain, packed=True))
         also = f", packed {packs[-1]['steps_per_s']:.1f}" if packed else ""
+        also += f", swarm with loss {losing[-1]['steps_per_s']:.1f}" if loss else ""
         print(
             f"{side}x{side}: swarm {swarm[-1]['steps_per_s']:.1f} steps/s, "
             f"bare {bare[-1]['steps_per_s']:.1f}{also}; launch to exit "
@@ -279,7 +298,12 @@ def compare(
     for key in ("setup_s", "steps_per_s", "wall_s"):
         row[f"swarm_{key}"] = statistics.median(r[key] for r in swarm)
         row[f"bare_{key}"] = statistics.median(r[key] for r in bare)
+        if loss:
+            row[f"lossy_{key}"] = statistics.median(r[key] for r in losing)
     row["rate_ratio"] = row["swarm_steps_per_s"] / row["bare_steps_per_s"]
+    if loss:
+        row["loss"] = loss
+        row["loss_ratio"] = row["lossy_steps_per_s"] / row["swarm_steps_per_s"]
     if packed:
         row["packed_steps_per_s"] = statistics.median(r["steps_per_s"] for r in packs)
         row["packed_ratio"] = row["swarm_steps_per_s"] / row["packed_steps_per_s"]
@@ -314,6 +338,25 @@ def format_table(rows: list[dict]) -> str:
         wall = f"{r['swarm_wall_s']:>8.1f} / {r['bare_wall_s']:<7.1f}"
         lines.append(
             f"{r['robots']:>8} {r['steps']:>6} {setup} {rate} {r['rate_ratio']:>6.2f} {wall}"
+        )
+    return "\n".join(lines)
+
+
+def format_loss(rows: list[dict]) -> str:
+    """The swarm with lossy links beside the loss-free swarm of the same rows."""
+    lines = [
+        f"{'robots':>8} {'steps':>6} {'loss':>5} {'steps/s':>21} {'ratio':>6} "
+        f"{'launch to exit s':>18}",
+        f"{'':>21} {'lossy / loss-free':>21} {'':>6} {'lossy / loss-free':>18}",
+    ]
+    for r in rows:
+        if "loss" not in r:
+            continue
+        rate = f"{r['lossy_steps_per_s']:>9.1f} / {r['swarm_steps_per_s']:<9.1f}"
+        wall = f"{r['lossy_wall_s']:>8.1f} / {r['swarm_wall_s']:<7.1f}"
+        lines.append(
+            f"{r['robots']:>8} {r['steps']:>6} {r['loss']:>5.2f} {rate} "
+            f"{r['loss_ratio']:>6.2f} {wall}"
         )
     return "\n".join(lines)
 
@@ -360,6 +403,18 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--procs", type=int, default=os.cpu_count() or 1)
     parser.add_argument(
+        "--loss",
+        type=float,
+        default=0.1,
+        help="message loss of the lossy runs beside each swarm figure (default 0.1; 0: none)",
+    )
+    parser.add_argument(
+        "--noise",
+        type=float,
+        default=0.05,
+        help="sensor noise of the lossy large-swarm runs (default 0.05)",
+    )
+    parser.add_argument(
         "--steps",
         type=int,
         default=None,
@@ -379,6 +434,8 @@ def main(argv: list[str] | None = None) -> int:
         sides = (args.record_side, args.view_side)
         if not (1 <= args.procs <= 64 and all(0 <= side <= 256 for side in sides)):
             parser.error("--procs must be in 1..64, --record-side and --view-side in 0..256")
+        if not (0 <= args.loss < 1 and 0 <= args.noise <= 1):
+            parser.error("--loss must be in [0, 1) and --noise in [0, 1]")
     except CamoError as exc:
         print(f"camo bench ros: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -395,14 +452,20 @@ def main(argv: list[str] | None = None) -> int:
             args.steps or default_steps(side),
             args.repeat,
             packed=True,
+            loss=args.loss,
         )
         for side in args.rate_sides
     ]
     whole = [
-        compare(side, args.procs, domain, args.out / "whole", None, args.repeat)
+        compare(side, args.procs, domain, args.out / "whole", None, args.repeat, loss=args.loss)
         for side in args.sides
     ]
-    large = [large_run(side, domain, args.out / "large" / str(side)) for side in args.large_sides]
+    links = [[]] + ([lossy(args.loss, args.noise)] if args.loss else [])
+    large = [
+        large_run(side, domain, args.out / "large" / f"{side}_{k}", extra)
+        for side in args.large_sides
+        for k, extra in enumerate(links)
+    ]
     # What recording, and a live view with no client connected, add to a run.
     extras = {
         "recording": (args.record_side, "record", lambda out: ["--record", str(out / "bag")]),
@@ -426,6 +489,9 @@ def main(argv: list[str] | None = None) -> int:
             )
         print("whole runs (35 + 10 steps):")
         print(format_table(whole))
+        if args.loss:
+            print(f"with {args.loss:.0%} of messages lost (the same runs' loss-free figures):")
+            print(format_loss(rates + whole))
         if large:
             print("large swarms (one run each, the launcher's default processes):")
             print(format_large(large))

@@ -35,10 +35,19 @@ class LinkDraws:
         self.index = {robot: row for row, robot in enumerate(robots)}
         self.widths = [len(s) for s in slots]
         self.present = senders >= 0
+        self.ids = senders  # per slot its neighbour's id, -1 for none
         self.senders = np.where(self.present, senders, 0).astype(np.uint64)
         self.receivers = np.asarray(robots, dtype=np.uint64)[:, None]
-        # Per (stream, step): the table, and its rows as Python lists (what robots read).
+        # Whom each robot knows (discovery's outcome, set by the robot), and when it was set:
+        # a view is made for all robots at once with the knowledge of that moment, and is a
+        # robot's only if it had set its own by then.
+        self.known = np.zeros_like(self.present)
+        self.known_at = [0] * len(robots)  # 0: not yet
+        self.epoch = 0
+        # Per (stream, step): the table of survivals, and each robot's row of it as a tuple.
         self._tables: OrderedDict[tuple[int, int], tuple[np.ndarray, list]] = OrderedDict()
+        # Per (stream, step, slots, known_only): what robots read (View).
+        self._views: OrderedDict[tuple[int, int, int, bool], View] = OrderedDict()
 
     def _drawn(self, stream: int, step: int) -> tuple[np.ndarray, list]:
         key = (stream, step)
@@ -47,10 +56,18 @@ class LinkDraws:
             sender = rng.sender_hash(self.seed, stream, step, self.senders)
             u = rng.to_unit(rng.mix_array(sender ^ self.receivers))
             table = self.present & ~(u < self.rho)
-            drawn = self._tables[key] = table, table.tolist()  # one C call for all rows
+            drawn = self._tables[key] = table, []
             if len(self._tables) > KEPT:
                 self._tables.popitem(last=False)
         return drawn
+
+    def set_known(self, robot: int, known: list[bool]) -> None:
+        """A robot's discovery is over: these are the neighbours it knows."""
+        row = self.index[robot]
+        self.known[row] = False
+        self.known[row, : len(known)] = known
+        self.epoch += 1
+        self.known_at[row] = self.epoch
 
     def table(self, stream: int, step: int) -> np.ndarray:
         """robots x slots: the messages of `stream`/`step` that survive (False for no robot)."""
@@ -58,10 +75,46 @@ class LinkDraws:
 
     def arrivals(self, robot: int, stream: int, step: int) -> tuple[bool, ...]:
         """A robot's row: per slot, does its neighbour's message survive."""
-        row = self.index[robot]
-        values = self._drawn(stream, step)[1][row]
-        width = self.widths[row]
-        return tuple(values if width == len(values) else values[:width])
+        table, rows = self._drawn(stream, step)
+        if not rows:  # made for all robots at once
+            width = table.shape[1]
+            rows.extend(
+                tuple(values) if w == width else tuple(values[:w])
+                for values, w in zip(table.tolist(), self.widths, strict=True)
+            )
+        return rows[self.index[robot]]
+
+    def view(self, stream: int, step: int, slots: int, known_only: bool) -> View:
+        """What robots read of a step's messages of `stream` from their slots below `slots`
+        (and, `known_only`, from the neighbours they know), made for all of them at once."""
+        key = (stream, step, slots, known_only)
+        view = self._views.get(key)
+        if view is None:
+            table = self._drawn(stream, step)[0][:, :slots]
+            if known_only:
+                table = table & self.known[:, :slots]
+            heard = np.where(table, self.ids[:, :slots], -1).tolist()  # one C call for all rows
+            view = self._views[key] = View(self.epoch if known_only else None, heard)
+            if len(self._views) > 2 * KEPT:
+                self._views.popitem(last=False)
+        return view
+
+
+class View:
+    """A (stream, step)'s messages as a process's robots read them, by row (LinkDraws.index):
+    `heard[row]` per slot the neighbour whose message survives, -1 where none does (no robot
+    has that id: a mailbox has nothing from it). Made with whom robots knew at `epoch` (None:
+    whom they know does not matter): a robot whose discovery ended later
+    (`LinkDraws.known_at`) reads its own row elsewhere."""
+
+    __slots__ = ("epoch", "heard")
+
+    def __init__(self, epoch: int | None, heard: list) -> None:
+        self.epoch, self.heard = epoch, heard
+
+    def holds(self, known_at: int) -> bool:
+        """Whether a robot whose discovery ended at `known_at` (0: not yet) may read its row."""
+        return self.epoch is None or 0 < known_at <= self.epoch
 
 
 class LinkBook:

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from camo_core.algorithm import colours, kernels, levels
+from camo_core.algorithm import colours, levels
 from camo_core.algorithm.modes import Modes, modes_of
 from camo_core.algorithm.modes.descriptors import majority_name
 from camo_core.algorithm.orientation import angle_of
@@ -59,12 +59,16 @@ def pattern_said(summary: dict) -> str:
 
 def mean_p(p: np.ndarray) -> np.ndarray:
     """Mean p over robots (p: ... x width), summed in robot-id order by every driver."""
+    from camo_core.algorithm import kernels  # numba: not for a robot's process
+
     p = np.asarray(p, dtype=np.float64)
     return kernels.mean_p(np.ascontiguousarray(p).reshape(-1, p.shape[-1]))
 
 
 def p_stats(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """mean_p(p), and width x 2: the least and the greatest p over robots, per entry."""
+    from camo_core.algorithm import kernels  # numba: not for a robot's process
+
     p = np.asarray(p, dtype=np.float64)
     return kernels.p_stats(np.ascontiguousarray(p).reshape(-1, p.shape[-1]))
 

@@ -36,6 +36,9 @@ class RobotCore:
     # The link's draws, made for all of its process's robots at once (link.LinkDraws); None:
     # this robot draws its own.
     link: LinkDraws | None = None
+    # What it is handed has had the link's losses and its unknown neighbours taken out already
+    # (the step protocol takes a step's messages by `heard`): nothing is left to filter.
+    delivered_filtered: bool = False
     # Its last finished round, in a later round of a --scope local run (scopes.Previous): what
     # it keeps showing if nothing changed for it.
     previous: Previous | None = None
@@ -58,6 +61,7 @@ class RobotCore:
             )
         modes = self.modes = self.modes or modes_of(self.params)
         self.id = robot_id(self.row, self.col, self.params.cols)
+        self.link_row = -1 if self.link is None else self.link.index[self.id]
         # Its slots: on the grid the twelve of §1, on a --layout its neighbours by range, the
         # near ones first (colours, energies and votes come from those).
         self.neighbors, self.near, self.place = modes.layout.slots(self.id)
@@ -88,25 +92,38 @@ class RobotCore:
         link? Drawn once per (stream, step) and kept: the protocol asks on every delivery."""
         if self.params.rho_comm <= 0.0:
             return self._everyone
+        if self.link is not None:  # kept there, for all of its process's robots
+            return self.link.arrivals(self.id, stream, step)
         key = (stream, step)
         cached = self._arrivals.get(key)
         if cached is None:
-            if self.link is not None:
-                cached = self.link.arrivals(self.id, stream, step)
-            else:
-                seed, me, rho = self.params.seed, self.id, self.params.rho_comm
-                cached = tuple(
-                    src is not None and not rng.lost(seed, stream, step, src, me, rho)
-                    for src in self.neighbors
-                )
+            seed, me, rho = self.params.seed, self.id, self.params.rho_comm
+            cached = tuple(
+                src is not None and not rng.lost(seed, stream, step, src, me, rho)
+                for src in self.neighbors
+            )
             self._arrivals[key] = cached
         return cached
+
+    def heard(self, stream: int, step: int, slots: int, known_only: bool = True) -> list[int]:
+        """Per slot below `slots`, the neighbour whose message of `stream`/`step` survives the
+        link (and, `known_only`, that it knows), else -1: no robot has that id, so a mailbox
+        has nothing from it."""
+        link = self.link
+        if link is not None:
+            view = link.view(stream, step, slots, known_only)
+            if view.holds(link.known_at[self.link_row]):
+                return view.heard[self.link_row]
+        arriving = self.arrivals(stream, step)
+        known = (self.known if known_only else self._everyone)[:slots]
+        near = zip(self.neighbors[:slots], arriving[:slots], known, strict=True)
+        return [n if a and k else -1 for n, a, k in near]  # type: ignore[misc]  # a: n is not None
 
     def _filter(self, stream: int, step: int, delivered: Sequence, slots: range) -> Sequence:
         """What was delivered from known neighbours whose message survived the link (a slot
         without a neighbour delivers nothing)."""
-        arriving = self.arrivals(stream, step)
-        if self._all_known and arriving is self._everyone:
+        arriving = self._everyone if self.delivered_filtered else self.arrivals(stream, step)
+        if (self.all_known or self.delivered_filtered) and arriving is self._everyone:
             if not slots.start and slots.stop == len(delivered):
                 return delivered  # all of it (read, never changed)
             return [delivered[s] for s in slots]
@@ -122,13 +139,15 @@ class RobotCore:
         arriving = self.arrivals(rng.STREAM_HELLO, 0)
         self.known = [bool(heard[s]) and arriving[s] for s in range(len(self.neighbors))]
         self._known_counts()
+        if self.link is not None:
+            self.link.set_known(self.id, self.known)
 
     def _known_counts(self) -> None:
         """The consensus degree and the known-slot mask, once known changes (read every step)."""
         self.degree = sum(self.known[s] for s in range(self.near))
         self.known_mask = sum(1 << s for s, known in enumerate(self.known) if known)
         # Every neighbour known: with a lossless link a step's messages need no filtering.
-        self._all_known = all(
+        self.all_known = all(
             k or n is None for k, n in zip(self.known, self.neighbors, strict=True)
         )
 

@@ -37,9 +37,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from itertools import compress
-from operator import and_
-from typing import Any, cast
+from typing import Any
 
 from camo_core.algorithm.change import params_of_round
 from camo_core.algorithm.modes.scopes import Previous
@@ -150,7 +148,7 @@ class StepProtocol:
         # the robot last looked (None: look again at once).
         self._awaiting: tuple[int, ...] | None = None
         self._awaiting_key: Key = (-1, "", -1)
-        self._expected_ids: dict[tuple[str, int, bool], tuple[int, ...]] = {}
+        self._expected_ids: dict[tuple[str, int, bool], list[int]] = {}
         # Delivered and not yet used, by step and sender: early messages wait for their step.
         self.mailbox = mailbox or Mailbox()
         self.last_round: Previous | None = None  # its last finished round
@@ -353,7 +351,7 @@ class StepProtocol:
         pending = self._waiting_for("hello", 0, self.listen["hello"], known_only=False)
         if not self._ready(pending, self.discovery_timeout, now, ticking):
             return False
-        hellos = self._take("hello", 0, self.listen["hello"])
+        hellos = self._take("hello", 0, self.listen["hello"], known_only=False)
         self.core.discover([h is not None for h in hellos])
         self._expected_ids.clear()  # who is known has changed
         self._next(SENSING, 0, now)
@@ -477,7 +475,8 @@ class StepProtocol:
         if self._awaiting is not None and self._awaiting_key == key:
             pending = [n for n in self._awaiting if n not in box]
         else:
-            pending = [n for n in self._expected(kind, step, slots, known_only) if n not in box]
+            expected = self._expected(kind, step, slots, known_only)
+            pending = [n for n in expected if n >= 0 and n not in box]
             if self.silent and pending:
                 slot_of, silent = self.slot_of, self.silent
                 pending = [n for n in pending if slot_of[n] not in silent]
@@ -485,24 +484,19 @@ class StepProtocol:
         self._awaiting = tuple(pending) if pending else None
         return pending
 
-    def _expected(self, kind: str, step: int, slots: int, known_only: bool) -> tuple[int, ...]:
-        """Neighbours in slots below `slots` whose message for `step` survives the link (and,
-        `known_only`, that were discovered). Without loss the same every step: kept per phase."""
+    def _expected(self, kind: str, step: int, slots: int, known_only: bool) -> list[int]:
+        """Per slot below `slots`, the neighbour whose message for `step` survives the link
+        (and, `known_only`, that was discovered), -1 where none does. Without loss the same
+        every step: kept per phase."""
         core = self.core
-        lossless = self.params.rho_comm <= 0.0
+        if self.params.rho_comm > 0.0:  # made for all of the process's robots at once, or drawn
+            return core.heard(STREAM[kind], step, slots, known_only)
         cache_key = (kind, slots, known_only)
-        if lossless:
-            cached = self._expected_ids.get(cache_key)
-            if cached is not None:
-                return cached
-        # A slot without a neighbour never arrives (nor is it known): the slots' flags pick the
-        # neighbours, in C.
-        arriving = core.arrivals(STREAM[kind], step)[:slots]
-        flags = map(and_, arriving, core.known) if known_only else arriving
-        # (A slot that arrives has a neighbour: no None among them.)
-        expected = cast(tuple[int, ...], tuple(compress(core.neighbors[:slots], flags)))
-        if lossless:
-            self._expected_ids[cache_key] = expected
+        expected = self._expected_ids.get(cache_key)
+        if expected is None:
+            expected = self._expected_ids[cache_key] = core.heard(
+                STREAM[kind], step, slots, known_only
+            )
         return expected
 
     def _ready(self, pending: list[int], timeout: float, now: float, ticking: bool) -> bool:
@@ -532,10 +526,14 @@ class StepProtocol:
         assert robot is not None
         return robot
 
-    def _take(self, kind: str, step: int, slots: int) -> list:
-        """The step's messages by slot (None: none came), taken out of the mailbox."""
+    def _take(self, kind: str, step: int, slots: int, known_only: bool = True) -> list:
+        """The step's messages by slot (None: none came, or the link lost it), taken out of the
+        mailbox."""
         box = self.mailbox.take((self.round, kind, step))
-        return list(map(box.get, self.core.neighbors[:slots]))  # a slot's None finds nothing
+        core = self.core
+        if core.delivered_filtered:  # a slot whose message was lost, or is unknown, finds nothing
+            return list(map(box.get, core.heard(STREAM[kind], step, slots, known_only)))
+        return list(map(box.get, core.neighbors[:slots]))  # a slot's None finds nothing
 
     def _next(self, phase: int, step: int, now: float) -> None:
         self.phase, self.step = phase, step
@@ -567,7 +565,14 @@ class StepProtocol:
         """The robot in a round: with its process's link draws where its mailbox has them, and
         its last finished round (a --scope local robot that saw no change keeps its display)."""
         link = None if self.mailbox.link is None else self.mailbox.link.draws(params)
-        return RobotCore(params, row, col, link=link, previous=self.last_round)
+        return RobotCore(
+            params,
+            row,
+            col,
+            link=link,
+            delivered_filtered=link is not None,
+            previous=self.last_round,
+        )
 
     # ---- output ---------------------------------------------------------------------
 

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from camo_core.algorithm import kernels, layout_rules, orientation, rules
+from camo_core.algorithm import layout_rules, orientation, rules
 from camo_core.algorithm.orientation import CODES, ORIENTED
 from camo_core.algorithm.patterns import PATTERN_NAMES, WIDTH
 
@@ -153,6 +153,8 @@ class AnyOrientation(Axes):
         return orientation.choose(p), p
 
     def vote_all(self, sensed, known_mask, prefix, rho, scores, energy):
+        from camo_core.algorithm import kernels  # numba: for the whole grid's paths only
+
         shape = sensed.shape
         tensor = np.empty(shape), np.empty(shape), np.empty(shape)
         kernels.tensors_all(sensed, known_mask, prefix, rho, *tensor)

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from camo_core.algorithm import kernels, orientation, rng, rules
+from camo_core.algorithm import orientation, rng, rules
 from camo_core.algorithm.params import CamoParams
 
 KAPPA = 0.25  # the imbalance e_h - e_v of stripes, beyond which a robot's texture is striped
@@ -108,6 +108,8 @@ class GlobalScope:
     def run(self, params, p0, width, known_mask, degree, each_step) -> np.ndarray:
         """The whole grid's consensus from p0 (rows x cols x (width + histogram)); each_step(k,
         reported) is told the p each robot reports after step k. The averaged vectors."""
+        from camo_core.algorithm import kernels  # numba: for the whole grid's paths only
+
         p = p0
         nxt = np.empty_like(p)
         step_kernel = kernels.consensus_step if p.shape[-1] == 3 else kernels.consensus_step_n
@@ -236,6 +238,8 @@ class LocalScope:
         (C), and from the end of C, when their segment's consensus begins, their p."""
         seed, rho = params.seed, params.rho_comm
         shown: list[np.ndarray] = []  # what robots report while they do not average p
+
+        from camo_core.algorithm import kernels  # numba: for the whole grid's paths only
 
         def averaged(x: np.ndarray, first: int, steps: int, gate=None) -> np.ndarray:
             nxt = np.empty_like(x)
