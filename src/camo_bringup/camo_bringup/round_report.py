@@ -14,7 +14,6 @@ import numpy as np
 from camo_bringup.run_config import RunConfig
 from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.result import pattern_said
-from camo_core.results.animation import join_animations
 from camo_core.results.record import round_fields
 from camo_core.swarm.robot_io import CONSENSUS
 from camo_core.swarm.run_setup import contiguous
@@ -133,6 +132,8 @@ def continuous_round(
     for key, at in (("noticed_s", summary["noticed_at"]), ("done_s", done_at)):
         row[key] = None if at is None or changed is None else round(at - changed, 3)
     # The run's GIF: every round so far, one after another.
+    from camo_core.results.animation import join_animations  # matplotlib: by what draws
+
     join_animations(
         [config.folder / f"round_{k}" for k in range(index + 1)], config.folder / "run.gif"
     )

@@ -39,8 +39,7 @@ from camo_core.algorithm.result import RunResult
 from camo_core.algorithm.sensing import image_digest
 from camo_core.cli.options import Parser, add_out_options, out_dir, seconds
 from camo_core.exceptions import CamoError
-from camo_core.results.animation import write_animation
-from camo_core.results.output import run_title, write_round
+from camo_core.results.output import Parallel, run_title, write_round
 from camo_core.results.record import Backgrounds, RoundRecord, Rounds
 from camo_core.results.snapshots import Snapshots
 from camo_core.shutdown import StopFlag
@@ -350,10 +349,20 @@ class MonitorNode(Node):
     ) -> dict:
         """summary.json, figure.png and run.gif of a round (partial: how far a stopped run
         got; `extra`: more fields for its summary)."""
+        from camo_core.results.animation import write_animation  # matplotlib: by what draws
+
         image = self.images.get(round_index)
         record, dead = self.record(round_index), self.dead(round_index)
         title = run_title(label, record.params, "robot nodes")  # the round's seed
         marks = record.marks(dead, self.bridged)
+        snapshots = Snapshots.of_record(record)
+        # run.gif in a forked process of its own while this one draws figure.png: the two
+        # drawings share the machine's cores (the robots' processes are stopping meanwhile).
+        gif = Parallel(
+            lambda: write_animation(
+                snapshots, record.sensed_shown, dead, folder / "run.gif", title, marks
+            )
+        )
         summary = write_round(
             self.result(round_index, partial),
             image,
@@ -363,8 +372,7 @@ class MonitorNode(Node):
             {"rejected_messages": self.rejected_messages(), **(extra or {})},
             marks,
         )
-        snapshots = Snapshots.of_record(record)
-        write_animation(snapshots, record.sensed_shown, dead, folder / "run.gif", title, marks)
+        gif.wait("run.gif")
         return summary
 
     def _view(self) -> tuple[int, RoundRecord]:
