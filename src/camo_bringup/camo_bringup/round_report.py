@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import sys
+import time
 from pathlib import Path
 
 import cv2
@@ -41,7 +42,9 @@ def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dic
     """summary.json, figure.png and timing.json of a finished round, and its result line; the
     summary."""
     folder = round_folder(config, index)
+    writing = time.monotonic()
     summary = monitor.write(index, folder, config.labels[index])
+    written = time.monotonic()
     params = config.params
     steps = modes_of(params).scope.steps(params) + params.formation_steps
     missed = int(monitor.record(index).deadlines.sum())
@@ -57,6 +60,10 @@ def report_round(config: RunConfig, monitor: MonitorNode, index: int, times: dic
         "steps_s": done - voted,
         "steps_per_s": steps / max(done - voted, 1e-9),
         "launch_to_done_s": done - launched,
+        # From the last robot done (this process's clock) to summary.json, figure.png and
+        # run.gif written: what the user waits for after the swarm's last step.
+        "done_to_written_s": written - times["done"],
+        "writing_s": written - writing,
         "deadlines": missed,
         "peak_mib": times.get("peak_mib", {}),  # largest resident sets: a worker, all together
         # When the round's frame was projected and when its last robot was done (ROS time, s

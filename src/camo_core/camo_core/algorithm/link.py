@@ -18,6 +18,7 @@ from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams
 
 KEPT = 64  # (stream, step) tables a round's draws keep: the steps its robots are in, and more
+VIEWS_KEPT = 24  # views of them (a worker of 8192 robots: about 1 MB each)
 
 
 class LinkDraws:
@@ -95,7 +96,7 @@ class LinkDraws:
                 table = table & self.known[:, :slots]
             heard = np.where(table, self.ids[:, :slots], -1).tolist()  # one C call for all rows
             view = self._views[key] = View(self.epoch if known_only else None, heard)
-            if len(self._views) > 2 * KEPT:
+            if len(self._views) > VIEWS_KEPT:
                 self._views.popitem(last=False)
         return view
 
