@@ -25,7 +25,7 @@ from camo_nodes.topics.runs import setup_from
 from camo_nodes.trust import BackgroundCheck, Hosts, Rejections, merged
 
 OPTIONS = ["--pattern", "forest", "--rows", "6", "--cols", "6", "--seed", "2"]
-OPTIONS += ["--rho-comm", "0.1", "--consensus-steps", "600"]
+OPTIONS += ["--rho-comm", "0.1", "--consensus-steps", "300"]
 SETUP = {
     "run": "r",
     "params": {"rows": 6, "cols": 6},
@@ -70,6 +70,10 @@ def test_a_run_under_attack_equals_the_simulator_and_reports_what_it_refused(tmp
     assert "not from the process hosting its sender" in refused["by_reason"]
     assert "columns of different lengths" in refused["by_reason"]  # refused whole, counted once
     assert "a background that is not the run's next one" in refused["by_reason"]
+    # Its writer on the run's recorded topic never reports as a recorder: the run's end does
+    # not wait hold's minute for it (it did: 54 s from the last robot done to the results).
+    timing = json.loads((tmp_path / "run" / "timing.json").read_text())
+    assert timing["done_to_written_s"] < 30, timing
 
 
 # ---- the pieces, alone ----------------------------------------------------------------------

@@ -38,6 +38,10 @@ class RunSide(Protocol):
 
 
 RECORDER_SETTLE = 1.0  # s after the parameters appear that a waiting recorder has joined
+# s a round's end waits for a writer on the run's recorded topic that has never reported as a
+# recorder does (a recorder reports as it records): a stranger writing there does not hold
+# the run for `hold`'s minute.
+UNHEARD_GRACE = 5.0
 
 
 def recorder_report(text: str) -> dict | None:
@@ -130,15 +134,30 @@ class Recorders:
         if finished is None:
             finished = int(session.monitor.record(round_index).finished.sum())
 
+        deadline = time.monotonic() + limit
+        unheard_until = time.monotonic() + UNHEARD_GRACE
+        warned = False
+
         def short() -> list[dict]:
             """The reports of recorders that do not hold the round yet."""
+            nonlocal warned
             reports = self.live_reports()
-            if len(reports) < self.count() or not self.own_heard():
-                return [{}]  # a recorder not heard from yet
+            if not self.own_heard():
+                return [{}]  # our own recorder, not heard from yet
+            if len(reports) < self.count():
+                if time.monotonic() < unheard_until:
+                    return [{}]  # a recorder not heard from yet
+                if not warned:
+                    print(
+                        f"camo run: {self.count() - len(reports)} writers on "
+                        f"{session.topics.recorded} never reported as recorders; not waited "
+                        "for",
+                        file=sys.stderr,
+                    )
+                    warned = True
             continuous = session.config.continuous
             return [r for r in reports if not holds(r, round_index, finished, continuous)]
 
-        deadline = time.monotonic() + limit
         while lacking := short():
             problem = group.failed()
             if problem:
