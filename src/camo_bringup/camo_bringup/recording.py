@@ -80,6 +80,10 @@ class Recorders:
         # Whether our recorder still runs: one that could not write its bag (a full disk) has
         # said so and exited, and the run goes on without waiting for it.
         self.own_running: Callable[[], bool] = lambda: True
+        # Since when the graph has shown more writers on the recorded topic than have reported
+        # as recorders (None: it does not now): they are waited for UNHEARD_GRACE from then.
+        self._unheard_since: float | None = None
+        self._unheard_said = False
         node.create_subscription(String, topics.recorded, self._on_recorded, LATCHED_READER)
         # Created now, written at the end: recorders subscribe to it while the run goes on.
         self.result_pub = node.create_publisher(String, topics.result, LATCHED)
@@ -109,6 +113,29 @@ class Recorders:
             return max(len(self.live_reports()), publishers - 1)
         return max(1, publishers)
 
+    def waited_for(self) -> int:
+        """The recorders a wait waits for: those the graph shows, but of the writers that have
+        never reported as recorders, only for UNHEARD_GRACE after they were first seen (a
+        recorder reports four times a second as it records; a stranger writing on the topic
+        never does), then said once and not waited for again."""
+        graph, heard = self.count(), len(self.live_reports())
+        if graph <= heard:
+            self._unheard_since = None  # every writer there has reported
+            return graph
+        now = time.monotonic()
+        if self._unheard_since is None:
+            self._unheard_since = now
+        if now - self._unheard_since < UNHEARD_GRACE:
+            return graph
+        if not self._unheard_said:
+            print(
+                f"camo run: {graph - heard} writers on {self.session.topics.recorded} never "
+                "reported as recorders; not waited for",
+                file=sys.stderr,
+            )
+            self._unheard_said = True
+        return heard
+
     def present(self) -> bool:
         """Whether a recorder records the run. A recorder waiting for a run finds it within
         about a discovery announcement period (fastdds.xml) of its parameters' appearing: a
@@ -135,26 +162,12 @@ class Recorders:
             finished = int(session.monitor.record(round_index).finished.sum())
 
         deadline = time.monotonic() + limit
-        unheard_until = time.monotonic() + UNHEARD_GRACE
-        warned = False
 
         def short() -> list[dict]:
             """The reports of recorders that do not hold the round yet."""
-            nonlocal warned
             reports = self.live_reports()
-            if not self.own_heard():
-                return [{}]  # our own recorder, not heard from yet
-            if len(reports) < self.count():
-                if time.monotonic() < unheard_until:
-                    return [{}]  # a recorder not heard from yet
-                if not warned:
-                    print(
-                        f"camo run: {self.count() - len(reports)} writers on "
-                        f"{session.topics.recorded} never reported as recorders; not waited "
-                        "for",
-                        file=sys.stderr,
-                    )
-                    warned = True
+            if len(reports) < self.waited_for() or not self.own_heard():
+                return [{}]  # a recorder not heard from yet
             continuous = session.config.continuous
             return [r for r in reports if not holds(r, round_index, finished, continuous)]
 
@@ -180,7 +193,7 @@ class Recorders:
     def views_matched(self, limit: float = 5.0) -> None:
         """Before the round's final scene and diagnostics: every recorder subscribes to them
         (it finds topics as they appear; a short round can end first), or `limit` passes."""
-        recorders = self.count()
+        recorders = self.waited_for()
         monitor = self.session.monitor
         views = (monitor.markers_pub, monitor.diagnostics_pub)
         deadline = time.monotonic() + limit
@@ -188,6 +201,7 @@ class Recorders:
             if all(v.get_subscription_count() >= recorders for v in views):
                 return
             self.session.spin()
+            recorders = self.waited_for()
 
     def publish_result(self, result: dict, limit: float = 10.0) -> None:
         """The run's last word, latched, and waited for: every recorder must hold it (a bag
@@ -196,7 +210,7 @@ class Recorders:
         deadline = time.monotonic() + limit
         while time.monotonic() < deadline:
             reports = self.live_reports()
-            present = self.count()
+            present = self.waited_for()
             heard = len(reports) >= present and self.own_heard()
             if not present or (heard and all(r["result"] for r in reports)):
                 break  # every recorder has it (one that stopped by itself had it)

@@ -363,15 +363,19 @@ class MonitorNode(Node):
                 snapshots, record.sensed_shown, dead, folder / "run.gif", title, marks
             )
         )
-        summary = write_round(
-            self.result(round_index, partial),
-            image,
-            folder,
-            title,
-            self.progress_line(round_index) if partial else None,
-            {"rejected_messages": self.rejected_messages(), **(extra or {})},
-            marks,
-        )
+        try:
+            summary = write_round(
+                self.result(round_index, partial),
+                image,
+                folder,
+                title,
+                self.progress_line(round_index) if partial else None,
+                {"rejected_messages": self.rejected_messages(), **(extra or {})},
+                marks,
+            )
+        except BaseException:
+            gif.stop()  # a round written again must not meet this one's GIF half-written
+            raise
         gif.wait("run.gif")
         return summary
 

@@ -47,8 +47,9 @@ class LinkDraws:
         self.epoch = 0
         # Per (stream, step): the table of survivals, and each robot's row of it as a tuple.
         self._tables: OrderedDict[tuple[int, int], tuple[np.ndarray, list]] = OrderedDict()
-        # Per (stream, step, slots, known_only): what robots read (View).
-        self._views: OrderedDict[tuple[int, int, int, bool], View] = OrderedDict()
+        # Per (stream, step, known_only): what robots read (View), of all their slots (a robot
+        # reads the ones it listens to: on a --layout the number differs from robot to robot).
+        self._views: OrderedDict[tuple[int, int, bool], View] = OrderedDict()
 
     def _drawn(self, stream: int, step: int) -> tuple[np.ndarray, list]:
         key = (stream, step)
@@ -85,16 +86,16 @@ class LinkDraws:
             )
         return rows[self.index[robot]]
 
-    def view(self, stream: int, step: int, slots: int, known_only: bool) -> View:
-        """What robots read of a step's messages of `stream` from their slots below `slots`
-        (and, `known_only`, from the neighbours they know), made for all of them at once."""
-        key = (stream, step, slots, known_only)
+    def view(self, stream: int, step: int, known_only: bool) -> View:
+        """What robots read of a step's messages of `stream` (and, `known_only`, from the
+        neighbours they know), made for all of them at once."""
+        key = (stream, step, known_only)
         view = self._views.get(key)
         if view is None:
-            table = self._drawn(stream, step)[0][:, :slots]
+            table = self._drawn(stream, step)[0]
             if known_only:
-                table = table & self.known[:, :slots]
-            heard = np.where(table, self.ids[:, :slots], -1).tolist()  # one C call for all rows
+                table = table & self.known
+            heard = np.where(table, self.ids, -1).tolist()  # one C call for all rows
             view = self._views[key] = View(self.epoch if known_only else None, heard)
             if len(self._views) > VIEWS_KEPT:
                 self._views.popitem(last=False)

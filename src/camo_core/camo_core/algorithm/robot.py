@@ -111,9 +111,9 @@ class RobotCore:
         has nothing from it."""
         link = self.link
         if link is not None:
-            view = link.view(stream, step, slots, known_only)
+            view = link.view(stream, step, known_only)
             if view.holds(link.known_at[self.link_row]):
-                return view.heard[self.link_row]
+                return view.heard[self.link_row][:slots]
         arriving = self.arrivals(stream, step)
         known = (self.known if known_only else self._everyone)[:slots]
         near = zip(self.neighbors[:slots], arriving[:slots], known, strict=True)

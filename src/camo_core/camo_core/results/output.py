@@ -3,8 +3,10 @@ write them."""
 
 from __future__ import annotations
 
+import gc
 import math
 import multiprocessing
+import signal
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -62,8 +64,11 @@ def write_round(
 
 class Parallel:
     """`work()` in a forked process of its own (where fork is there; else at once, here), so
-    that what a run writes at its end shares the machine's cores. `wait` joins it: an error in
-    it is one line here."""
+    that what a run writes at its end shares the machine's cores. `wait` joins it (`limit`
+    seconds at most): an error in it is one line here. Whoever forks it and cannot wait for it
+    (an error of its own) calls `stop`."""
+
+    LIMIT = 300.0  # s: drawing a round's outputs takes seconds; more is a process that hangs
 
     def __init__(self, work: Callable[[], None]) -> None:
         self.process = None
@@ -75,21 +80,32 @@ class Parallel:
         )
         self.process.start()
 
-    def wait(self, what: str) -> None:
+    def wait(self, what: str, limit: float = LIMIT) -> None:
         if self.process is None:
             return
         try:
-            self.process.join()
+            self.process.join(limit)
         finally:
-            if self.process.is_alive():  # Ctrl-C in the join: it is stopped with this process
-                self.process.terminate()
-                self.process.join()
+            if self.process.is_alive():  # Ctrl-C in the join, or it hangs: it is stopped
+                self.stop()
         if self.process.exitcode != 0:
             raise CamoError(f"writing {what} failed (exit code {self.process.exitcode})")
+
+    def stop(self) -> None:
+        """Stop it, without waiting for what it writes."""
+        if self.process is not None and self.process.is_alive():
+            self.process.terminate()
+            self.process.join()
 
 
 def _run_reporting(work: Callable[[], None]) -> None:
     """A forked worker's body: an error is one line on stderr and exit code 1."""
+    # What the parent held is never finalized here: a forked copy of a ROS process would call
+    # into DDS, whose threads it does not have. Its parent's Ctrl-C and stop flags are not its
+    # own: Ctrl-C leaves it to finish, SIGTERM (stop) ends it.
+    gc.freeze()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     try:
         work()
     except Exception as exc:  # noqa: BLE001 - whatever it is, one line, as the parent says
