@@ -43,7 +43,7 @@ def test_a_forked_writer_finishes_through_ctrl_c_and_stop_ends_it(tmp_path):
     hung = Parallel(lambda: time.sleep(60))
     started = time.monotonic()
     hung.stop()
-    assert time.monotonic() - started < 10 and hung.process.exitcode == -signal.SIGTERM
+    assert time.monotonic() - started < 10 and hung.process.exitcode < 0  # by a signal
 
 
 def test_a_forked_writer_that_hangs_is_stopped_after_the_limit_and_said():

@@ -95,7 +95,10 @@ class Parallel:
         """Stop it, without waiting for what it writes."""
         if self.process is not None and self.process.is_alive():
             self.process.terminate()
-            self.process.join()
+            self.process.join(2.0)
+            if self.process.is_alive():  # SIGTERM came before it took its own handler
+                self.process.kill()
+                self.process.join()
 
 
 def _run_reporting(work: Callable[[], None]) -> None:
