@@ -36,8 +36,7 @@ def test_a_forked_writer_finishes_through_ctrl_c_and_stop_ends_it(tmp_path):
         done.write_text("ok")
 
     writer = Parallel(slow)
-    time.sleep(0.3)
-    os.kill(writer.process.pid, signal.SIGINT)
+    os.kill(writer.process.pid, signal.SIGINT)  # at once: before its handlers, held back
     writer.wait("done")
     assert done.read_text() == "ok"
     hung = Parallel(lambda: time.sleep(60))

@@ -62,6 +62,9 @@ def write_round(
     return summary
 
 
+FORK_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
 class Parallel:
     """`work()` in a forked process of its own (where fork is there; else at once, here), so
     that what a run writes at its end shares the machine's cores. `wait` joins it (`limit`
@@ -78,7 +81,14 @@ class Parallel:
         self.process = multiprocessing.get_context("fork").Process(
             target=_run_reporting, args=(work,), daemon=True
         )
-        self.process.start()
+        # Forked with Ctrl-C and SIGTERM held back until the child has its own handlers: one
+        # that came between the fork and them would run the parent's there (a KeyboardInterrupt
+        # before multiprocessing's bootstrap would even go on as a copy of the parent).
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, FORK_SIGNALS)
+        try:
+            self.process.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
     def wait(self, what: str, limit: float = LIMIT) -> None:
         if self.process is None:
@@ -109,6 +119,7 @@ def _run_reporting(work: Callable[[], None]) -> None:
     gc.freeze()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, FORK_SIGNALS)  # held back since the fork
     try:
         work()
     except Exception as exc:  # noqa: BLE001 - whatever it is, one line, as the parent says
