@@ -135,6 +135,17 @@ def region_map(rng, layout, n, size):
     raise ValueError(layout)
 
 
+def usable_region_map(rng, layout: str, n: int, size: int):
+    """region_map drawn again (100 times at most) until all n regions are there, none under
+    6% of the scene; the last one drawn otherwise."""
+    for _ in range(100):
+        region, info = region_map(rng, layout, n, size)
+        areas = np.bincount(region.ravel(), minlength=n) / region.size
+        if len(np.unique(region)) == n and areas.min() > 0.06:
+            break
+    return region, info
+
+
 def _adjacent(region, n):
     adj = np.zeros((n, n), bool)
     for a, b in ((region[:-1], region[1:]), (region[:, :-1], region[:, 1:])):
@@ -298,11 +309,7 @@ def make_scene(
     n = int(n_regions or rng.integers(2, 5))
     layout = str(layout or rng.choice(LAYOUTS))
     cell = size / cells
-    for _ in range(100):
-        region, linfo = region_map(rng, layout, n, size)
-        areas = np.bincount(region.ravel(), minlength=n) / region.size
-        if len(np.unique(region)) == n and areas.min() > 0.06:
-            break
+    region, linfo = usable_region_map(rng, layout, n, size)
     pats = np.asarray(patterns if patterns is not None else assign_patterns(rng, region, n))
     image = np.zeros((size, size))
     tex_info, redraws = [], 0
@@ -427,11 +434,7 @@ def orient_scene(seed, cells=32, size=512, check_fn=None) -> Scene:
     n = int(rng.integers(2, 5))
     layout = str(rng.choice(LAYOUTS))
     cell = size / cells
-    for _ in range(100):
-        region, _info = region_map(rng, layout, n, size)
-        areas = np.bincount(region.ravel(), minlength=n) / region.size
-        if len(np.unique(region)) == n and areas.min() > 0.06:
-            break
+    region, _info = usable_region_map(rng, layout, n, size)
     adj = _adjacent(region, n)
     for _ in range(500):
         codes = np.where(rng.random(n) < 0.3, M, 3 + rng.integers(0, 12, n))
