@@ -6,6 +6,8 @@ import json
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from skimage import color as skcolor
 from skimage import data
 from support import COMPUTE, PROCESS, Bus, run_camo
@@ -155,6 +157,47 @@ def test_colour_distance_is_the_mean_ciede2000_of_shown_against_sensed():
     paper = simulate(CamoParams(), raw, raw_colours=raw_colours).summary()
     assert paper["colour_distance"] > summary["colour_distance"]
     assert np.array(paper["display"]).shape == (8, 8)
+
+
+def _ciede2000_robot_by_robot(shown, sensed) -> float:
+    lab = lambda rgb: skcolor.rgb2lab(np.asarray(rgb, float).reshape(-1, 1, 3) / 255.0)  # noqa: E731
+    return float(np.mean(skcolor.deltaE_ciede2000(lab(sensed), lab(shown))))
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.integers(1, 3000),
+    st.integers(1, 40),
+    st.sampled_from(["greys", "colours", "noisy"]),
+    st.integers(0, 2**32 - 1),
+)
+def test_colour_distance_worked_out_per_distinct_pair_equals_robot_by_robot(n, tones, kind, seed):
+    # Few distinct pairs take the table, mostly distinct ones go robot by robot: both give
+    # exactly the mean of scikit-image's differences worked out for every robot.
+    rng = np.random.default_rng(seed)
+    if kind == "greys":
+        sensed = np.repeat((rng.integers(0, 511, n) / 2.0)[:, None], 3, axis=1)
+    elif kind == "colours":
+        sensed = rng.integers(0, 256, (tones, 3))[rng.integers(0, tones, n)].astype(float)
+    else:
+        sensed = rng.random((n, 3)) * 255
+    shown = rng.integers(0, 256, (tones, 3))[rng.integers(0, tones, n)]
+    assert colours.colour_distance(shown, sensed) == _ciede2000_robot_by_robot(shown, sensed)
+
+
+def test_distinct_rows_map_every_row_to_an_equal_one_and_refuse_hash_collisions(monkeypatch):
+    rng = np.random.default_rng(3)
+    rows = rng.integers(0, 3, (5000, 6)).astype(float)
+    rows[17] = -0.0  # -0.0 and 0.0 differ in their bits: told apart, each kept as it is
+    first, each = colours._distinct_rows(rows)
+    assert len(first) == len(np.unique(rows.view(np.uint64), axis=0))
+    assert np.array_equal(rows[first][each].view(np.uint64), rows.view(np.uint64))
+    assert colours._distinct_rows(rng.random((5000, 6))) is None  # mostly distinct
+    # Two different rows with one hash are never merged: the check sends them robot by robot.
+    monkeypatch.setattr(colours, "_row_keys", lambda bits: np.zeros(len(bits), np.uint64))
+    assert colours._distinct_rows(rows) is None
+    shown, sensed = rows[:, :3] * 60, rows[:, 3:] * 60
+    assert colours.colour_distance(shown, sensed) == _ciede2000_robot_by_robot(shown, sensed)
 
 
 @pytest.mark.slow(COMPUTE)

@@ -157,11 +157,50 @@ def palettes(vectors: np.ndarray, own: np.ndarray, k: int) -> tuple[np.ndarray, 
 
 def colour_distance(shown: np.ndarray, sensed: np.ndarray) -> float:
     """The mean CIEDE2000 difference (scikit-image's) between the colours robots show and
-    those they sensed (sRGB ... x 3, 0..255), over the robots given."""
+    those they sensed (sRGB ... x 3, 0..255), over the robots given.
+
+    A swarm shows a few palette colours over a few hundred sensed ones, so the difference is
+    worked out once for each distinct (sensed, shown) pair and spread back to every robot:
+    the same numbers, summed in the same order, as working it out robot by robot."""
     from skimage.color import deltaE_ciede2000, rgb2lab
 
-    shown = np.asarray(shown, dtype=np.float64).reshape(-1, 1, 3)
-    sensed = np.asarray(sensed, dtype=np.float64).reshape(-1, 1, 3)
+    shown = np.asarray(shown, dtype=np.float64).reshape(-1, 3)
+    sensed = np.asarray(sensed, dtype=np.float64).reshape(-1, 3)
     if shown.size == 0:
         return 0.0
-    return float(np.mean(deltaE_ciede2000(rgb2lab(sensed / 255.0), rgb2lab(shown / 255.0))))
+    pairs = np.concatenate([sensed, shown], axis=1)
+    first, each = _distinct_rows(pairs) or (slice(None), slice(None))
+    sensed, shown = pairs[first, None, :3], pairs[first, None, 3:]
+    differences = deltaE_ciede2000(rgb2lab(sensed / 255.0), rgb2lab(shown / 255.0))[:, 0]
+    return float(np.mean(differences[each]))
+
+
+def _distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(first, each): the index of one row of every distinct value in `rows` (n x m float64)
+    and, for every row, which of them it equals (rows == rows[first][each], bit for bit); None
+    where more than half the rows are distinct. Rows are told apart by a 64-bit hash of their
+    bits, checked afterwards: if two different rows ever shared a hash, None."""
+    bits = np.ascontiguousarray(rows).view(np.uint64)
+    key = _row_keys(bits)
+    sample = key[:: max(1, len(key) // 4096)]
+    if len(np.unique_values(sample)) > len(sample) // 2:
+        return None  # mostly distinct (noisy colours): not worth a table
+    distinct = np.sort(np.unique_values(key))  # by hashing: no sort of all n keys
+    if len(distinct) > len(rows) // 2:
+        return None
+    each = np.searchsorted(distinct, key)
+    first = np.empty(len(distinct), np.intp)
+    first[each] = np.arange(len(rows))
+    if not np.array_equal(bits[first][each], bits):
+        return None
+    return first, each
+
+
+def _row_keys(bits: np.ndarray) -> np.ndarray:
+    """A 64-bit hash of each row of `bits` (n x m uint64)."""
+    key = np.zeros(len(bits), np.uint64)
+    for column in bits.T:  # FNV-style: fold in a column, multiply (mod 2^64), mix high bits down
+        key ^= column
+        key *= np.uint64(0x100000001B3)
+        key ^= key >> np.uint64(29)
+    return key
