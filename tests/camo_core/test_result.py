@@ -9,10 +9,12 @@ import cv2
 import matplotlib.axes
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from support import COMPUTE
 
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.result import SUMMARY_KEYS, RunResult
+from camo_core.algorithm.result import SUMMARY_KEYS, RunResult, p_stats
 from camo_core.algorithm.simulator import simulate
 from camo_core.results import figures
 from camo_core.results import summary as result
@@ -192,3 +194,23 @@ def test_small_grid_figure_is_drawn_as_before(tmp_path, monkeypatch):
     shapes = [shape for shape, _ in calls]
     assert shapes == [(128, 192), (rows, cols), (rows, cols, 3), (rows, cols), (rows, cols)]
     assert not any("extent" in kwargs for _, kwargs in calls)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 300), st.integers(1, 8), st.integers(0, 2**32 - 1), st.booleans())
+def test_p_stats_sums_in_robot_order_and_keeps_the_first_robots_nan(n, width, seed, holes):
+    # The mean is the sum in robot-id order (as every driver sums it), the spread the least and
+    # greatest; a NaN in the first robot's p stays, a later one is passed over.
+    rng = np.random.default_rng(seed)
+    p = rng.random((n, width)) * rng.choice([1e-9, 1.0, 1e9], (n, width))
+    if holes:
+        p[rng.random((n, width)) < 0.1] = np.nan
+    mean, spread = p_stats(p)
+    in_order = np.cumsum(p, axis=0)[-1] / n  # cumsum adds one robot after another
+    assert np.array_equal(mean, in_order, equal_nan=True)
+    for k in range(width):
+        column = p[:, k]
+        if np.isnan(column[0]):
+            assert np.isnan(spread[k]).all()
+        else:
+            assert spread[k, 0] == np.nanmin(column) and spread[k, 1] == np.nanmax(column)

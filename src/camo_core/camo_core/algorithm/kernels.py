@@ -366,18 +366,36 @@ def mean_p(p_flat):
 @njit(cache=True)
 def p_stats(p_flat):
     """mean_p's mean (the same sums in the same order) and, in the same pass, width x 2: the
-    least and the greatest p over robots, per entry."""
+    least and the greatest p over robots, per entry (NaN where the first robot's is)."""
     n, width = p_flat.shape
     total = np.zeros(width)
     spread = np.full((width, 2), np.nan)
-    for r in range(n):
-        for k in range(width):
-            value = p_flat[r, k]
-            total[k] = total[k] + value
-            if r == 0 or value < spread[k, 0]:
-                spread[k, 0] = value
-            if r == 0 or value > spread[k, 1]:
-                spread[k, 1] = value
+    if n == 0:
+        return total / n, spread
+    spread[:, 0] = p_flat[0]
+    spread[:, 1] = p_flat[0]
+    # Three entries at a time, each in robot-id order as mean_p sums them: three independent
+    # sums, least and greatest in registers rather than one chain through memory.
+    for k0 in range(0, width, 3):
+        a, b, c = k0, min(k0 + 1, width - 1), min(k0 + 2, width - 1)
+        sa, sb, sc = 0.0, 0.0, 0.0
+        la, lb, lc = spread[a, 0], spread[b, 0], spread[c, 0]
+        ga, gb, gc = spread[a, 1], spread[b, 1], spread[c, 1]
+        for r in range(n):
+            va, vb, vc = p_flat[r, a], p_flat[r, b], p_flat[r, c]
+            sa += va
+            sb += vb
+            sc += vc
+            la = va if va < la else la
+            lb = vb if vb < lb else lb
+            lc = vc if vc < lc else lc
+            ga = va if va > ga else ga
+            gb = vb if vb > gb else gb
+            gc = vc if vc > gc else gc
+        # a width that is no multiple of three repeats its last entry: the same values again
+        total[c], spread[c, 0], spread[c, 1] = sc, lc, gc
+        total[b], spread[b, 0], spread[b, 1] = sb, lb, gb
+        total[a], spread[a, 0], spread[a, 1] = sa, la, ga
     return total / n, spread
 
 
