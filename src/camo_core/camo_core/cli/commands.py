@@ -116,11 +116,13 @@ def cmd_sim(args: argparse.Namespace) -> int:
     sensed = modes.sensing.shown(result.sensed, result.sensed_rgb)
     # figure.png and run.gif are drawn in a process of their own while this one writes
     # summary.json: on two cores a 1024x1024 run's outputs take half the time.
-    drawing = Parallel(partial(_draw, result, image, snapshots, folder, title, marks, sensed))
+    figure = Parallel(partial(_draw_figure, result, image, folder, title, marks))
+    gif = Parallel(partial(_draw_gif, result.params, snapshots, folder, title, marks, sensed))
     summary = result.summary(arrays=True)
     write_summary(summary, folder)
     write_params_file(args.options_parser, args, folder)
-    drawing.wait("figure.png and run.gif")
+    figure.wait("figure.png")
+    gif.wait("run.gif")
     how = "" if modes.layout.grid else "robot by robot "
     print(
         f"pattern: {pattern_said(summary)}; wrote {folder}/summary.json, "
@@ -165,13 +167,18 @@ def previous_round(folder: str, params: CamoParams, modes: Modes) -> Previous:
     return Previous(raw, pattern, final, grid)
 
 
-def _draw(result, image, snapshots, folder, title, marks, sensed) -> None:
-    """figure.png and run.gif of a simulator run (matplotlib is imported here, by what draws)."""
+def _draw_figure(result, image, folder, title, marks) -> None:
+    """figure.png of a simulator run (matplotlib is imported here, by what draws)."""
     from camo_core.results import figures
-    from camo_core.results.animation import write_animation
 
     figures.run_figure(result, image, folder / "figure.png", title=title, marks=marks)
-    dead = np.zeros(result.params.count, bool)  # the simulator loses messages, never robots
+
+
+def _draw_gif(params, snapshots, folder, title, marks, sensed) -> None:
+    """run.gif of a simulator run."""
+    from camo_core.results.animation import write_animation
+
+    dead = np.zeros(params.count, bool)  # the simulator loses messages, never robots
     write_animation(snapshots, sensed, dead, folder / "run.gif", title, marks)
 
 
