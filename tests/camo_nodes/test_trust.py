@@ -25,7 +25,7 @@ from camo_nodes.topics.runs import setup_from
 from camo_nodes.trust import BackgroundCheck, Hosts, Rejections, merged
 
 OPTIONS = ["--pattern", "forest", "--rows", "6", "--cols", "6", "--seed", "2"]
-OPTIONS += ["--rho-comm", "0.1", "--consensus-steps", "300"]
+OPTIONS += ["--rho-comm", "0.1", "--consensus-steps", "120"]
 SETUP = {
     "run": "r",
     "params": {"rows": 6, "cols": 6},
