@@ -294,7 +294,7 @@ def foxglove_client(tmp_path_factory):
 
 def pytest_sessionstart(session):
     """Shared memory that killed processes of an earlier session left would hang this one's."""
-    from camo_nodes.shm import remove_stale
+    from camo_core.shm import remove_stale
 
     if not in_a_worker(session.config):
         remove_stale()
@@ -303,7 +303,7 @@ def pytest_sessionstart(session):
 def pytest_sessionfinish(session, exitstatus):
     """Tests kill robots, workers and launchers: remove the shared-memory files Fast DDS leaves
     of processes killed (those whose lock nobody holds, as `fastdds shm clean` does)."""
-    from camo_nodes.shm import remove_stale
+    from camo_core.shm import remove_stale
 
     if not in_a_worker(session.config):
         remove_stale()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+import mmap
 import os
 import subprocess
 import sys
@@ -13,7 +14,7 @@ import pytest
 from support import MACHINE, PROCESS, ROOT
 
 from camo_bringup.soak import camo_processes
-from camo_nodes.shm import remove_stale, stale_files
+from camo_core.shm import orphans, remove_stale, stale_files
 
 
 @pytest.mark.slow(PROCESS)
@@ -31,6 +32,8 @@ def test_consecutive_runs_leave_no_process_no_shared_memory_and_the_same_result(
     report = json.loads(out.stdout)
     assert report["runs"] == 3 and report["failed_runs"] == []
     assert report["leaked_processes"] == [] and report["stale_shm_files"] == []
+    # A run leaves its own few files for the next camo process to remove: none pile up.
+    assert max(report["shm_entries_per_run"]) <= 8, report["shm_entries_per_run"]
     assert report["killed_at_stop"] == 0
     assert report["results_differing_from_the_first"] == []
     assert report["peak_mib_first_last"][0] > 10
@@ -81,5 +84,36 @@ def test_shared_memory_of_a_dead_owner_is_stale_and_of_a_live_one_is_not(tmp_pat
         "fastrtps_live",
         "fastrtps_live_el",
         "fastrtps_port7413",
+        "unrelated",
+    ]
+
+
+def test_shared_memory_no_process_has_open_or_mapped_is_an_orphan_once_old(tmp_path):
+    # A port file whose lock file went, and multiprocessing's semaphores of killed workers:
+    # no lock tells of them, only that no process has them open or mapped.
+    old = time.time() - 60
+    names = ("fastrtps_port7415", "sem.fastrtps_port7415_mutex", "sem.mp-killed", "sem.mp-open")
+    names += ("sem.mp-mapped", "sem.mp-young", "unrelated")
+    for name in names:
+        (tmp_path / name).write_bytes(bytes(64))
+        if name != "sem.mp-young":
+            os.utime(tmp_path / name, (old, old))
+    opened = os.open(tmp_path / "sem.mp-open", os.O_RDONLY)
+    with open(tmp_path / "sem.mp-mapped", "r+b") as file:
+        mapped = mmap.mmap(file.fileno(), 64)  # mapped, its file closed: as a live semaphore
+    try:
+        assert sorted(p.name for p in orphans(tmp_path)) == [
+            "fastrtps_port7415",
+            "sem.fastrtps_port7415_mutex",
+            "sem.mp-killed",
+        ]
+        assert remove_stale(tmp_path) == 3
+    finally:
+        os.close(opened)
+        mapped.close()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "sem.mp-mapped",
+        "sem.mp-open",
+        "sem.mp-young",
         "unrelated",
     ]

@@ -1,7 +1,10 @@
 """`./camo bench soak --runs N`: N small runs one after another in one domain, and what they leave.
 
 After each run it looks for what a run must not leave behind: camo processes
-still running, Fast DDS shared-memory files of dead processes (/dev/shm), and a
+still running, Fast DDS shared-memory files of dead processes, entries of /dev/shm
+(Fast DDS's, Python multiprocessing's) that pile up from one run to the next (each run's
+processes remove what earlier ones left, `camo_core.shm`: after the last run the count is
+the first run's), and a
 result that differs from the first run's (same parameters, same seed: a
 leftover in the domain would show here). Over the runs it compares the last
 tenth with the first: the peak memory of a run's processes, the machine's available
@@ -22,8 +25,8 @@ from pathlib import Path
 
 from camo_core.cli.options import Parser
 from camo_core.exceptions import EXIT_USAGE, CamoError
+from camo_core.shm import ORPHAN_PREFIXES, SHM, stale_files
 from camo_core.shutdown import interrupt_on_signals
-from camo_nodes.shm import stale_files
 
 MODULES = ("camo_nodes.", "camo_projector.", "camo_bag.", "camo_droplet.")
 RESULT_KEYS = ("pattern", "votes", "mean_p", "final")
@@ -90,6 +93,14 @@ def one_run(index: int, args: argparse.Namespace, domain: int) -> dict:
     }
 
 
+def shm_entries() -> int:
+    """/dev/shm's entries of the kinds camo's processes make (Fast DDS's, multiprocessing's)."""
+    try:
+        return sum(1 for name in os.listdir(SHM) if name.startswith(ORPHAN_PREFIXES))
+    except OSError:
+        return 0
+
+
 def tenth(values: list[float], last: bool) -> float:
     k = max(1, len(values) // 10)
     return statistics.median(values[-k:] if last else values[:k])
@@ -98,6 +109,8 @@ def tenth(values: list[float], last: bool) -> float:
 def soak(args: argparse.Namespace) -> dict:
     before = {os.getpid()}
     stale_before = {p.name for p in stale_files()}
+    entries_before = shm_entries()
+    entries: list[int] = []  # after each run: what it left (the next camo process removes it)
     domain = 150 + os.getpid() % 30
     available = [available_mib()]
     runs, leaked, stale_new, differing = [], {}, set(), []
@@ -111,6 +124,7 @@ def soak(args: argparse.Namespace) -> dict:
             except OSError:
                 pass
         stale_new |= {p.name for p in stale_files()} - stale_before
+        entries.append(shm_entries())
         if runs and run["result"] != runs[0]["result"]:
             differing.append(index)
         runs.append(run)
@@ -118,7 +132,7 @@ def soak(args: argparse.Namespace) -> dict:
         print(
             f"soak {index + 1}/{args.runs}: exit {run['exit']}, {run['wall_s']:.1f} s, "
             f"peak {run['peak_mib']:.0f} MiB; leaked processes {len(leaked)}, "
-            f"stale shm files {len(stale_new)}",
+            f"stale shm files {len(stale_new)}, /dev/shm entries {entries[-1]}",
             file=sys.stderr,
         )
     walls = [r["wall_s"] for r in runs]
@@ -132,6 +146,11 @@ def soak(args: argparse.Namespace) -> dict:
         "leaked_processes": sorted(leaked.values()),
         "killed_at_stop": sum(r["killed_at_stop"] for r in runs),
         "stale_shm_files": sorted(stale_new),
+        "shm_entries_before": entries_before,
+        "shm_entries_per_run": entries,
+        # What the runs leave piles up if the last tenth's count is above the first tenth's (a
+        # run leaves a few files of its own, removed by the next: the count varies by a few).
+        "shm_entries_gained": tenth(entries, True) - tenth(entries, False),
         "peak_mib_first_last": [tenth(peaks, False), tenth(peaks, True)],
         "peak_ratio": tenth(peaks, True) / tenth(peaks, False),
         "wall_s_first_last": [tenth(walls, False), tenth(walls, True)],
@@ -151,6 +170,11 @@ def format_report(report: dict) -> str:
             f"  leaked processes:               {len(report['leaked_processes'])}",
             f"  processes killed at the end:    {report['killed_at_stop']}",
             f"  stale shared-memory files:      {len(report['stale_shm_files'])}",
+            f"  /dev/shm entries before / after the first / after the last run: "
+            f"{report['shm_entries_before']} / {report['shm_entries_per_run'][0]} / "
+            f"{report['shm_entries_per_run'][-1]}",
+            f"  /dev/shm entries gained, first to last tenth of the runs: "
+            f"{report['shm_entries_gained']:g}",
             f"  peak memory of a process, first/last tenth: {first:.0f} / {last:.0f} MiB "
             f"(ratio {report['peak_ratio']:.2f})",
             f"  launch to exit, first/last tenth:           {wall_first:.1f} / {wall_last:.1f} s "
@@ -193,6 +217,7 @@ def main(argv: list[str] | None = None) -> int:
     clean = not (
         report["leaked_processes"]
         or report["stale_shm_files"]
+        or report["shm_entries_gained"] > 0
         or report["failed_runs"]
         or report["results_differing_from_the_first"]
         or report["killed_at_stop"]

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from camo_core.exceptions import UsageError
+from camo_core.shm import remove_stale
 
 ROOT = Path(__file__).resolve().parents[3]
 CONNECT_TIMEOUT_S = 10
@@ -112,6 +113,9 @@ class DaskEngine:
         finally:
             if self.cluster is not None:
                 self.cluster.close()
+                # The semaphores of workers killed on the way (multiprocessing's, in /dev/shm):
+                # nothing unlinks them but this (camo_core.shm).
+                remove_stale()
 
 
 def worker_environment() -> None:
@@ -125,6 +129,7 @@ def local_engine(workers: int, ros_per_worker: int = 1) -> DaskEngine:
     """A LocalCluster of `workers` single-threaded processes over TCP on 127.0.0.1, its
     dashboard on 127.0.0.1 only."""
     worker_environment()
+    remove_stale()  # what killed camo processes left in /dev/shm
     from distributed import Client, LocalCluster
 
     # The workers start ignoring SIGINT (they keep the disposition they are born with): Ctrl-C
