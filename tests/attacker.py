@@ -10,6 +10,12 @@ secret), as soon as the run's launcher has started. It prints "ready" (stderr) o
 publishers exist, stops after SECONDS or on SIGTERM, and prints how many topics it attacked
 and messages it sent.
 
+    python tests/attacker.py RUN_ID SECONDS --replay IMAGE
+
+One that listens to every topic of the run for SECONDS, then plays every message it took
+again, bytes for bytes (a keyed run's tags with them), and tells the projector to load IMAGE
+(a path) and a built-in background.
+
     python tests/attacker.py RUN_ID SECONDS --hijack FIRST-LAST ...
 
 A quieter stranger (for tests/camo_bringup/test_launcher.py): it only announces those tiles as
@@ -47,6 +53,7 @@ from camo_msgs.msg import (
     Vote,
     Votes,
 )
+from camo_nodes.topics import keyed
 from camo_nodes.topics.robot_messages import VALUE_COLUMNS
 
 COLUMNS = {Hellos: ("hello", Hello), Colors: ("color", Color), Votes: ("vote", Vote)}
@@ -119,8 +126,8 @@ def hijack(node, run: str, seconds: float, tiles: list[str]) -> int:
     ranges = [tuple(int(x) for x in tile.split("-")) for tile in tiles]
     announcement = Host(name=node.get_name(), first=[a for a, _ in ranges])
     announcement.last = [b for _, b in ranges]
-    node.create_publisher(Host, f"/{run}/camo/hosts", latched).publish(announcement)
-    beat = node.create_publisher(Heartbeat, f"/{run}/swarm/heartbeat", 10)
+    keyed.publisher(node, Host, f"/{run}/camo/hosts", latched, run).publish(announcement)
+    beat = keyed.publisher(node, Heartbeat, f"/{run}/swarm/heartbeat", 10, run)
     print("ready", file=sys.stderr, flush=True)
     stop: list[bool] = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
@@ -133,10 +140,49 @@ def hijack(node, run: str, seconds: float, tiles: list[str]) -> int:
     return 0
 
 
+def replay(node, run: str, seconds: float, image: str) -> int:
+    """Listen to every topic of the run for SECONDS, taking each message's bytes as they came
+    (a keyed run's tags and all), then write them all again, in order, on their topics; and
+    tell the projector to load IMAGE (a path) and a built-in background."""
+    from rclpy.qos import HistoryPolicy
+
+    qos = QoSProfile(
+        depth=1, history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE
+    )
+    taken: list[tuple[str, bytes]] = []
+    readers, writers = {}, {}
+    print("ready", file=sys.stderr, flush=True)
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        for name, types in node.get_topic_names_and_types():
+            if name.startswith(f"/{run}/") and name not in readers and types[0] in TYPES:
+                cls = TYPES[types[0]]
+                readers[name] = node.create_subscription(
+                    cls, name, lambda data, name=name: taken.append((name, data)), qos, raw=True
+                )
+                writers[name] = node.create_publisher(cls, name, qos)
+        rclpy.spin_once(node, timeout_sec=0.05)
+    for name, data in taken:  # played again, bytes for bytes
+        writers[name].publish(data)
+    load = node.create_publisher(String, f"/{run}/camo/projector/load", 10)
+    end = time.monotonic() + 3
+    while time.monotonic() < end:  # volatile: sent while the projector listens
+        load.publish(String(data=image))
+        load.publish(String(data="desert"))
+        rclpy.spin_once(node, timeout_sec=0.2)
+    print(json.dumps({"topics": len(readers), "replayed": len(taken)}))
+    return 0
+
+
 def main() -> int:
     run, seconds, tiles = sys.argv[1], float(sys.argv[2]), sys.argv[3:]
     rclpy.init()
     node = rclpy.create_node("stranger")
+    if tiles[:1] == ["--replay"]:
+        code = replay(node, run, seconds, tiles[1])
+        node.destroy_node()
+        rclpy.shutdown()
+        return code
     if tiles[:1] == ["--hijack"]:
         code = hijack(node, run, seconds, tiles[1:])
         node.destroy_node()
@@ -156,7 +202,7 @@ def main() -> int:
             for kind, cls in zip(KINDS, COLUMNS, strict=True):
                 guessed[f"/{run}/camo/tile_{tile.replace('-', '_')}/{part}/{kind}"] = cls
     for name, cls in guessed.items():
-        publishers[name] = (node.create_publisher(cls, name, qos), cls)
+        publishers[name] = (keyed.publisher(node, cls, name, qos, run), cls)
     print("ready", file=sys.stderr, flush=True)
     count, cols = 36, 6
     random.seed(1)
@@ -168,7 +214,7 @@ def main() -> int:
         for name, types in node.get_topic_names_and_types():
             if name.startswith(f"/{run}/") and name not in publishers and types[0] in TYPES:
                 cls = TYPES[types[0]]
-                publishers[name] = (node.create_publisher(cls, name, qos), cls)
+                publishers[name] = (keyed.publisher(node, cls, name, qos, run), cls)
         for publisher, cls in publishers.values():
             for _ in range(5):
                 publisher.publish(forged(cls, sent, count, cols))

@@ -2,6 +2,7 @@
 gets the round the swarm has done, one with an image makes a continuous swarm camouflage it.
 Driven without ROS: how many goals it keeps open, and what it does for them in a turn."""
 
+import json
 import os
 import re
 import subprocess
@@ -17,6 +18,8 @@ from support import ROOT, SWARM, domain, finished, start_run, wait_for_line
 from camo_bringup.camouflage_action import MAX_OPEN, CamouflageAction, OpenGoal
 from camo_core.algorithm.backgrounds import background
 from camo_core.results.record import Backgrounds
+from camo_core.swarm.keys import KEY_FILE_ENV, NO_TAG, new_key_file
+from camo_nodes.topics import keyed
 from camo_nodes.topics.images import image_to_msg
 
 
@@ -30,8 +33,12 @@ def client_script(tmp_path) -> str:
     return str(path)
 
 
-def client(script: str, domain_id: int, *args: str) -> subprocess.CompletedProcess:
+def client(script: str, domain_id: int, key, *args: str) -> subprocess.CompletedProcess:
+    """The docs client, with the run's `key` file (None: without one)."""
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
+    env.pop(KEY_FILE_ENV, None)
+    if key is not None:
+        env[KEY_FILE_ENV] = str(key)
     return subprocess.run(
         [sys.executable, script, *args], env=env, capture_output=True, text=True, timeout=120
     )
@@ -49,11 +56,14 @@ def test_the_docs_client_follows_a_goal_of_a_continuous_run_to_its_result(tmp_pa
     )  # fmt: skip
     try:
         wait_for_line(proc, "topics under")
-        now = client(script, domain_id, "goals")  # no image: the round under way, or done
+        key = tmp_path / "run" / "run.key"  # the run's own, made as it started
+        stranger = client(script, domain_id, None, "goals", str(desert))
+        assert stranger.returncode == 1 and "refused the goal" in stranger.stderr
+        now = client(script, domain_id, key, "goals")  # no image: the round under way, or done
         assert now.returncode == 0, now.stderr
         assert re.search(r"^round 0 \(frame 0\): vertical \(", now.stdout, re.M), now.stdout
         assert "robots per phase" in now.stdout  # feedback while it waited
-        goal = client(script, domain_id, "goals", str(desert))
+        goal = client(script, domain_id, key, "goals", str(desert))
         assert goal.returncode == 0, goal.stderr
         assert re.search(r"^round 1 \(frame [1-9]\d*\): horizontal \(", goal.stdout, re.M)
         _, err = finished(proc, 120)
@@ -62,6 +72,8 @@ def test_the_docs_client_follows_a_goal_of_a_continuous_run_to_its_result(tmp_pa
             proc.kill()
     assert proc.returncode == 0, err[-2000:]
     assert (tmp_path / "run" / "goals" / "goal_0.png").exists()
+    refused = json.loads((tmp_path / "run" / "round_0" / "summary.json").read_text())
+    assert refused["rejected_messages"]["by_reason"].get(NO_TAG) == 1, refused
 
 
 @pytest.mark.slow(SWARM)
@@ -76,7 +88,7 @@ def test_a_run_without_continuous_refuses_a_goal_with_an_image(tmp_path):
     )  # fmt: skip
     try:
         wait_for_line(proc, "topics under")
-        goal = client(script, domain_id, "fixed", str(desert))
+        goal = client(script, domain_id, tmp_path / "run" / "run.key", "fixed", str(desert))
         assert goal.returncode == 1 and "refused the goal" in goal.stderr, goal.stderr
     finally:
         proc.send_signal(2)
@@ -113,6 +125,7 @@ def action_of(tmp_path) -> CamouflageAction:
     action.executor = SimpleNamespace(spin_once=lambda timeout_sec: None)
     action.folder, action.open, action.done = tmp_path / "goals", [], []
     action._numbers = iter(range(100))
+    action.keys = keyed.GoalCheck("r")  # no key in this process: every goal passes it
     return action
 
 
@@ -198,13 +211,34 @@ def test_a_goal_showing_the_scene_camouflaged_already_gets_its_round(tmp_path):
             assert time.monotonic() < deadline and proc.poll() is None, "no round 0"
             time.sleep(0.2)
         sent = time.monotonic()
-        goal = client(script, domain_id, "same", str(forest))
+        key = tmp_path / "run" / "run.key"
+        goal = client(script, domain_id, key, "same", str(forest))
         assert goal.returncode == 0, goal.stderr
         assert re.search(r"^round 0 \(frame 0\): vertical \(", goal.stdout, re.M), goal.stdout
-        now = client(script, domain_id, "same")  # no image: the round of the scene shown
+        now = client(script, domain_id, key, "same")  # no image: the round of the scene shown
         assert re.search(r"^round 0 \(frame 0\): vertical \(", now.stdout, re.M), now.stdout
         assert time.monotonic() - sent < 30
     finally:
         proc.send_signal(2)
         _, err = finished(proc, 60)
     assert "superseded" not in err and "round 1" not in err
+
+
+def test_a_keyed_server_takes_a_goal_tagged_with_its_key_once(tmp_path, monkeypatch):
+    from camo_msgs.action import Camouflage
+
+    monkeypatch.setenv(KEY_FILE_ENV, str(new_key_file(tmp_path / "k").path))
+    keyed.process_key.cache_clear()
+    try:
+        check = keyed.GoalCheck("lab")
+        goal = keyed.tag_goal(Camouflage.Goal(image=image_to_msg(background("desert"))), "lab")
+        assert len(goal.key_tag) == 32 and check.problem(goal) is None
+        assert check.problem(goal) == "a goal sent again (its key tag was taken once)"
+        assert check.problem(Camouflage.Goal()) == NO_TAG  # no tag
+        other = keyed.tag_goal(Camouflage.Goal(), "another_run")
+        assert check.problem(other) == NO_TAG
+        changed = keyed.tag_goal(Camouflage.Goal(), "lab")
+        changed.image.width = 4  # the tag covers the whole goal
+        assert check.problem(changed) == NO_TAG
+    finally:
+        keyed.process_key.cache_clear()

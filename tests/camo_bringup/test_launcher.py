@@ -33,6 +33,7 @@ from support import (
 )
 
 from camo_bringup import launcher, run_config, worker
+from camo_core.swarm.keys import KEY_FILE_ENV, NO_TAG, new_key_file
 from camo_core.swarm.robot_io import CONSENSUS
 
 
@@ -537,11 +538,16 @@ def running(pid: int) -> bool:
         return False
 
 
-def stranger_hosting(run: str, domain_id: str, *tiles: str) -> subprocess.Popen:
-    """tests/attacker.py announcing `tiles` of run `run` as its own (and beating), once ready."""
+def stranger_hosting(run: str, domain_id: str, *tiles: str, key: str = "") -> subprocess.Popen:
+    """tests/attacker.py announcing `tiles` of run `run` as its own (and beating), once ready;
+    with the run's `key` file, or without one."""
+    env = {**os.environ, "ROS_DOMAIN_ID": domain_id}
+    env.pop(KEY_FILE_ENV, None)
+    if key:
+        env[KEY_FILE_ENV] = key
     stranger = subprocess.Popen(
         [sys.executable, str(ROOT / "tests" / "attacker.py"), run, "300", "--hijack", *tiles],
-        env={**os.environ, "ROS_DOMAIN_ID": domain_id},
+        env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -554,12 +560,39 @@ DISCOVERY = 5.0  # s: the runs below wait this long for a robot's neighbours at 
 
 
 @pytest.mark.slow(SWARM)
-def test_a_stranger_hosting_the_runs_cells_first_ends_it_in_one_line(tmp_path):
-    """A process the launcher did not start announces cells 4-8 of run lab before its workers
-    do: the run ends (code 2) within its discovery timeout, says who took what in one line,
-    and leaves none of its processes behind."""
+def test_a_stranger_without_the_key_hosting_the_runs_cells_first_changes_nothing(tmp_path):
+    """A process without the run's key announces cells 4-8 of run lab before its workers do,
+    and beats: its announcements and heartbeats are refused, and the run is the simulator's."""
     domain_id = str(domain())
+    key = str(new_key_file(tmp_path / "lab.key").path)
     stranger = stranger_hosting("lab", domain_id, "4-8")
+    try:
+        options = ["--rows", "3", "--cols", "3", "--seed", "4", "--pattern", "forest"]
+        options += ["--consensus-steps", "400"]  # seconds: its processes report what they refused
+        run = start_run(
+            *options,
+            *["--run-id", "lab", "--procs", "2", "--key-file", key],
+            *["--discovery-timeout", str(DISCOVERY), "--out", str(tmp_path / "run")],
+            domain_id=domain_id,
+        )
+        _, err = finished(run, 120)
+    finally:
+        stranger.terminate()
+        finished(stranger, 30)
+    assert run.returncode == 0, err[-3000:]
+    sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
+    ran = assert_like_sim(tmp_path / "run", tmp_path / "sim", attacked=True)
+    assert sim.returncode == 0 and ran["rejected_messages"]["by_reason"][NO_TAG] > 0, ran
+
+
+@pytest.mark.slow(SWARM)
+def test_an_insider_hosting_the_runs_cells_first_ends_it_in_one_line(tmp_path):
+    """A process with the run's key that the launcher did not start announces cells 4-8 of
+    run lab before its workers do: the run ends (code 2) within its discovery timeout, says
+    who took what in one line, and leaves none of its processes behind."""
+    domain_id = str(domain())
+    key = str(new_key_file(tmp_path / "lab.key").path)
+    stranger = stranger_hosting("lab", domain_id, "4-8", key=key)
     err_path = tmp_path / "stderr"
     started, children = time.monotonic(), set()
     try:
@@ -567,6 +600,7 @@ def test_a_stranger_hosting_the_runs_cells_first_ends_it_in_one_line(tmp_path):
             run = subprocess.Popen(
                 [sys.executable, "-m", "camo_bringup.launcher", "--rows", "3", "--cols", "3"]
                 + ["--run-id", "lab", "--domain-id", domain_id, "--procs", "2"]
+                + ["--key-file", key]
                 + ["--discovery-timeout", str(DISCOVERY), "--out", str(tmp_path / "run")],
                 cwd=ROOT,
                 stdout=subprocess.DEVNULL,
@@ -598,10 +632,11 @@ def test_a_worker_for_cells_hosted_already_or_not_left_to_it_says_so_in_one_line
     cells the run hosts itself, it exits 2 at once with one line saying why."""
     domain_id = str(domain())
     env = {**os.environ, "ROS_DOMAIN_ID": domain_id}
+    key = str(new_key_file(tmp_path / "lab.key").path)  # the run's, given to its workers
     run = subprocess.Popen(
         [sys.executable, "-m", "camo_bringup.launcher", "--rows", "3", "--cols", "3"]
         + ["--run-id", "lab", "--domain-id", domain_id, "--procs", "1", "--remote-cells", "6-8"]
-        + ["--discovery-timeout", "120", "--out", str(tmp_path / "run")],
+        + ["--discovery-timeout", "120", "--out", str(tmp_path / "run"), "--key-file", key],
         cwd=ROOT,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
@@ -610,13 +645,13 @@ def test_a_worker_for_cells_hosted_already_or_not_left_to_it_says_so_in_one_line
     stranger = None
     try:
         wait_for_line(run, "topics under")
-        stranger = stranger_hosting("lab", domain_id, "6-8")
+        stranger = stranger_hosting("lab", domain_id, "6-8", key=key)
         workers = {}
         for cells in ("6-8", "0-2"):
             started = time.monotonic()
             workers[cells] = subprocess.run(
                 [sys.executable, "-m", "camo_bringup.worker", "--cells", cells]
-                + ["--run-id", "lab", "--wait", "30"],
+                + ["--run-id", "lab", "--wait", "30", "--key-file", key],
                 capture_output=True,
                 text=True,
                 timeout=60,
@@ -985,8 +1020,8 @@ def test_a_large_swarm_on_this_machine_defers_discovery_to_a_server_of_its_own(t
     small = ["--rows", "64", "--cols", "64", "--out", str(tmp_path / "b")]
     assert config_from(build_parser().parse_args(small), environ={}).deferred is None
     # Not when the user chose how processes find each other, nor with workers elsewhere.
-    for extra in (["--network", "subnet"], ["--discovery-server", "10.0.0.1:11811"]):
-        args = build_parser().parse_args([*large[:-1], str(tmp_path / "c"), *extra])
+    for k, extra in enumerate((["--network", "subnet"], ["--discovery-server", "10.0.0.1:11811"])):
+        args = build_parser().parse_args([*large[:-1], str(tmp_path / f"c{k}"), *extra])
         assert config_from(args, environ={}).deferred is None
     remote = [*large[:-1], str(tmp_path / "d"), "--remote-cells", "0-9"]
     assert config_from(build_parser().parse_args(remote), environ={}).deferred is None

@@ -11,6 +11,8 @@ import pytest
 from support import PROCESS, SWARM, assert_like_sim, domain, finished, run_camo
 from two_hosts import TwoHosts, lossy_available, netns_available
 
+from camo_core.swarm.keys import new_key_file
+
 OK, WHY = netns_available()
 pytestmark = pytest.mark.skipif(not OK, reason=WHY)
 
@@ -51,17 +53,18 @@ def test_a_swarm_split_across_two_hosts_equals_the_simulator(tmp_path, mode):
         else:
             network = ["--discovery-server", discovery_server(net, env)]
         before = net.traffic("a")
+        key = ["--key-file", str(new_key_file(tmp_path / "split.key").path)]  # on both hosts
         launcher = net.popen(
             "a",
             [sys.executable, "-m", "camo_bringup.launcher", *OPTIONS, "--procs", "1"]
             + ["--remote-cells", f"{half}-{ROWS * COLS - 1}", "--run-id", "split"]
-            + ["--out", str(tmp_path / "run"), *network],
+            + ["--out", str(tmp_path / "run"), *network, *key],
             env,
         )
         worker = net.popen(
             "b",
             [sys.executable, "-m", "camo_bringup.worker", "--cells", f"{half}-{ROWS * COLS - 1}"]
-            + ["--run-id", "split", *network],
+            + ["--run-id", "split", *network, *key],
             env,
         )
         _, said = finished(launcher, 240)
@@ -111,6 +114,7 @@ def split_run(net: TwoHosts, tmp_path, env: dict[str, str]) -> tuple:
     """The launcher with half the robots on host a, a worker with the rest on host b."""
     half = ROWS * COLS // 2
     network = ["--network", "subnet"]
+    network += ["--key-file", str(new_key_file(tmp_path / "faults.key").path)]  # both hosts
     launcher = net.popen(
         "a",
         [sys.executable, "-m", "camo_bringup.launcher", *OPTIONS, "--procs", "1"]

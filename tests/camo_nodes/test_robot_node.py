@@ -9,6 +9,8 @@ from types import SimpleNamespace
 import pytest
 from support import SWARM, assert_like_sim, domain, finished, ros_node, run_camo, start_run
 
+from camo_core.swarm.keys import KEY_FILE_ENV, new_key_file
+
 
 def test_robot_with_cell_outside_grid_exits_with_one_line():
     out = subprocess.run(
@@ -78,13 +80,15 @@ def test_robot_with_negative_rho_exits_with_one_line():
 @pytest.mark.slow(SWARM)
 def test_robots_started_alone_and_a_remote_worker_join_a_run_and_equal_the_simulator(tmp_path):
     domain_id = domain()
-    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id)}
+    key = str(new_key_file(tmp_path / "alone.key").path)  # the run's, given to all its processes
+    env = {**os.environ, "ROS_DOMAIN_ID": str(domain_id), KEY_FILE_ENV: key}
     options = ["--pattern", "desert", "--rows", "2", "--cols", "3", "--seed", "4"]
     options += ["--rho-comm", "0.2"]
     # The launcher starts no robot: row 0 is a worker's, row 1 three robots alone.
     launcher = start_run(
         *options,
         *["--remote-cells", "0-2", "--remote-cells", "3-5", "--run-id", "alone"],
+        *["--key-file", key],
         *["--out", str(tmp_path / "run")],
         domain_id=env["ROS_DOMAIN_ID"],
     )

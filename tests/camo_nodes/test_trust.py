@@ -19,6 +19,7 @@ from support import (
     wait_for_line,
 )
 
+from camo_core.swarm.keys import KEY_FILE_ENV, NO_TAG, new_key_file
 from camo_core.swarm.run_setup import RunSetup
 from camo_msgs.msg import Host
 from camo_nodes.topics.runs import setup_from
@@ -37,11 +38,20 @@ SETUP = {
 
 
 @pytest.mark.slow(SWARM)
-def test_a_run_under_attack_equals_the_simulator_and_reports_what_it_refused(tmp_path):
+@pytest.mark.parametrize("insider", [False, True], ids=["stranger", "insider_with_the_key"])
+def test_a_run_under_attack_equals_the_simulator_and_reports_what_it_refused(tmp_path, insider):
+    """A stranger without the run's key: every message it writes is refused for its tag. One
+    that has the key file (what keys cannot stop) is refused message by message, by what the
+    run checks besides: its sender's host, its columns, the run's backgrounds."""
+    key = str(new_key_file(tmp_path / "run.key").path)
     env = {**os.environ, "ROS_DOMAIN_ID": str(domain())}
+    env.pop(KEY_FILE_ENV, None)
+    if insider:
+        env[KEY_FILE_ENV] = key
     run = start_run(
         *OPTIONS,
         *["--procs", "2", "--run-id", "attacked", "--out", str(tmp_path / "run")],
+        *["--key-file", key],
         domain_id=env["ROS_DOMAIN_ID"],
     )
     wait_for_line(run, "topics under")
@@ -67,9 +77,12 @@ def test_a_run_under_attack_equals_the_simulator_and_reports_what_it_refused(tmp
     refused = ran["rejected_messages"]
     assert refused["total"] > 0 and sum(refused["by_reason"].values()) == refused["total"]
     assert "received messages refused" in out
-    assert "not from the process hosting its sender" in refused["by_reason"]
-    assert "columns of different lengths" in refused["by_reason"]  # refused whole, counted once
-    assert "a background that is not the run's next one" in refused["by_reason"]
+    if not insider:
+        assert set(refused["by_reason"]) == {NO_TAG}, refused
+    else:
+        assert "not from the process hosting its sender" in refused["by_reason"]
+        assert "columns of different lengths" in refused["by_reason"]  # refused whole, once
+        assert "a background that is not the run's next one" in refused["by_reason"]
     # Its writer on the run's recorded topic never reports as a recorder: the run's end does
     # not wait hold's minute for it (it did: 54 s from the last robot done to the results).
     timing = json.loads((tmp_path / "run" / "timing.json").read_text())

@@ -48,7 +48,8 @@ def test_a_projector_given_a_parameter_it_has_not_exits_at_once_naming_itself():
     assert out.returncode == 2
     assert out.stderr.strip() == (
         "projector_node: error: projector has no parameter bogus (it has: image, pattern, "
-        "background_topic, video, fps, loop, images, period, camera, max_fps, snapshot, run_id)"
+        "background_topic, video, fps, loop, images, period, camera, max_fps, snapshot, goals, "
+        "run_id)"
     )
 
 

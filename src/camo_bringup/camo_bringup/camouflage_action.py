@@ -38,6 +38,7 @@ from camo_core.exceptions import CamoError
 from camo_core.inputs.images import MAX_IMAGE_PIXELS
 from camo_core.swarm.robot_io import CONSENSUS
 from camo_msgs.action import Camouflage
+from camo_nodes.topics import keyed
 from camo_nodes.topics.images import image_from_msg
 
 FEEDBACK_PERIOD = 0.5  # s
@@ -75,6 +76,7 @@ class CamouflageAction:
         self.done: deque[tuple[int, int, dict]] = deque(maxlen=DONE_KEPT)
         self._grids: dict[int, np.ndarray | None] = {}  # frame -> its greys, of rounds in `done`
         self._numbers = itertools.count()
+        self.keys = keyed.GoalCheck(config.topics.run)
         # A node and executor of its own: a result sent after its request's callback returned
         # fails from rclpy's EventsExecutor, which the launcher's other nodes spin ("Failed to
         # send result response"); rclpy's own executor keeps the request for later.
@@ -94,6 +96,11 @@ class CamouflageAction:
     # ---- the server's callbacks ------------------------------------------------------------
 
     def _goal(self, request) -> GoalResponse:
+        refused = self.keys.problem(request)  # a keyed run takes its key holders' goals only
+        if refused:
+            self.session.monitor.rejected.refuse(refused, b"", "a Camouflage goal")
+            self.session.node.get_logger().warning(f"Camouflage goal refused: {refused}")
+            return GoalResponse.REJECT
         if len(self.open) >= MAX_OPEN:
             return GoalResponse.ACCEPT  # aborted at once, saying why (`_execute`), not decoded
         problem = self._problem(request.image)
@@ -191,10 +198,10 @@ class CamouflageAction:
         if not self.session.loader.get_subscription_count():
             return False
         self.folder.mkdir(exist_ok=True)
-        path = self.folder / f"goal_{next(self._numbers)}.png"
-        cv2.imwrite(str(path), goal.image)
+        number = next(self._numbers)
+        cv2.imwrite(str(self.folder / f"goal_{number}.png"), goal.image)
         goal.sent = max(monitor.images, default=-1)
-        self.session.loader.publish(String(data=str(path)))
+        self.session.loader.publish(String(data=f"goal {number}"))  # never a path (projector)
         return True
 
     def _under_way(self, goal: OpenGoal) -> bool:

@@ -32,11 +32,13 @@ from camo_bringup.run_config import RunConfig, build_parser, config_from
 from camo_bringup.session import Session
 from camo_core.cli.params_file import write_params_file
 from camo_core.exceptions import EXIT_USAGE, CamoError
+from camo_core.shm import remove_stale
 from camo_core.shutdown import StopFlag
+from camo_core.swarm.keys import ENCRYPT_ENV, KEY_FILE_ENV, fingerprint
 from camo_core.swarm.robot_io import CONSENSUS
 from camo_core.swarm.run_setup import contiguous
 from camo_nodes.monitor_node import MonitorNode
-from camo_nodes.shm import remove_stale
+from camo_nodes.topics import keyed
 
 TEARDOWN_LIMIT = 60.0  # s; stopping, writing and the result take 25 s at most
 EXIT_RECORDING = 3  # the run finished, its recording failed (a full disk): the bag is cut short
@@ -93,7 +95,12 @@ def start_processes(config: RunConfig, group: ProcessGroup, session: Session) ->
         print(f"camo run: recording every topic to {config.record}/", file=sys.stderr)
     if config.foxglove is not None:
         group.start_view(config.topics.run, config.foxglove)  # it says where it serves
-    print(f"camo run: {config.topics.run}: topics under /{config.topics.run}/", file=sys.stderr)
+    key = keyed.process_key()
+    said = f"key {fingerprint(key)} in {key.path}" if key else "no key: any writer is believed"
+    print(
+        f"camo run: {config.topics.run}: topics under /{config.topics.run}/; {said}",
+        file=sys.stderr,
+    )
     with tempfile.TemporaryDirectory(prefix="camo-ready-") as ready:
         group.start_swarm(config, Path(ready) if config.deferred else None)
         (config.folder / "processes.json").write_text(
@@ -256,6 +263,11 @@ def run_continuous(config: RunConfig, session: Session, group: ProcessGroup, rou
 def run(config: RunConfig) -> int:
     launched = (time.monotonic(), time.time())
     os.environ.update(config.env)
+    for name in (KEY_FILE_ENV, ENCRYPT_ENV):  # the run's key (none with --no-key)
+        if name not in config.env:
+            os.environ.pop(name, None)
+    keyed.process_key.cache_clear()
+
     stop = StopFlag()
     rclpy.init(
         args=["--ros-args", "--log-level", "warn"], signal_handler_options=SignalHandlerOptions.NO

@@ -132,7 +132,11 @@ class ProcessGroup:
         quiet = ("--ros-args", "--log-level", "warn")
         run = ("-p", f"run_id:={config.topics.run}")
         if config.projector is not None:
-            self._start("camo_projector.projector_node", *quiet, *run, *config.projector)
+            goals = (
+                "-p",
+                f"goals:={config.folder / 'goals'}",
+            )  # the Camouflage goals' (last: wins)
+            self._start("camo_projector.projector_node", *quiet, *run, *config.projector, *goals)
         for robot, port in config.bridges.items():
             extra = ["-p", f"calibration:={config.calibration}"] if config.calibration else []
             bridge = self._start(

@@ -17,6 +17,7 @@ from std_msgs.msg import String
 from camo_bringup.failures import RunFailed
 from camo_bringup.run_config import RunConfig
 from camo_nodes.monitor_node import MonitorNode
+from camo_nodes.topics import keyed
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.topics.qos import LATCHED, LATCHED_READER
 
@@ -84,9 +85,17 @@ class Recorders:
         # as recorders (None: it does not now): they are waited for UNHEARD_GRACE from then.
         self._unheard_since: float | None = None
         self._unheard_said = False
-        node.create_subscription(String, topics.recorded, self._on_recorded, LATCHED_READER)
+        keyed.subscription(
+            node,
+            String,
+            topics.recorded,
+            self._on_recorded,
+            LATCHED_READER,
+            topics.run,
+            session.monitor.rejected.refuse,
+        )
         # Created now, written at the end: recorders subscribe to it while the run goes on.
-        self.result_pub = node.create_publisher(String, topics.result, LATCHED)
+        self.result_pub = keyed.publisher(node, String, topics.result, LATCHED, topics.run)
 
     def _on_recorded(self, msg: String) -> None:
         report = recorder_report(msg.data)

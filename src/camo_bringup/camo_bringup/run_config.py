@@ -33,6 +33,7 @@ from camo_core.inputs.files import checked_path, shown
 from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer, items
 from camo_core.results.folders import new_folder_problem
+from camo_core.swarm.keys import ENCRYPT_ENV, KEY_FILE_ENV, new_key_file, read_key_file
 from camo_core.swarm.run_setup import MAX_WAIT, ProtocolParams, RunSetup, contiguous
 from camo_nodes.topics.names import RunTopics, check_run_id, new_run_id
 from camo_nodes.topics.parameters import ros_arguments
@@ -142,6 +143,18 @@ def build_parser() -> Parser:
         default=None,
         help="serve the run live to Foxglove on ws://127.0.0.1:PORT (default 8765), as "
         "./camo view does",
+    )
+    add(
+        "--no-key",
+        action="store_true",
+        help="run without a key: its processes believe any writer in the domain (to measure "
+        "what keys cost, or with nodes of your own that write on the run's topics)",
+    )
+    add(
+        "--encrypt",
+        action="store_true",
+        help="also encrypt the robots' messages and the backgrounds (AES-GCM with the run's "
+        "key): the traffic cannot be read without the key file",
     )
     add(
         "--no-projector",
@@ -308,13 +321,22 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         projector = ros_arguments(ProjectorParams(image=str(Path(args.image).resolve())))
     else:
         projector = ros_arguments(ProjectorParams(pattern=args.pattern or args.default_pattern))
+    if args.no_key and (args.key_file or args.encrypt):
+        raise UsageError("--no-key does not go with --key-file or --encrypt")
+    folder = out_dir(args)
+    env.pop(KEY_FILE_ENV, None)
+    env.pop(ENCRYPT_ENV, None)
+    if not args.no_key:
+        env[KEY_FILE_ENV] = str(run_key(args.key_file, folder))
+    if args.encrypt:
+        env[ENCRYPT_ENV] = "1"
     return RunConfig(
         params=params,
         procs=procs,
         protocol=protocol,
         image=image,
         labels=[label, *args.then],
-        folder=out_dir(args),
+        folder=folder,
         env=env,
         projector=projector,
         alone=alone,
@@ -408,3 +430,11 @@ def worker_groups(config: RunConfig) -> list[list[int]]:
     taken |= {c for first, last in config.remote for c in range(first, last + 1)}
     shared = [i for i in range(params.count) if i not in taken]
     return [[i] for i in config.alone] + (split_cells(shared, config.procs) if shared else [])
+
+
+def run_key(given: str | None, folder: Path) -> Path:
+    """The run's key file: --key-file's (checked), else a new random key in the run's folder."""
+    if given:
+        read_key_file(given)  # missing, malformed or readable by others: one line, now
+        return Path(given).resolve()
+    return new_key_file(folder / "run.key").path

@@ -17,6 +17,7 @@ from camo_bringup.run_config import RunConfig
 from camo_core.shutdown import StopFlag
 from camo_nodes.host import host_node_name
 from camo_nodes.monitor_node import MonitorNode
+from camo_nodes.topics import keyed
 from camo_nodes.topics.qos import LATCHED
 
 HOSTS_SETTLE = 2.0  # s: a host the graph shows has its latched announcement taken by then
@@ -41,9 +42,9 @@ class Session:
         self.setup = setup
         self.monitor = MonitorNode(config.params, topics, setup, context=context)
         self.executor.add_node(self.monitor)
-        self.loader = self.node.create_publisher(String, topics.load, 10)
+        self.loader = keyed.publisher(self.node, String, topics.load, 10, topics.run)
         self.started = time.monotonic()
-        self.node.create_publisher(String, topics.params, LATCHED).publish(
+        keyed.publisher(self.node, String, topics.params, LATCHED, topics.run).publish(
             String(data=setup.to_json())
         )
         self.recorders = Recorders(self)

@@ -89,7 +89,7 @@ def refuse_hosted(node: Node, topics: RunTopics, setup: RunSetup, tiles, stop, s
     seconds, and on until every writer of announcements the graph shows was heard, for
     `settle[1]` at most."""
     hosts = Hosts(setup.params.count, Rejections(_Quiet()), setup)
-    polled = PolledTopics("worker_join_hosts", topics.robot_namespace)
+    polled = PolledTopics("worker_join_hosts", topics.robot_namespace, run=topics.run)
 
     def learn(data: bytes, gid: bytes) -> None:
         msg = hosts.rejections.decoded(data, HostMsg, gid, "an announcement")

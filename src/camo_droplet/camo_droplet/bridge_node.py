@@ -45,6 +45,7 @@ from camo_nodes.robot_node import (
     robot_parameters,
     robot_setup,
 )
+from camo_nodes.topics import keyed
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.topics.parameters import parameters_help
 from camo_nodes.topics.qos import LATCHED, history_qos
@@ -97,10 +98,12 @@ class DropletMonitorNode(Node):
             list(Path(transcript).read_text(errors="replace").splitlines()) if transcript else None
         )
         self.state: FirmwareState | None = None
-        self.status_pub = self.create_publisher(StatusArray, topics.status, history_qos(10_000))
+        self.status_pub = keyed.publisher(
+            self, StatusArray, topics.status, history_qos(10_000), topics.run
+        )
         # The monitor takes a cell's statuses from the process that announced hosting it.
         cell = row * params.cols + col
-        self.create_publisher(Host, topics.hosts, LATCHED).publish(
+        keyed.publisher(self, Host, topics.hosts, LATCHED, topics.run).publish(
             Host(name=self.get_name(), first=[cell], last=[cell])
         )
         self.reconnector = Reconnector(link, self.get_logger()) if link else None

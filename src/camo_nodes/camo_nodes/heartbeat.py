@@ -19,6 +19,7 @@ from rclpy.node import Node
 
 from camo_core.swarm.liveness import HEARTBEAT_PERIOD
 from camo_msgs.msg import Heartbeat
+from camo_nodes.topics import keyed
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.topics.qos import HEARTBEAT_WRITER
 
@@ -28,7 +29,9 @@ class HeartbeatThread:
 
     def __init__(self, node: Node, topics: RunTopics, period: float = HEARTBEAT_PERIOD) -> None:
         self.period = period
-        self.publisher = node.create_publisher(Heartbeat, topics.heartbeat, HEARTBEAT_WRITER)
+        self.publisher = keyed.publisher(
+            node, Heartbeat, topics.heartbeat, HEARTBEAT_WRITER, topics.run
+        )
         self.msg = Heartbeat(name=node.get_name())
         self.msg.header.frame_id = "camo"
         self.offline: tuple[int, ...] = ()  # robots whose hardware is off, set by the host's loop

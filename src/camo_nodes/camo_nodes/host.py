@@ -36,6 +36,7 @@ from camo_core.swarm.protocol import TICK
 from camo_core.swarm.run_setup import ProtocolParams
 from camo_core.swarm.ticks import Ticks
 from camo_msgs.msg import Notices
+from camo_nodes.topics import keyed
 from camo_nodes.topics.images import ImageEncodingError, frame_number, image_from_msg
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.topics.qos import LATCHED_READER, history_qos
@@ -138,8 +139,12 @@ class Host:
             # round, for the monitor once all are told.
             self._noticing: dict[int, tuple[int, float, float]] = {}
             self._notice = Notices(name=node.get_name())
-            self.notices = node.create_publisher(
-                Notices, transport.topics.notices, history_qos(NOTICES_KEPT)
+            self.notices = keyed.publisher(
+                node,
+                Notices,
+                transport.topics.notices,
+                history_qos(NOTICES_KEPT),
+                transport.topics.run,
             )
             node.create_timer(protocol.sense_period, self._read)
             node.create_timer(1.0, self._forget)

@@ -51,6 +51,7 @@ from camo_msgs.msg import Host, Notices, StatusArray
 from camo_nodes import scene
 from camo_nodes.polled import PolledTopics
 from camo_nodes.rcl_take import PREFIX
+from camo_nodes.topics import keyed
 from camo_nodes.topics.images import (
     ImageEncodingError,
     frame_number,
@@ -108,7 +109,9 @@ class MonitorNode(Node):
         self._owner = np.full(params.count, -1, np.int64)
         self._prefixes: dict[bytes, int] = {}
         context = kwargs.get("context")
-        self.polled = PolledTopics("monitor_listener", topics.swarm_namespace, context)
+        self.polled = PolledTopics(
+            "monitor_listener", topics.swarm_namespace, context, topics.run, self.rejected.refuse
+        )
         self.polled.listen(Host, topics.hosts, LATCHED_READER, self._on_host)
         # Every process writes its robots' statuses to one topic: the monitor keeps all
         # (LATCHED_READER keeps every sample), or bursts would push statuses out.
@@ -116,11 +119,14 @@ class MonitorNode(Node):
         self.polled.listen(Image, topics.background, LATCHED_READER, self._on_background)
         self.polled.listen(Notices, topics.notices, LATCHED_READER, self._on_notices)
         self.create_timer(0.02, self.turn)
-        self.pattern_pub = self.create_publisher(Image, topics.pattern, 10)
+        # For viewers; tagged too, so that a keyed recorder or view tells them from a stranger's.
+        self.pattern_pub = keyed.publisher(self, Image, topics.pattern, 10, topics.run)
         self.create_timer(0.2, self._publish_pattern)
         self.bridged = set(setup.bridged if setup is not None else ())
-        self.markers_pub = self.create_publisher(MarkerArray, topics.markers, 1)
-        self.diagnostics_pub = self.create_publisher(DiagnosticArray, topics.diagnostics, 1)
+        self.markers_pub = keyed.publisher(self, MarkerArray, topics.markers, 1, topics.run)
+        self.diagnostics_pub = keyed.publisher(
+            self, DiagnosticArray, topics.diagnostics, 1, topics.run
+        )
         self.create_timer(0.5, self.publish_views)
 
     def turn(self) -> int:

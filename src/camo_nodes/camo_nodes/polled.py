@@ -3,6 +3,8 @@
 An executor that spun these subscriptions would take their messages first, and
 rclpy hands a callback no publisher GID; `poll()` takes them through
 `rcl_take.py` instead and calls each topic's handler with (CDR bytes, GID).
+In a keyed run (`keyed.py`) a handler gets only the messages the run's key
+tagged, the trailer taken off; the others go to `refuse`.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from camo_nodes.rcl_take import Taker
+from camo_nodes.topics.keyed import Refuse, opener, unsealing
 from camo_nodes.topics.startup import LEAN_NODE
 
 Handler = Callable[[bytes, bytes], None]
@@ -23,8 +26,14 @@ TAKE_LIMIT = 64
 
 
 class PolledTopics:
-    def __init__(self, name: str, namespace: str, context=None) -> None:
+    def __init__(
+        self, name: str, namespace: str, context=None, run: str = "", refuse: Refuse | None = None
+    ) -> None:
+        """`run`, `refuse`: the run whose key its messages must carry (if the process has one)
+        and what is told of those that do not."""
         self.node = Node(name, namespace=namespace, context=context, **LEAN_NODE)
+        self.run = run
+        self.refuse = refuse or (lambda reason, gid: None)
         self.takers: list[tuple[Taker, Handler, int]] = []
         self._buffer: list[tuple[bytes, bytes]] = []
         self.more = False  # the last poll left messages waiting
@@ -37,6 +46,8 @@ class PolledTopics:
         subscription = self.node.create_subscription(
             msg_type, topic, lambda m: None, qos, raw=True
         )
+        opened = opener(self.run) if self.run else None
+        handle = unsealing(handle, subscription.topic_name, opened, self.refuse)
         self.takers.append((Taker(subscription), handle, limit))
 
     def poll(self) -> int:

@@ -62,6 +62,7 @@ from camo_msgs.msg import Heartbeat, Host, StatusArray
 from camo_nodes.heartbeat import HeartbeatThread
 from camo_nodes.polled import PolledTopics
 from camo_nodes.rcl_take import PREFIX, publisher_gid
+from camo_nodes.topics import keyed
 from camo_nodes.topics.names import RunTopics, tile_name
 from camo_nodes.topics.qos import HEARTBEAT_READER, LATCHED, LATCHED_READER, history_qos
 from camo_nodes.topics.robot_messages import COLUMN_TYPES, Columns, RaggedColumns, stamp, unpack
@@ -207,8 +208,12 @@ class Transport:
         self._unsent_edges: list[Batch] = []  # those of them other processes' robots wait for
         for first, last in tiles:
             self._create_writers(first, last)
-        status_pub = node.create_publisher(
-            StatusArray, topics.status, history_qos(status_depth(params) * len(self.hosted))
+        status_pub = keyed.publisher(
+            node,
+            StatusArray,
+            topics.status,
+            history_qos(status_depth(params) * len(self.hosted)),
+            topics.run,
         )
         self.statuses = Statuses(status_pub, node.get_name())
         self.status_pub = status_pub
@@ -233,8 +238,14 @@ class Transport:
         self._woken: set[int] = set()
         self._generation: list[int] = []
         self._announced_rejections = 0
-        self.polled = PolledTopics(f"{node.get_name()}_edges", node.get_namespace(), node.context)
-        self.host_pub = node.create_publisher(Host, topics.hosts, LATCHED)
+        self.polled = PolledTopics(
+            f"{node.get_name()}_edges",
+            node.get_namespace(),
+            node.context,
+            topics.run,
+            self.rejected.refuse,
+        )
+        self.host_pub = keyed.publisher(node, Host, topics.hosts, LATCHED, topics.run)
         self.own = publisher_gid(self.host_pub)[:PREFIX]  # this process, as DDS names it
         # This process's tiles as another process announced them too: wherever that one was
         # heard first, this one's robots go unheard (trust.py).
@@ -260,8 +271,13 @@ class Transport:
             for kind in self.kinds:
                 # An array holds at least one message: at most as many arrays as messages.
                 depth = len(members) * messages_per_robot(self.params, kind)
-                writer = self.node.create_publisher(
-                    COLUMN_TYPES[kind], self.topics.tile(name, part, kind), history_qos(depth)
+                writer = keyed.publisher(
+                    self.node,
+                    COLUMN_TYPES[kind],
+                    self.topics.tile(name, part, kind),
+                    history_qos(depth),
+                    self.topics.run,
+                    sealable=True,
                 )
                 batch = Batch(writer, kind, part == "edge")
                 for robot in members:

@@ -8,10 +8,13 @@ device number). A stream is projected at `max_fps` frames a second at most, its 
 each time; with `snapshot` only its first frame (a run without --continuous camouflages once).
 
 Every frame it publishes is numbered (header.frame_id `arena/frame_<n>`, n counting from 0): a
-round of the swarm is named after the frame it camouflages against. Setting `image` or
-`pattern` while running (what the run's Camouflage action does with a goal's image), or
-sending a name or path on /<run>/camo/projector/load, projects that instead, and ends a
-stream.
+round of the swarm is named after the frame it camouflages against. A name sent on
+/<run>/camo/projector/load projects that instead, and ends a stream: a built-in background,
+one of the backgrounds its run's parameters list (a --then switch), or `goal <n>` (the image
+the run's Camouflage action wrote into `goals`, its n-th goal's). A message never names a
+path: whoever can write on the topic reads no file off this machine. Setting `image` or
+`pattern` while running does the same, except in a keyed run, whose parameter services
+anyone in the domain could call: there the launcher's keyed messages alone choose.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import rclpy
@@ -35,6 +39,7 @@ from camo_core.exceptions import CamoError, UsageError
 from camo_core.inputs.images import load_image
 from camo_core.schema import check_fields, param, with_role
 from camo_core.swarm.run_setup import MAX_WAIT
+from camo_nodes.topics import keyed
 from camo_nodes.topics.images import (
     ImageEncodingError,
     frame_id,
@@ -48,8 +53,8 @@ from camo_nodes.topics.parameters import (
     parameters_help,
     ros_arguments,
 )
-from camo_nodes.topics.qos import history_qos
-from camo_nodes.topics.runs import run_from_parameter
+from camo_nodes.topics.qos import LATCHED_READER, history_qos
+from camo_nodes.topics.runs import run_from_parameter, setup_from
 from camo_nodes.topics.startup import LEAN_NODE, node_help, start_ros, wants_help
 from camo_projector.sources import CameraSource, ImagesSource, Source, VideoSource
 
@@ -104,6 +109,11 @@ class ProjectorParams:
         metavar="F",
     )
     snapshot: bool = param(False, "project only a stream's first frame")
+    goals: str = param(
+        "",
+        "the folder where the run's Camouflage action writes its goals' images (goal_<n>.png)",
+        metavar="FOLDER",
+    )
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -153,10 +163,11 @@ class ProjectorNode(Node):
         """`first`: the still background its parameters name, when the caller has loaded it;
         `source`: the stream they name, opened."""
         super().__init__("projector", namespace=topics.robot_namespace, **kwargs)
+        self.topics = topics
         values = node_parameters(self, *PROJECTOR_PARAMETERS)
         self.values = values
-        self.publisher = self.create_publisher(
-            Image, topics.background, history_qos(FRAMES_LATCHED)
+        self.publisher = keyed.publisher(
+            self, Image, topics.background, history_qos(FRAMES_LATCHED), topics.run, sealable=True
         )
         self.frame = -1  # the number of the last frame projected
         self._last_stamp = 0
@@ -164,8 +175,15 @@ class ProjectorNode(Node):
         self.source = source
         self._latest: Image | None = None  # the topic's newest frame, not projected yet
         self.add_on_set_parameters_callback(self._on_set)
-        # A topic as well as the parameters: data is a built-in name or an image path.
-        self.create_subscription(String, topics.load, self._on_load, 10)
+        # What may be loaded: built-in backgrounds, the run's own (its parameters, latched), and
+        # its goals' images; refusals are counted.
+        self.listed: tuple[str, ...] = ()
+        self.refused = 0
+        run = topics.run
+        keyed.subscription(self, String, topics.load, self._on_load, 10, run, self._refuse)
+        keyed.subscription(
+            self, String, topics.params, self._on_setup, LATCHED_READER, run, self._refuse
+        )
         streaming = source is not None or values["background_topic"]
         if values["background_topic"]:
             # Best effort matches a camera driver's sensor-data QoS and a reliable writer alike.
@@ -219,21 +237,49 @@ class ProjectorNode(Node):
 
     # ---- stills ------------------------------------------------------------------------
 
+    def _refuse(self, reason: str, gid: bytes = b"") -> None:
+        self.refused += 1
+        # At most once a second: anyone in the domain can send here.
+        self.get_logger().warning(
+            f"refused a command: {reason} ({self.refused} so far)", throttle_duration_sec=1.0
+        )
+
+    def _on_setup(self, msg: String) -> None:
+        setup = setup_from(msg.data, self.topics.run)
+        if setup is not None:
+            self.listed = setup.backgrounds
+
     def _on_load(self, msg: String) -> None:
         name = msg.data.strip()
+        path = self.loadable(name)
+        if path is None:
+            self._refuse(f"{name[:80]!r} is none of the run's backgrounds or goals")
+            return
         try:
-            image = load("", name) if name in BACKGROUNDS else load(name, "")
+            image = load("", name) if path == name and name in BACKGROUNDS else load(path, "")
         except CamoError as exc:
-            # At most once a second: anyone in the domain can send here.
             self.get_logger().error(f"cannot project {name!r}: {exc}", throttle_duration_sec=1.0)
             return
         self._stop_stream()
         self.publish(image)
 
+    def loadable(self, name: str) -> str | None:
+        """What `name` on the load topic projects (a built-in name, or a file the run itself
+        named), or None: a message never names a file of its own."""
+        if name in BACKGROUNDS or name in self.listed:
+            return name
+        kind, _, number = name.partition(" ")
+        if kind == "goal" and number.isdigit() and self.values["goals"]:
+            return str(Path(self.values["goals"]) / f"goal_{int(number)}.png")
+        return None
+
     def _on_set(self, params) -> SetParametersResult:
         values = {p.name: p.value for p in params}
         if not {"image", "pattern"} & set(values):
             return SetParametersResult(successful=True)
+        if keyed.process_key() is not None:
+            reason = "a keyed run's projector is told what to project by its launcher only"
+            return SetParametersResult(successful=False, reason=reason)
         path = values.get("image", "")
         pattern = values.get("pattern", self.get_parameter("pattern").value)
         try:

@@ -40,6 +40,7 @@ from camo_core.inputs.numeric import integer, items, number
 from camo_core.results.output import Parallel, run_title
 from camo_core.results.snapshots import Snapshots
 from camo_core.results.summary import write_summary
+from camo_core.swarm.keys import fingerprint, new_key_file
 
 
 def sensed_overrides(
@@ -182,6 +183,13 @@ def _draw_gif(params, snapshots, folder, title, marks, sensed) -> None:
     write_animation(snapshots, sensed, dead, folder / "run.gif", title, marks)
 
 
+def cmd_key(args: argparse.Namespace) -> int:
+    Path(args.file).parent.mkdir(parents=True, exist_ok=True)
+    made = new_key_file(args.file)
+    print(f"wrote {args.file} (key {fingerprint(made)}); give it to every process of the run")
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     sizes = tuple(integer(s) for s in items(args.sizes, "--sizes")) if args.sizes else bench.SIZES
     report = bench.run(sizes=sizes, whole=args.whole)
@@ -219,6 +227,13 @@ def build_parser() -> Parser:
     parser = Parser(prog="camo", description="camouflage swarm: reference tools")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
     add_sim_arguments(sub.add_parser("sim", help="run the centralized reference simulator once"))
+    key = sub.add_parser(
+        "key",
+        help="write a new random run key (0600) for ./camo run --key-file and the processes "
+        "that talk to the run",
+    )
+    key.add_argument("file", help="the key file to create (it must not exist)")
+    key.set_defaults(func=cmd_key)
     ben = sub.add_parser("bench", help="benchmarks")
     ben.add_argument("what", choices=["sim"], help="what to benchmark")
     ben.add_argument("--json", action="store_true", help="print one JSON object")

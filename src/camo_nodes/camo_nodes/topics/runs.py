@@ -13,6 +13,7 @@ from std_msgs.msg import String
 from camo_core.exceptions import CamoError
 from camo_core.swarm.run_setup import RunSetup, SetupError
 
+from . import keyed
 from .names import RunTopics, check_run_id, runs_on_graph
 from .qos import LATCHED_READER
 
@@ -103,6 +104,10 @@ def result_from(text: str, run: str) -> dict | None:
     return result if valid else None
 
 
+def _ignored(reason: str, gid: bytes) -> None:
+    """Parameters not tagged with the run's key: as if never written."""
+
+
 def wait_for_setup(node, spin, topics: RunTopics, timeout: float, stop=None) -> RunSetup:
     """The run's /swarm/params (latched) as the launcher published it."""
     got: list[RunSetup] = []
@@ -112,7 +117,9 @@ def wait_for_setup(node, spin, topics: RunTopics, timeout: float, stop=None) -> 
         if setup is not None:
             got.append(setup)
 
-    subscription = node.create_subscription(String, topics.params, take, LATCHED_READER)
+    subscription = keyed.subscription(
+        node, String, topics.params, take, LATCHED_READER, topics.run, _ignored
+    )
     deadline = time.monotonic() + timeout
     try:
         while not got and not stop:

@@ -26,9 +26,9 @@ from camo_core.cli.params_file import check_ros_args
 from camo_core.exceptions import EXIT_USAGE, UsageError
 from camo_core.inputs.files import shown
 from camo_core.inputs.numeric import INTEGER
+from camo_core.shm import remove_stale
 from camo_core.shutdown import stacks_on_faults
-
-from ..shm import remove_stale
+from camo_core.swarm.keys import KEY_FILE_ENV, read_key_file
 
 FASTDDS_PROFILE = Path(__file__).parent.parent / "fastdds.xml"
 
@@ -249,12 +249,22 @@ def add_network_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited, else 0)"
     )
+    parser.add_argument(
+        "--key-file",
+        metavar="FILE",
+        default=None,
+        help="the run's key file (run.key beside its results, 0600): only messages tagged with "
+        f"it are believed, and this process's are tagged (default: ${KEY_FILE_ENV} if set)",
+    )
 
 
 def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, str]:
     """The environment a ROS process of ours runs in, from --network, --discovery-server and
     --domain-id (raises UsageError)."""
     env = dict(environ)
+    if getattr(args, "key_file", None):
+        read_key_file(args.key_file)  # missing, malformed or readable by others: one line
+        env[KEY_FILE_ENV] = str(Path(args.key_file).resolve())
     if args.domain_id is None:
         inherited = env.get("ROS_DOMAIN_ID", "").strip()
         whole = inherited.isascii() and inherited.isdigit() and len(inherited) <= 3
