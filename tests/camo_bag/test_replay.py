@@ -19,15 +19,20 @@ from support import (
     start_run,
 )
 
+from camo_core.swarm.keys import new_key_file
+
 
 @pytest.mark.slow(SWARM)
 def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded, tmp_path):
     bag, live = recorded
     domain_id = domain()
+    key = str(new_key_file(tmp_path / "again.key").path)  # the fresh run's, given to the replay
     swarm = start_run(
         *BAG_OPTIONS,
         "--run-id",
         "again",  # the last --run-id counts: a run of its own, driven by the bag
+        "--key-file",
+        key,
         "--no-projector",
         "--out",
         str(tmp_path / "again"),
@@ -44,6 +49,8 @@ def test_replaying_the_background_into_a_fresh_swarm_reproduces_the_run(recorded
         "15",
         "--domain-id",
         str(domain_id),
+        "--key-file",
+        key,
     )
     assert replay.returncode == 0, replay.stderr
     assert "published 1 messages on 1 topics" in replay.stderr

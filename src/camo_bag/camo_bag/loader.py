@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -54,6 +54,8 @@ from camo_bag.container import (
 from camo_bag.qos_yaml import check_profiles
 from camo_core.inputs.files import checked_path
 from camo_core.inputs.strict_yaml import read_yaml
+from camo_core.swarm.keys import Opener, RunKey, sealed, strip
+from camo_nodes.topics.keyed import process_key
 
 METADATA = "metadata.yaml"
 METADATA_MAX = 64 * 1024 * 1024  # a metadata.yaml larger than this is not one camo wrote
@@ -261,8 +263,15 @@ class Bag:
         return self.file
 
     def messages(self, topics: list[str] | None = None) -> Iterator[BagMessage]:
-        """Messages of the usable channels (of `topics`), in log-time order; a damaged chunk
-        gives BagError."""
+        """Messages of the usable channels (of `topics`), in log-time order, as plain CDR: an
+        encrypted run's opened with the run's key (--key-file, $CAMO_KEY_FILE); a damaged
+        chunk, or an encrypted message without the key that sealed it, gives BagError."""
+        opened = Unsealing(self.file)
+        for message in self.raw_messages(topics):
+            yield opened(message)
+
+    def raw_messages(self, topics: list[str] | None = None) -> Iterator[BagMessage]:
+        """`messages`, as recorded (an encrypted run's sealed)."""
         wanted = {c.topic for c in self._channels.values()}
         if topics is not None:
             wanted &= set(topics)
@@ -543,8 +552,38 @@ def repair(src: str | Path, dst: str | Path) -> tuple[Bag, int]:
     try:
         for topic in bag.summary.topics:
             writer.add_topic(topic, topic.definition)
-        for message in bag.messages():
+        for message in bag.raw_messages():  # as recorded: an encrypted run's stays sealed
             writer.write(message.topic, message.data, message.log_time, message.publish_time)
     finally:
         writer.close()
     return bag, writer.message_count
+
+
+class Unsealing:
+    """A bag's messages made plain: a keyed run's trailer off (bags of older camo versions may
+    hold it), an encrypted run's payload opened with the process's key."""
+
+    def __init__(self, file: Path) -> None:
+        self.file = file
+        self.openers: dict[str, Opener] = {}
+        self.key: RunKey | None = None
+        self._looked = False
+
+    def __call__(self, message: BagMessage) -> BagMessage:
+        data = message.data
+        if not sealed(data):
+            plain = strip(data)
+            return message if plain is data else replace(message, data=plain)
+        if not self._looked:
+            self.key, self._looked = process_key(), True
+        if self.key is None:
+            raise BagError(
+                f"{self.file}: {message.topic} holds encrypted messages (a run with --encrypt): "
+                "give its key file with --key-file"
+            )
+        run = message.topic.split("/")[1] if message.topic.count("/") >= 2 else ""
+        opener = self.openers.setdefault(run, Opener(self.key, run, replays=False))
+        payload, why = opener.open(message.topic, data)
+        if payload is None:
+            raise BagError(f"{self.file}: {message.topic}: {why} (is it the run's key file?)")
+        return replace(message, data=payload)

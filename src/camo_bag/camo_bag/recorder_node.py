@@ -44,6 +44,8 @@ from camo_core.cli.options import Parser, seconds
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.results.folders import new_folder_problem
 from camo_core.shutdown import StopFlag
+from camo_core.swarm.keys import sealed
+from camo_nodes.topics import keyed
 from camo_nodes.topics.images import frame_number
 from camo_nodes.topics.names import RunTopics, check_run_id
 from camo_nodes.topics.qos import LATCHED
@@ -91,10 +93,12 @@ class RecorderNode(Node):
         self.flush_period = flush_period
         self._flushed = time.monotonic()
         self._params_written = False
+        self.reader = keyed.Reader()
+        self.refused = 0  # messages without the run's key tag: not recorded
         self.create_timer(flush_period, self._flush)
         self.report_pub = None
         if run is not None:
-            self.report_pub = self.create_publisher(String, run.recorded, LATCHED)
+            self.report_pub = keyed.publisher(self, String, run.recorded, LATCHED, run.run)
             self.create_timer(0.25, self.report)
         self._reported = None
         self.discover()
@@ -143,11 +147,20 @@ class RecorderNode(Node):
         if self.bag.closed:
             return
         received = time.time_ns()
-        published = header_stamp_ns(data) if self._stamped[topic] else None
-        self.bag.write(topic, data, received, published if published is not None else received)
+        # A keyed run's messages are recorded as plain CDR (any reader of bags reads them), an
+        # encrypted run's as their ciphertext; with the run's key, what it did not tag is not
+        # the run's and is left out (counted).
+        payload, _ = self.reader.payload(topic, data)
+        if payload is None and self.reader.key is not None:
+            self.refused += 1
+            return
+        recorded = data if payload is None or sealed(data) else payload
+        stamped = payload is not None and self._stamped[topic]
+        published = header_stamp_ns(payload) if stamped else None
+        self.bag.write(topic, recorded, received, published if published is not None else received)
         cls = self._decoders.get(topic)
-        if cls is not None:
-            self._account(topic, deserialize_message(data, cls))
+        if cls is not None and payload is not None:
+            self._account(topic, deserialize_message(payload, cls))
         elif self.run is not None and topic == self.run.background:
             self.ledger.background(frame_number(header_frame_id(data)))
         if time.monotonic() - self._flushed > self.flush_period:  # timers starve under floods

@@ -16,6 +16,7 @@ lacks; `--partial` renders what it holds, with the gaps named in summary.json
 
 from __future__ import annotations
 
+import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,9 +38,11 @@ from camo_core.results.animation import join_animations, write_animation
 from camo_core.results.output import run_title, write_round
 from camo_core.results.record import Backgrounds, Rounds, round_fields
 from camo_core.results.snapshots import Snapshots
+from camo_core.swarm.keys import KEY_FILE_ENV, read_key_file
 from camo_core.swarm.status_rows import rows_of_message
 from camo_msgs.msg import Notices
 from camo_nodes.topics.images import frame_number, image_from_msg, pixels_sha256
+from camo_nodes.topics.keyed import process_key
 
 
 @dataclass
@@ -212,9 +215,20 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="render an incomplete bag: what it holds, its gaps named in summary.json",
     )
+    parser.add_argument(
+        "--key-file",
+        metavar="FILE",
+        default=None,
+        help="the run's key file, to read a bag of a run with --encrypt (default: "
+        "$CAMO_KEY_FILE, if set)",
+    )
     bag = None
     try:
         args = parser.parse_args(argv)
+        if args.key_file:
+            read_key_file(args.key_file)  # missing, malformed or readable by others: one line
+            os.environ[KEY_FILE_ENV] = str(Path(args.key_file).resolve())
+            process_key.cache_clear()
         out = out_dir(args)
         bag = open_bag(args.bag, args.partial)
         summaries = render(bag, out, args.partial)

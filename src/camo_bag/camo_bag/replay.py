@@ -28,6 +28,7 @@ from camo_core.cli.options import Parser
 from camo_core.cli.progress import ProgressBar
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
+from camo_nodes.topics import keyed
 from camo_nodes.topics.names import check_run_id
 from camo_nodes.topics.startup import LEAN_NODE, add_network_options, network_env, start_ros
 
@@ -67,6 +68,11 @@ def build_parser() -> Parser:
     return parser
 
 
+def run_of(topic: str) -> str:
+    """The run id a topic belongs to (/<run>/...)."""
+    return topic.split("/")[1] if topic.count("/") >= 3 else ""
+
+
 def renamed(topic: str, run_id: str | None) -> str:
     """A recorded topic under another run id (topics of the older layout, at the root, keep
     their names)."""
@@ -99,11 +105,16 @@ def replay(args, bag: Bag, stop: StopFlag) -> int:
     topics = chosen_topics(args, bag)
     node = Node("replay", **LEAN_NODE)
     try:
+        # With a key (--key-file: the live run's), what the bag holds is published with this
+        # run's tags (a bag holds plain CDR, or an encrypted run's ciphertext that this key
+        # opens); without one, as recorded, and a keyed run takes none of it.
         publishers = {
-            t.name: node.create_publisher(
+            t.name: keyed.publisher(
+                node,
                 msgdefs.message_class(t.type),
                 renamed(t.name, args.run_id),
                 qos_yaml.load_first(t.qos, f"{bag.file}: {t.name} offered_qos_profiles"),
+                run_of(renamed(t.name, args.run_id)),
             )
             for t in topics
         }
@@ -121,15 +132,16 @@ def replay(args, bag: Bag, stop: StopFlag) -> int:
                 sleep_until(start + (message.log_time - summary.start_ns) / 1e9 / args.rate, stop)
                 if stop:
                     break
+                data = message.data  # plain CDR (bag.messages opens an encrypted run's)
                 try:  # subscribers would fail on it: left out, and counted
-                    decoded = decoders[message.topic](message.data)
+                    decoded = decoders[message.topic](data)
                 except Exception:  # noqa: BLE001 - bytes that do not decode as their type
                     bag.reject(message)
                     continue
                 if message.topic in upgraded:
                     publishers[message.topic].publish(decoded)
                 else:
-                    publishers[message.topic].publish(message.data)
+                    publishers[message.topic].publish(data)
                 bar.update(note=message.topic)
             passes += 1
             if not args.loop:

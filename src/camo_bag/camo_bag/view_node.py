@@ -29,6 +29,7 @@ from camo_bag.graph_topics import new_topics, taking_qos
 from camo_core.cli.options import Parser
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
+from camo_nodes.topics import keyed
 from camo_nodes.topics.names import RunTopics, check_run_id, runs_on_graph
 from camo_nodes.topics.runs import run_ended
 from camo_nodes.topics.startup import add_network_options, network_env, start_ros
@@ -80,6 +81,8 @@ class ViewNode(Node):
         self.watchers: dict[str, int] = {}
         self.taken: dict[str, object] = {}
         self.forwarded = 0
+        self.refused = 0  # messages not shown: refused for their key tag, or sealed
+        self.reader = keyed.Reader()
         self.create_timer(0.5, self.discover)
         self.create_timer(0.05, self.follow_clients)
         self.discover()
@@ -142,15 +145,21 @@ class ViewNode(Node):
                 self.taken[topic] = self.create_subscription(
                     cls,
                     topic,
-                    lambda data, channel=channel: self._forward(channel, data),
+                    lambda data, channel=channel, topic=topic: self._forward(channel, topic, data),
                     taking_qos(offered),
                     raw=True,
                 )
             elif not count and topic in self.taken:
                 self.destroy_subscription(self.taken.pop(topic))
 
-    def _forward(self, channel: foxglove.Channel, data: bytes) -> None:
-        channel.log(data, log_time=time.time_ns())
+    def _forward(self, channel: foxglove.Channel, topic: str, data: bytes) -> None:
+        # Foxglove's decoders take plain CDR: a keyed run's trailer off, a sealed message opened
+        # (with the run's key; else not shown), a stranger's refused where the key can tell.
+        payload, _ = self.reader.payload(topic, data)
+        if payload is None:
+            self.refused += 1
+            return
+        channel.log(payload, log_time=time.time_ns())
         self.forwarded += 1
 
     def close(self) -> None:
@@ -214,7 +223,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         executor.shutdown()
         if node is not None:
-            print(f"camo view: forwarded {node.forwarded} messages", file=sys.stderr)
+            refused = f" ({node.refused} refused: no key tag of the run)" if node.refused else ""
+            print(f"camo view: forwarded {node.forwarded} messages{refused}", file=sys.stderr)
             node.close()
         rclpy.try_shutdown()
     return 0
