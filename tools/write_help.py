@@ -22,6 +22,7 @@ COLUMNS = "100"  # the width the texts are written at, whatever the terminal
 # subcommands the subcommand), and the module call that prints it.
 HELP = {
     "sim": ["camo_core.cli", "sim"],
+    "key": ["camo_core.cli", "key"],
     "errors": ["camo_sweep.errors"],
     "sweep": ["camo_sweep.cli"],
     "sweep-plot": ["camo_sweep.cli", "plot"],

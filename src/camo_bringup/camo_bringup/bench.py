@@ -19,7 +19,8 @@ run with lossy links (`--loss`, default 10% of messages lost) and its ratio to
 the loss-free one. Large swarms (128x128 and 256x256 by default) run once each,
 with the launcher's default processes, loss-free and with loss and sensor noise
 (`--loss`, `--noise`), and add the largest resident set of a worker and of the
-whole run.
+whole run. Keys (`--keyed-side`, 64 by default): the step rate of a run without a key,
+keyed (the default) and encrypted, alternating, and the ratios to the run without a key.
 """
 
 from __future__ import annotations
@@ -310,6 +311,44 @@ def compare(
     return row
 
 
+KEYS = {"no key": ["--no-key"], "keyed": [], "encrypted": ["--encrypt"]}
+KEY_TARGETS = {"keyed": 0.95, "encrypted": 0.85}  # step rate against the run without a key
+
+
+def key_cost(side: int, procs: int, domain: int, out: Path, steps: int, repeat: int) -> dict:
+    """Step rates of alternating runs without a key, keyed (the default) and encrypted: the
+    medians and their ratios to the run without a key."""
+    rates: dict[str, list[float]] = {what: [] for what in KEYS}
+    for k in range(repeat):
+        for what, options in KEYS.items():
+            folder = out / f"{what.replace(' ', '_')}_{k}"
+            rates[what].append(
+                swarm_run(side, procs, domain, folder, steps, options)["steps_per_s"]
+            )
+        said = ", ".join(f"{what} {r[-1]:.1f}" for what, r in rates.items())
+        print(f"{side}x{side}: steps/s {said}", file=sys.stderr)
+    row = {"robots": f"{side}x{side}", "steps": steps}
+    row |= {
+        f"{what.replace(' ', '_')}_steps_per_s": statistics.median(r) for what, r in rates.items()
+    }
+    for what in KEY_TARGETS:
+        row[f"{what}_ratio"] = row[f"{what}_steps_per_s"] / row["no_key_steps_per_s"]
+    return row
+
+
+def format_keys(row: dict) -> str:
+    names = [what.replace(" ", "_") for what in KEYS]
+    rates = " / ".join(f"{row[name + '_steps_per_s']:.1f}" for name in names)
+    ratios = ", ".join(
+        f"{what} {row[f'{what}_ratio']:.2f} (target >= {target})"
+        for what, target in KEY_TARGETS.items()
+    )
+    return (
+        f"keys {row['robots']}, {row['steps']} steps: steps/s without a key / keyed / "
+        f"encrypted {rates}; ratios {ratios}"
+    )
+
+
 def added_cost(side: int, procs: int, domain: int, out: Path, repeat: int, extra) -> dict:
     """Launch to exit of alternating runs without and with `extra(folder)` options (recording,
     a live view): the medians and their ratio."""
@@ -374,6 +413,36 @@ def grid_sides(text: str) -> list[int]:
     return [side for side in sides if side]
 
 
+def print_report(args, rates, whole, large, keys, added) -> None:
+    """The figures as tables, for people."""
+    print(f"medians of {args.repeat} alternating runs, {args.procs} processes")
+    if rates:
+        print("long runs (step rate):")
+        print(format_table(rates))
+    for r in rates:
+        print(
+            f"{r['robots']} against the packed bare exchange: "
+            f"{r['packed_steps_per_s']:.1f} steps/s, ratio {r['packed_ratio']:.2f}"
+        )
+    if whole:
+        print("whole runs (35 + 10 steps):")
+        print(format_table(whole))
+    if args.loss and rates + whole:
+        print(f"with {args.loss:.0%} of messages lost (the same runs' loss-free figures):")
+        print(format_loss(rates + whole))
+    if large:
+        print("large swarms (one run each, the launcher's default processes):")
+        print(format_large(large))
+    if keys is not None:
+        print(format_keys(keys))
+    targets = {"recording": 1.5, "live view": 1.1}
+    for what, r in added.items():
+        print(
+            f"{what} {r['robots']}: launch to exit {r['plain_s']:.1f} s, with it "
+            f"{r['added_s']:.1f} s, ratio {r['ratio']:.2f} (target <= {targets[what]})"
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = Parser(prog="camo bench ros", description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object")
@@ -400,6 +469,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--view-side", type=int, default=8, help="side of the live-view comparison (0: none)"
+    )
+    parser.add_argument(
+        "--keyed-side",
+        type=int,
+        default=64,
+        help="side of the comparison of runs without a key, keyed and encrypted (0: none)",
     )
     parser.add_argument("--procs", type=int, default=os.cpu_count() or 1)
     parser.add_argument(
@@ -431,9 +506,11 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
         if not ((args.steps is None or 20 <= args.steps <= 100_000) and 1 <= args.repeat <= 100):
             parser.error("--steps must be in 20..100000 and --repeat in 1..100")
-        sides = (args.record_side, args.view_side)
+        sides = (args.record_side, args.view_side, args.keyed_side)
         if not (1 <= args.procs <= 64 and all(0 <= side <= 256 for side in sides)):
-            parser.error("--procs must be in 1..64, --record-side and --view-side in 0..256")
+            parser.error(
+                "--procs must be in 1..64, --record-side, --view-side and --keyed-side in 0..256"
+            )
         if not (0 <= args.loss < 1 and 0 <= args.noise <= 1):
             parser.error("--loss must be in [0, 1) and --noise in [0, 1]")
     except CamoError as exc:
@@ -466,6 +543,11 @@ def main(argv: list[str] | None = None) -> int:
         for side in args.large_sides
         for k, extra in enumerate(links)
     ]
+    keys = None
+    if args.keyed_side:
+        side = args.keyed_side
+        steps = args.steps or default_steps(side)
+        keys = key_cost(side, args.procs, domain, args.out / "keys", steps, args.repeat)
     # What recording, and a live view with no client connected, add to a run.
     extras = {
         "recording": (args.record_side, "record", lambda out: ["--record", str(out / "bag")]),
@@ -477,30 +559,9 @@ def main(argv: list[str] | None = None) -> int:
         if side
     }
     if args.json:
-        print(json.dumps({"rates": rates, "whole": whole, "large": large, **added}))
+        print(json.dumps({"rates": rates, "whole": whole, "large": large, "keys": keys, **added}))
     else:
-        print(f"medians of {args.repeat} alternating runs, {args.procs} processes")
-        print("long runs (step rate):")
-        print(format_table(rates))
-        for r in rates:
-            print(
-                f"{r['robots']} against the packed bare exchange: "
-                f"{r['packed_steps_per_s']:.1f} steps/s, ratio {r['packed_ratio']:.2f}"
-            )
-        print("whole runs (35 + 10 steps):")
-        print(format_table(whole))
-        if args.loss:
-            print(f"with {args.loss:.0%} of messages lost (the same runs' loss-free figures):")
-            print(format_loss(rates + whole))
-        if large:
-            print("large swarms (one run each, the launcher's default processes):")
-            print(format_large(large))
-        targets = {"recording": 1.5, "live view": 1.1}
-        for what, r in added.items():
-            print(
-                f"{what} {r['robots']}: launch to exit {r['plain_s']:.1f} s, with it "
-                f"{r['added_s']:.1f} s, ratio {r['ratio']:.2f} (target <= {targets[what]})"
-            )
+        print_report(args, rates, whole, large, keys, added)
     return 0
 
 
