@@ -22,7 +22,7 @@ from support import (
 
 from camo_bag.loader import open_bag
 from camo_core.algorithm.backgrounds import background
-from camo_core.swarm.keys import KEY_FILE_ENV, REPLAYED, sealed
+from camo_core.swarm.keys import KEY_FILE_ENV, NO_TAG, REPLAYED, sealed
 
 
 def _attacker(run_id: str, domain_id: int, *args: str) -> subprocess.Popen:
@@ -110,3 +110,40 @@ def test_an_encrypted_runs_bag_holds_ciphertext_that_render_reads_with_its_key(t
     for name in ("final", "initial", "sensed", "votes", "mean_p"):
         assert again[name] == live[name], name
     assert sim.returncode == 0
+
+
+@pytest.mark.slow(SWARM)
+def test_a_keyed_16x16_run_under_a_flood_and_a_hijack_without_the_key_is_the_simulators(
+    tmp_path,
+):
+    """Two strangers without the key at once: one writes forged robot messages, statuses,
+    hosts, heartbeats, parameters and backgrounds on every topic of the run; the other
+    announces the first half of the grid as its own before the workers do, and beats. Every
+    message of theirs is refused for its tag, and the run is `./camo sim`'s."""
+    options = ["--rows", "16", "--cols", "16", "--pattern", "forest", "--seed", "5"]
+    options += ["--rho-comm", "0.1", "--consensus-steps", "300"]
+    domain_id = domain()
+    hijacker = _attacker("flooded", domain_id, "600", "--hijack", "0-127")
+    flooder = None
+    try:
+        wait_for_line(hijacker, "ready")
+        run = start_run(
+            *options,
+            *["--procs", "2", "--run-id", "flooded", "--out", str(tmp_path / "run")],
+            domain_id=domain_id,
+        )
+        wait_for_line(run, "topics under")
+        flooder = _attacker("flooded", domain_id, "600", "0-127", "128-255")
+        wait_for_line(flooder, "ready")
+        _, err = finished(run, 300)
+    finally:
+        for stranger in (hijacker, flooder):
+            if stranger is not None:
+                stranger.terminate()
+                finished(stranger, 30)
+    assert run.returncode == 0, err[-3000:]
+    sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
+    assert sim.returncode == 0, sim.stderr
+    ran = assert_like_sim(tmp_path / "run", tmp_path / "sim", attacked=True)
+    assert set(ran["rejected_messages"]["by_reason"]) == {NO_TAG}, ran["rejected_messages"]
+    assert ran["rejected_messages"]["total"] > 100
