@@ -15,8 +15,9 @@ port files whose lock file is gone (a port's last user closes it and leaves the
 segment and its semaphore), and the named semaphores (`sem.mp-*`) of Python's
 multiprocessing in processes killed before they could unlink them (Dask's
 workers, spawned). Neither is of any use once no process has it open or mapped:
-a live listener maps its port, a live semaphore is mapped by its users. So
-`orphans` are the files of those kinds, this user's, older than ORPHAN_AGE, that
+a live listener maps its port, a live semaphore is mapped by its users (but for
+a spawned child's start: SEMAPHORE_AGE). So `orphans` are the files of those
+kinds, this user's, older than ORPHAN_AGE (semaphores SEMAPHORE_AGE), that
 no process this one can see (/proc) has open or mapped. Processes in another PID
 namespace sharing this /dev/shm are not seen: a container shares its /dev/shm
 with no other by default, and should not share it with another run's.
@@ -92,6 +93,9 @@ ORPHAN_PREFIXES = ("fastrtps_", "sem.fastrtps_", "sem.mp-")
 # s: a file younger may be one whose creator is about to map it (it has the file open from
 # the start, so the window is one /proc scan long: milliseconds)
 ORPHAN_AGE = 1.0
+# s: a multiprocessing semaphore may be mapped by nobody for a while and still be wanted: a
+# spawning parent can let go of it before the child, still starting, opens it by name.
+SEMAPHORE_AGE = 600.0
 
 
 def in_use(root: Path = SHM) -> set[str]:
@@ -137,7 +141,8 @@ def orphans(root: Path = SHM) -> list[Path]:
             info = (root / name).stat()
         except OSError:
             continue
-        if info.st_uid == uid and now - info.st_mtime > ORPHAN_AGE:
+        age = SEMAPHORE_AGE if name.startswith("sem.mp-") else ORPHAN_AGE
+        if info.st_uid == uid and now - info.st_mtime > age:
             found.append(root / name)
     return found
 
