@@ -55,7 +55,7 @@ from camo_bag.qos_yaml import check_profiles
 from camo_core.inputs.files import checked_path
 from camo_core.inputs.strict_yaml import read_yaml
 from camo_core.swarm.keys import Opener, RunKey, sealed, strip
-from camo_nodes.topics.keyed import process_key
+from camo_nodes.topics.keyed import process_key, run_of
 
 METADATA = "metadata.yaml"
 METADATA_MAX = 64 * 1024 * 1024  # a metadata.yaml larger than this is not one camo wrote
@@ -581,7 +581,7 @@ class Unsealing:
                 f"{self.file}: {message.topic} holds encrypted messages (a run with --encrypt): "
                 "give its key file with --key-file"
             )
-        run = message.topic.split("/")[1] if message.topic.count("/") >= 2 else ""
+        run = run_of(message.topic)
         opener = self.openers.setdefault(run, Opener(self.key, run, replays=False))
         payload, why = opener.open(message.topic, data)
         if payload is None:

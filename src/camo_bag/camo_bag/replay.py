@@ -68,11 +68,6 @@ def build_parser() -> Parser:
     return parser
 
 
-def run_of(topic: str) -> str:
-    """The run id a topic belongs to (/<run>/...)."""
-    return topic.split("/")[1] if topic.count("/") >= 3 else ""
-
-
 def renamed(topic: str, run_id: str | None) -> str:
     """A recorded topic under another run id (topics of the older layout, at the root, keep
     their names)."""
@@ -114,7 +109,7 @@ def replay(args, bag: Bag, stop: StopFlag) -> int:
                 msgdefs.message_class(t.type),
                 renamed(t.name, args.run_id),
                 qos_yaml.load_first(t.qos, f"{bag.file}: {t.name} offered_qos_profiles"),
-                run_of(renamed(t.name, args.run_id)),
+                keyed.run_of(renamed(t.name, args.run_id)),
             )
             for t in topics
         }
