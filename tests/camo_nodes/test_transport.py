@@ -11,6 +11,7 @@ from support import ros_context
 
 from camo_core.algorithm.params import CamoParams
 from camo_core.swarm.robot_io import CONSENSUS, DONE, NOTHING, Message, Output
+from camo_msgs.msg import Host
 from camo_nodes.topics.names import RunTopics
 from camo_nodes.transport import (
     MAX_STATUS_BYTES,
@@ -19,6 +20,7 @@ from camo_nodes.transport import (
     Transport,
     row_bytes,
 )
+from camo_nodes.trust import OWN_TILES_CLAIMED
 
 
 class Writer:
@@ -180,5 +182,28 @@ def test_a_step_every_hosted_robot_took_is_let_go_and_a_late_message_for_it_is_n
         assert list(transport._seen) == [(0, "vote", 1)]
         transport._robot_message(vote(1, (0.0, 1.0, 0.0)), other)
         assert transport.rejected.counts == {"a second, different message for the same step": 1}
+        transport.close()
+        node.destroy_node()
+
+
+def test_another_process_announcing_its_tiles_is_said_at_once_in_its_own_announcement():
+    """The launcher may hear that process later than this one does (or not before a small run
+    ends): the claim is reported by reason in this process's next announcement, sent at once."""
+    with ros_context() as context:
+        node = rclpy.create_node("claimed_test", context=context)
+        transport = Transport(
+            node, CamoParams(rows=2, cols=2), RunTopics("claimed_test"), [(0, 3)]
+        )
+        sent = Writer()
+        transport.host_pub = sent
+        other = bytes(range(1, 13)) + bytes(4)  # another process's writer GID
+        elsewhere = Host(name="stranger", first=[0], last=[1])
+        transport._on_host(serialize_message(Host(name="stranger", first=[9], last=[9])), other)
+        assert transport.conflict is None and not sent.sent  # out of range: only refused
+        transport._on_host(serialize_message(elsewhere), other)
+        assert transport.conflict.name == "stranger" and transport.conflict.tiles == [(0, 3)]
+        (announced,) = sent.sent
+        reasons = dict(zip(announced.rejected_reasons, announced.rejected_counts, strict=True))
+        assert reasons[OWN_TILES_CLAIMED] == 1, reasons
         transport.close()
         node.destroy_node()

@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 from collections.abc import Iterable
 
-from rclpy.experimental import EventsExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import String
 
@@ -19,6 +19,7 @@ from camo_nodes.host import host_node_name
 from camo_nodes.monitor_node import MonitorNode
 from camo_nodes.topics import keyed
 from camo_nodes.topics.qos import LATCHED
+from camo_nodes.trust import OWN_TILES_CLAIMED as CLAIMED
 
 HOSTS_SETTLE = 2.0  # s: a host the graph shows has its latched announcement taken by then
 
@@ -33,7 +34,9 @@ class Session:
         topics = config.topics
         self.topics = topics
         self.node = Node("launcher", namespace=topics.swarm_namespace, context=context)
-        self.executor = EventsExecutor(context=context)
+        # rclpy's own executor: its EventsExecutor can crash destroying a node at the run's end
+        # while another process still writes to it (rclpy issue 1644, seen in CI).
+        self.executor = SingleThreadedExecutor(context=context)
         self.executor.add_node(self.node)
         self.action: CamouflageAction | None = None  # served once the run's nodes are up
         if config.named:
@@ -75,7 +78,10 @@ class Session:
         announcement is taken (the monitor may have heard the run's own host first, and its
         robots each other), yet a process that heard the stranger first computed without the
         run's robots there: the announcements of every host the graph shows are waited for
-        (at most HOSTS_SETTLE s), then any conflict ends the run."""
+        (at most HOSTS_SETTLE s), then any conflict ends the run. A process of the run that
+        hears another announce its tiles says so at once (trust.OWN_TILES_CLAIMED): that ends
+        the run too, even before this process hears the other (named if it does within the
+        discovery timeout)."""
         ours = {host_node_name(pid) for pid in started}
         hosts = self.monitor.trusted
         if final:
@@ -85,17 +91,42 @@ class Session:
                 and time.monotonic() < deadline
             ):
                 self.spin(0.05)
-        conflict = hosts.held_by_others(self.setup.tiles, lambda p: hosts.names.get(p) in ours)
-        if conflict is None:
+
+        def others():
+            return hosts.held_by_others(self.setup.tiles, lambda p: hosts.names.get(p) in ours)
+
+        conflict = others()
+        # Processes of the run that heard another announce their cells (said at once in their
+        # own announcements): a conflict even before this process hears that one.
+        told = [
+            name
+            for prefix, name in hosts.names.items()
+            if name in ours and hosts.refused.get(prefix, {}).get("by_reason", {}).get(CLAIMED)
+        ]
+        if conflict is None and told:
+            conflict = self._hear_claimant(others)
+        if conflict is None and not told:
             return
         waited = time.monotonic() - self.started
-        if final or ours <= set(hosts.names.values()) or waited > self.setup.discovery_timeout:
+        settled = ours <= set(hosts.names.values()) or waited > self.setup.discovery_timeout
+        if told or final or settled:
+            who = f"({conflict.process})" if conflict else f"(heard by {told[0]}, not here)"
             raise RunFailed(
-                f"run {self.topics.run}: cells {conflict.cells} were announced by a process "
-                f"this run did not start ({conflict.process}): wherever it was heard first, the "
-                f"run's own robots there go unheard; stop that process or choose another --run-id",
+                f"run {self.topics.run}: cells {conflict.cells if conflict else 'of ' + told[0]} "
+                f"were announced by a process this run did not start {who}: wherever it was "
+                f"heard first, the run's own robots there go unheard; stop that process or "
+                f"choose another --run-id",
                 EXIT_CONFLICT,
             )
+
+    def _hear_claimant(self, conflict):
+        """One of the run's processes reported another announcing its cells, which this one
+        has not heard yet: the claimant's announcement, waited for (discovery under load takes
+        seconds) at most the discovery timeout, to say who it is."""
+        deadline = time.monotonic() + self.setup.discovery_timeout
+        while (found := conflict()) is None and time.monotonic() < deadline:
+            self.spin(0.05)
+        return found
 
     def spin(self, seconds: float = 0.1) -> None:
         if self.stop:
@@ -128,8 +159,8 @@ class Session:
     def close(self) -> None:
         if self.action is not None:
             self.action.close()
-        # Executor first, then nodes, then context: the EventsExecutor must let go of the
-        # nodes' handles before they are destroyed, or interpreter exit can crash.
+        # Executor first, then nodes, then context: the nodes' handles are let go of before
+        # they are destroyed.
         self.executor.shutdown()
         for node in (self.monitor, self.node):
             self.executor.remove_node(node)

@@ -66,7 +66,7 @@ from camo_nodes.topics import keyed
 from camo_nodes.topics.names import RunTopics, tile_name
 from camo_nodes.topics.qos import HEARTBEAT_READER, LATCHED, LATCHED_READER, history_qos
 from camo_nodes.topics.robot_messages import COLUMN_TYPES, Columns, RaggedColumns, stamp, unpack
-from camo_nodes.trust import Conflict, Hosts, Rejections
+from camo_nodes.trust import OWN_TILES_CLAIMED, Conflict, Hosts, Rejections
 
 # Robot messages in one array at most: a process's pump can send several steps of thousands of
 # robots, and a DDS message past Fast DDS's shared-memory segment (512 KB) is slow.
@@ -355,6 +355,11 @@ class Transport:
         new = self.trusted.learn(msg, gid)
         if self.conflict is None and gid[:PREFIX] != self.own:
             self.conflict = self.trusted.held_by_others(self.tiles, lambda p: p == self.own)
+            if self.conflict is not None:
+                # Said at once: the launcher may not have heard that process yet (discovery
+                # under load takes seconds), and a small run can end before it does.
+                self.rejected.refuse(OWN_TILES_CLAIMED, gid, msg.name)
+                self.announce()
         for first, last in new:
             if first in self.hosted or not any(first <= n <= last for n in self.needed):
                 continue  # ours, or nothing there that this process's robots hear

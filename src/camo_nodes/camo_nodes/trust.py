@@ -34,6 +34,10 @@ from camo_core.swarm.run_setup import RunSetup
 from camo_msgs.msg import Host
 from camo_nodes.rcl_take import PREFIX
 
+# The reason a process reports (in its host announcement) for another process announcing
+# tiles it hosts itself: its launcher ends the run on it even before hearing that process.
+OWN_TILES_CLAIMED = "announcement of tiles this process hosts"
+
 
 class Rejections:
     """Messages refused, by reason; the first from each writing process is logged."""
