@@ -13,8 +13,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from support import COMPUTE
 
+from camo_core.algorithm import kernels
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.result import SUMMARY_KEYS, RunResult, p_stats
+from camo_core.algorithm.result import SMALL_P, SUMMARY_KEYS, RunResult, mean_p, p_stats
 from camo_core.algorithm.simulator import simulate
 from camo_core.results import figures
 from camo_core.results import summary as result
@@ -214,3 +215,14 @@ def test_p_stats_sums_in_robot_order_and_keeps_the_first_robots_nan(n, width, se
             assert np.isnan(spread[k]).all()
         else:
             assert spread[k, 0] == np.nanmin(column) and spread[k, 1] == np.nanmax(column)
+
+
+@pytest.mark.parametrize("robots", [1, 7, SMALL_P // 3, SMALL_P // 3 + 1])
+def test_p_stats_of_small_and_large_swarms_are_the_kernels_bits(robots):
+    """Small swarms' p statistics skip numba (its start costs more than they do): the same bits
+    as the compiled kernels on either side of the limit."""
+    p = np.random.default_rng(robots).random((robots, 3)) * 1e3
+    mean, spread = p_stats(p)
+    assert np.array_equal(mean, kernels.mean_p(p)) and np.array_equal(mean, mean_p(p))
+    expected_mean, expected_spread = kernels.p_stats(p)
+    assert np.array_equal(mean, expected_mean) and np.array_equal(spread, expected_spread)

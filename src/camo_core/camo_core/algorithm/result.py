@@ -57,20 +57,42 @@ def pattern_said(summary: dict) -> str:
     return f"{label} ({counts})"
 
 
+# Robots x width up to which p's statistics are taken with numpy rather than the compiled
+# kernels: importing numba and loading its kernels costs a process most of a second, more than
+# a small swarm's every step together (the launcher of a 3x3 run, a sweep's trial).
+SMALL_P = 1 << 16
+
+
+def _flat(p: np.ndarray) -> np.ndarray:
+    p = np.asarray(p, dtype=np.float64)
+    return np.ascontiguousarray(p).reshape(-1, p.shape[-1])
+
+
+def _small(flat: np.ndarray) -> bool:
+    """numpy gives the kernels' very bits here: sums in robot-id order (add.accumulate adds
+    one robot at a time, where sum would add pairwise), least and greatest alike without NaN."""
+    return 0 < flat.size <= SMALL_P and not np.isnan(flat).any()
+
+
 def mean_p(p: np.ndarray) -> np.ndarray:
     """Mean p over robots (p: ... x width), summed in robot-id order by every driver."""
+    flat = _flat(p)
+    if _small(flat):
+        return np.add.accumulate(flat, axis=0)[-1] / len(flat)
     from camo_core.algorithm import kernels  # numba: not for a robot's process
 
-    p = np.asarray(p, dtype=np.float64)
-    return kernels.mean_p(np.ascontiguousarray(p).reshape(-1, p.shape[-1]))
+    return kernels.mean_p(flat)
 
 
 def p_stats(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """mean_p(p), and width x 2: the least and the greatest p over robots, per entry."""
+    flat = _flat(p)
+    if _small(flat):
+        spread = np.stack([flat.min(axis=0), flat.max(axis=0)], axis=1)
+        return np.add.accumulate(flat, axis=0)[-1] / len(flat), spread
     from camo_core.algorithm import kernels  # numba: not for a robot's process
 
-    p = np.asarray(p, dtype=np.float64)
-    return kernels.p_stats(np.ascontiguousarray(p).reshape(-1, p.shape[-1]))
+    return kernels.p_stats(flat)
 
 
 @dataclass
