@@ -308,3 +308,19 @@ def test_one_palette_rule_serves_every_driver_on_many_swarms():
     alone = colours.robot_palette(tuple(mixed_up.tolist()), tuple(own.tolist()), 4)
     assert tuple(map(tuple, grid_colours[0, 0].tolist())) == alone[0]
     assert tuple(grid_shades[0, 0].tolist()) == alone[1]
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(1, 3000), st.integers(1, 40), st.booleans(), st.integers(0, 2**32 - 1))
+def test_greys_shown_give_the_distance_of_their_three_channel_colours(n, tones, grey, seed):
+    # A grey run's robots show greys: given as one column, the same bits as three equal ones,
+    # whether what they sensed was grey (one column each) or coloured.
+    rng = np.random.default_rng(seed)
+    sensed = np.repeat((rng.integers(0, 511, n) / 2.0)[:, None], 3, axis=1)
+    if not grey:
+        sensed[rng.integers(0, n)] += (0.0, 1.0, 2.0)
+    shown = (rng.integers(0, 256, tones) / 1.0)[rng.integers(0, tones, n)]
+    as_colours = np.repeat(shown[:, None], 3, axis=1)
+    expected = _ciede2000_robot_by_robot(as_colours, sensed)
+    assert colours.colour_distance(shown, sensed) == expected
+    assert colours.colour_distance(as_colours, sensed) == expected

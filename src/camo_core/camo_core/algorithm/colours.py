@@ -157,22 +157,34 @@ def palettes(vectors: np.ndarray, own: np.ndarray, k: int) -> tuple[np.ndarray, 
 
 def colour_distance(shown: np.ndarray, sensed: np.ndarray) -> float:
     """The mean CIEDE2000 difference (scikit-image's) between the colours robots show and
-    those they sensed (sRGB ... x 3, 0..255), over the robots given.
+    those they sensed (sRGB ... x 3, 0..255), over the robots given; `shown` may be n greys
+    (each the colour of three equal channels).
 
     A swarm shows a few palette colours over a few hundred sensed ones, so the difference is
     worked out once for each distinct (sensed, shown) pair and spread back to every robot:
     the same numbers, summed in the same order, as working it out robot by robot."""
     from skimage.color import deltaE_ciede2000, rgb2lab
 
-    shown = np.asarray(shown, dtype=np.float64).reshape(-1, 3)
+    shown = np.asarray(shown, dtype=np.float64)
     sensed = np.asarray(sensed, dtype=np.float64).reshape(-1, 3)
     if shown.size == 0:
         return 0.0
-    pairs = np.concatenate([sensed, shown], axis=1)
-    first, each = _distinct_rows(pairs) or (slice(None), slice(None))
-    sensed, shown = pairs[first, None, :3], pairs[first, None, 3:]
+    if shown.ndim == 1 and _greys(sensed):  # greys shown, greys sensed: one column each
+        pairs = np.stack([sensed[:, 0], shown], axis=1)
+        first, each = _distinct_rows(pairs) or (slice(None), slice(None))
+        sensed, shown = (np.repeat(pairs[first, None, k, None], 3, axis=-1) for k in (0, 1))
+    else:
+        shown = shown.reshape(-1, 3) if shown.ndim > 1 else np.repeat(shown[:, None], 3, axis=1)
+        pairs = np.concatenate([sensed, shown], axis=1)
+        first, each = _distinct_rows(pairs) or (slice(None), slice(None))
+        sensed, shown = pairs[first, None, :3], pairs[first, None, 3:]
     differences = deltaE_ciede2000(rgb2lab(sensed / 255.0), rgb2lab(shown / 255.0))[:, 0]
     return float(np.mean(differences[each]))
+
+
+def _greys(rgb: np.ndarray) -> bool:
+    """Every colour (n x 3) a grey: its three channels equal."""
+    return bool((rgb[:, 0] == rgb[:, 1]).all() and (rgb[:, 1] == rgb[:, 2]).all())
 
 
 def _distinct_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:

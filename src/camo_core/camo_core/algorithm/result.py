@@ -153,7 +153,9 @@ class RunResult:
         took_part = np.isfinite(self.sensed_rgb).all(axis=-1)
         if self.alive is not None:
             took_part &= self.alive
-        return colours.colour_distance(self.display_rgb[took_part], self.sensed_rgb[took_part])
+        greys = self.palette_rgb is None or self.shades is None  # what display_rgb repeats
+        shown = self.display[took_part] if greys else self.display_rgb[took_part]
+        return colours.colour_distance(shown, self.sensed_rgb[took_part])
 
     @property
     def grey_distance(self) -> float:
