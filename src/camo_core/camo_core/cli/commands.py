@@ -19,10 +19,7 @@ from camo_core.algorithm.modes import Modes, modes_of
 from camo_core.algorithm.modes.palettes import GridPalette
 from camo_core.algorithm.modes.scopes import Previous
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.perrobot import run_per_robot
 from camo_core.algorithm.result import pattern_said
-from camo_core.algorithm.simulator import simulate
-from camo_core.cli import bench
 from camo_core.cli.options import (
     Parser,
     add_contrast_option,
@@ -73,6 +70,9 @@ def sensed_overrides(
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
+    from camo_core.algorithm.perrobot import run_per_robot  # numba: only for what simulates
+    from camo_core.algorithm.simulator import simulate
+
     params = params_from(args)
     modes = modes_of(params)
     image, label = image_from(args)
@@ -191,6 +191,8 @@ def cmd_key(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
+    from camo_core.cli import bench  # numba: only for what simulates
+
     sizes = tuple(integer(s) for s in items(args.sizes, "--sizes")) if args.sizes else bench.SIZES
     report = bench.run(sizes=sizes, whole=args.whole)
     print(json.dumps(report) if args.json else bench.format_table(report))
