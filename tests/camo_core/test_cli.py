@@ -17,6 +17,7 @@ from support import (
     value_options,
 )
 
+from camo_core.algorithm import perrobot, simulator
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import SUMMARY_KEYS
 from camo_core.cli import commands
@@ -214,8 +215,8 @@ def test_every_option_of_sim_with_a_bad_value_is_one_line_and_exit_2(
     # Only the command line runs: the simulation itself is replaced by Validated (where a
     # value is fine: -1 for a weight, a folder named nan).
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(commands, "simulate", validated)
-    monkeypatch.setattr(commands, "run_per_robot", validated)
+    monkeypatch.setattr(simulator, "simulate", validated)  # as cmd_sim imports it
+    monkeypatch.setattr(perrobot, "run_per_robot", validated)
     argv = ["sim", "--rows", "2", "--cols", "2"]
     if option != "--out":
         argv += ["--out", str(tmp_path / "out"), "--force"]
@@ -251,8 +252,8 @@ def test_sim_with_declared_options_out_of_range_is_one_line_or_runs(
     tmp_path_factory, monkeypatch, capsys, pairs
 ):
     folder = tmp_path_factory.mktemp("sim")
-    monkeypatch.setattr(commands, "simulate", validated)
-    monkeypatch.setattr(commands, "run_per_robot", validated)
+    monkeypatch.setattr(simulator, "simulate", validated)  # as cmd_sim imports it
+    monkeypatch.setattr(perrobot, "run_per_robot", validated)
     argv = ["sim", "--rows", "2", "--cols", "2", "--out", str(folder / "o"), "--force"]
     for option, value in pairs:
         argv += [option] if value is None else [option, value]  # a flag takes no value

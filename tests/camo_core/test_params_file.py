@@ -308,13 +308,14 @@ def test_a_params_file_of_wrong_types_and_ranges_is_one_line_or_runs(
 ):
     from support import Validated, validated
 
+    from camo_core.algorithm import perrobot, simulator
     from camo_core.cli import commands
 
     folder = tmp_path_factory.mktemp("pf")
     path = folder / "p.yaml"
     path.write_text(yaml.safe_dump(tree))
-    monkeypatch.setattr(commands, "simulate", validated)
-    monkeypatch.setattr(commands, "run_per_robot", validated)
+    monkeypatch.setattr(simulator, "simulate", validated)  # as cmd_sim imports it
+    monkeypatch.setattr(perrobot, "run_per_robot", validated)
     argv = ["sim", "--params-file", str(path), "--out", str(folder / "out"), "--force"]
     try:
         code = commands.main(argv)
