@@ -148,8 +148,8 @@ def hashlib_of(pixels: np.ndarray) -> str:
 
 
 @pytest.mark.slow(SWARM)
+@pytest.mark.alone(TIMED)
 def test_a_static_noisy_camera_is_camouflaged_once(tmp_path):
-    # Not alone: nothing here is timed, and noise must not make a round however busy the cores.
     domain_id = domain()
     cam = camera(domain_id, tmp_path / "frames", "--fps", "15", "--noise", "8", "--seconds", "60")
     try:
