@@ -589,9 +589,9 @@ def test_a_stranger_without_the_key_hosting_the_runs_cells_first_changes_nothing
 def test_an_insider_hosting_the_runs_cells_first_ends_it_in_one_line(tmp_path):
     """A process with the run's key that the launcher did not start announces cells 4-8 of
     run lab before its workers do: the run ends (code 2) within its discovery timeout, says
-    who took what in one line, and leaves none of its processes behind. The run is long
-    enough (400 consensus steps) for its processes to discover that one: under load a 3x3 run
-    of the default length can end, rightly, before any of them hears it."""
+    who took what in one line, and leaves none of its processes behind. The run goes on until
+    its processes have discovered that one (a continuous run of 30 s): under load a 3x3 round
+    can end, rightly with code 0, before any of them hears it."""
     domain_id = str(domain())
     key = str(new_key_file(tmp_path / "lab.key").path)
     stranger = stranger_hosting("lab", domain_id, "4-8", key=key)
@@ -602,7 +602,7 @@ def test_an_insider_hosting_the_runs_cells_first_ends_it_in_one_line(tmp_path):
             run = subprocess.Popen(
                 [sys.executable, "-m", "camo_bringup.launcher", "--rows", "3", "--cols", "3"]
                 + ["--run-id", "lab", "--domain-id", domain_id, "--procs", "2"]
-                + ["--key-file", key, "--consensus-steps", "400"]
+                + ["--key-file", key, "--continuous", "--duration", "30"]
                 + ["--discovery-timeout", str(DISCOVERY), "--out", str(tmp_path / "run")],
                 cwd=ROOT,
                 stdout=subprocess.DEVNULL,
