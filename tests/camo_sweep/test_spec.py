@@ -294,3 +294,39 @@ def test_a_sweep_file_path_that_is_no_file_is_one_line(tmp_path, monkeypatch, na
     monkeypatch.chdir(tmp_path)
     with pytest.raises(UsageError, match=said):
         spec_from_yaml(name)
+
+
+@pytest.mark.parametrize(
+    "args, said",
+    [
+        (
+            ["--axis", "rho_comm=0:1:0.01", "--trials", "2", "--max-trials", "100"],
+            "the sweep has 202 trials, more than --max-trials 100: fewer values or replicates",
+        ),
+        (
+            ["--axis", "rows=1:4096:1", "--axis", "cols=1:4096:1"],
+            "the sweep has 16,777,216 trials, more than the 10,000,000 a sweep may have",
+        ),
+        (["--axis", "rho_comm=0.1", "--trials", str(10**30)], "the sweep has 1,000,000,000,000"),
+        (["--axis", "rho_comm=0.1", "--max-trials", "0"], "--max-trials must be in 1..10000000"),
+    ],
+)
+def test_a_sweep_of_too_many_trials_is_one_line_before_anything(tmp_path, capsys, args, said):
+    # Counted from the axes' lengths: no trial is listed, no folder made.
+    from camo_sweep import cli
+
+    assert cli.main([*args, "--workers", "1", "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err
+    assert said in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "s").exists()
+
+
+def test_a_sweep_says_how_many_trials_it_has_and_runs_before_it_starts(tmp_path, capsys):
+    from camo_sweep import cli
+
+    argv = ["--axis", "rho_comm=0,0.5", "--set", "rows=3", "--set", "cols=3", "--trials", "2"]
+    argv += ["--workers", "1", "--out", str(tmp_path / "s")]
+    assert cli.main(argv) == 0
+    assert "camo sweep: 4 trials, 4 to run\n" in capsys.readouterr().err
+    assert cli.main([*argv[:-6], "--trials", "3", *argv[-4:]]) == 0  # one replicate more
+    assert "camo sweep: 6 trials (4 in the table already), 2 to run\n" in capsys.readouterr().err

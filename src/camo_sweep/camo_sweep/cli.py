@@ -12,7 +12,14 @@ from camo_core.exceptions import CamoError, UsageError, reported
 from camo_core.inputs.numeric import integer
 from camo_core.inputs.strict_yaml import dump_yaml, read_yaml
 from camo_sweep import engines
-from camo_sweep.spec import DRIVERS, MAX_FILE_BYTES, SweepSpec, build_spec, spec_from_yaml
+from camo_sweep.spec import (
+    DRIVERS,
+    MAX_FILE_BYTES,
+    MAX_TRIALS,
+    SweepSpec,
+    build_spec,
+    spec_from_yaml,
+)
 from camo_sweep.sweep import plan, run_sweep
 
 SPEC_FILE = "sweep.yaml"
@@ -83,6 +90,13 @@ def build_parser() -> Parser:
     parser.add_argument(
         "--batch-s", type=float, default=0.25, help="seconds of simulator trials per task"
     )
+    parser.add_argument(
+        "--max-trials",
+        type=int,
+        default=MAX_TRIALS,
+        help=f"refuse a sweep of more trials than this (default and at most {MAX_TRIALS:,}: "
+        "a sweep lists its trials in memory before it starts)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
 
@@ -121,6 +135,26 @@ def check_folder(folder: Path, spec: SweepSpec) -> SweepSpec | None:
     return before
 
 
+def check_numbers(args) -> None:
+    """The options that are numbers, each in its range (one line if not)."""
+    if args.ros_per_worker < 1:
+        raise UsageError(f"--ros-per-worker must be at least 1 (got {args.ros_per_worker})")
+    if not 1 <= args.max_trials <= MAX_TRIALS:
+        raise UsageError(f"--max-trials must be in 1..{MAX_TRIALS} (got {args.max_trials})")
+    for name in ("ros_timeout", "batch_s"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and 0 < value <= 86400):
+            flag = "--" + name.replace("_", "-")
+            raise UsageError(f"{flag} must be a number of seconds in (0, 86400] (got {value})")
+
+
+def said_of(work) -> str:
+    """What a sweep is about to do, said before it starts."""
+    done = work.total - len(work.todo)
+    table = f" ({done:,} in the table already)" if done else ""
+    return f"{work.total:,} trials{table}, {len(work.todo):,} to run"
+
+
 def make_engine(args, spec: SweepSpec):
     if args.scheduler:
         return engines.remote_engine(args.scheduler)
@@ -136,13 +170,7 @@ def make_engine(args, spec: SweepSpec):
 
 def cmd_sweep(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
-    if args.ros_per_worker < 1:
-        raise UsageError(f"--ros-per-worker must be at least 1 (got {args.ros_per_worker})")
-    for name in ("ros_timeout", "batch_s"):
-        value = getattr(args, name)
-        if not (math.isfinite(value) and 0 < value <= 86400):
-            flag = "--" + name.replace("_", "-")
-            raise UsageError(f"{flag} must be a number of seconds in (0, 86400] (got {value})")
+    check_numbers(args)
     data = spec_from_yaml(args.file) if args.file else None
     if args.print_job_script:
         if not args.slurm:
@@ -156,8 +184,11 @@ def cmd_sweep(argv: list[str]) -> int:
     if args.out is None:
         raise UsageError("the following arguments are required: --out")
     spec = build_spec(data, args.axis, args.set, args.trials, args.seed, args.driver)
+    spec.refuse_more_than(args.max_trials, "--max-trials")
     before = check_folder(args.out, spec)
     work = plan(spec, args.out)  # options that cannot run fail here, before any write
+    if not args.quiet:
+        print(f"camo sweep: {said_of(work)}", file=sys.stderr)
     engine = make_engine(args, spec)  # and an unreachable scheduler here
     try:
         if spec.driver == "ros" and isinstance(engine, engines.DaskEngine):

@@ -196,8 +196,16 @@ class SweepSpec:
         sources = {"image", "pattern"} & (set(names) | set(self.options))
         if len(sources) > 1:
             raise UsageError("a sweep takes --image or --pattern values, not both")
-        if self.count() > MAX_TRIALS:
-            raise UsageError(f"the sweep has {self.count()} trials (at most {MAX_TRIALS})")
+        self.refuse_more_than(MAX_TRIALS)
+
+    def refuse_more_than(self, limit: int, flag: str = "") -> None:
+        """One line if the sweep has more than `limit` trials (`flag`: the option that set it)."""
+        count = self.count()
+        if count > limit:
+            most = f"{flag} {limit:,}" if flag else f"the {limit:,} a sweep may have"
+            raise UsageError(
+                f"the sweep has {count:,} trials, more than {most}: fewer values or replicates"
+            )
 
     def axis_names(self) -> list[str]:
         """Every option an axis sets, in order of first appearance: the table's axis columns."""
