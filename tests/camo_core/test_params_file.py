@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from support import PROCESS, SWARM
 
 from camo_core.cli.params_file import ParamsFileError, check_params_file, check_ros_args
+from camo_core.exceptions import UsageError
 from camo_core.inputs.files import shown
 
 GOOD = """\
@@ -209,6 +210,24 @@ def test_a_node_takes_its_own_keys_over_the_general_ones(tmp_path):
     assert parameters_for(path, "other") == {"rows": 4, "cols": 4}
 
 
+def test_a_file_for_other_nodes_only_is_one_line_naming_its_sections(tmp_path):
+    from camo_core.cli.params_file import parameters_for
+
+    path = write(
+        tmp_path,
+        "camo_smi:\n  ros__parameters:\n    rows: 4\n"
+        "/lab/projector:\n  ros__parameters:\n    image: a.png\n",
+    )
+    with pytest.raises(UsageError) as refused:
+        parameters_for(path, "camo_sim")
+    said = str(refused.value)
+    assert "no section for camo_sim (it has /camo_smi, /lab/projector)" in said
+    assert "/**/camo_sim" in said and "\n" not in said
+    assert parameters_for(path, "projector") == {"image": "a.png"}  # a node it names: read
+    wild = write(tmp_path, "/lab/**:\n  ros__parameters:\n    rows: 4\n")
+    assert parameters_for(wild, "camo_sim") == {}  # a namespace's wildcard: not refused
+
+
 @pytest.mark.slow(PROCESS)
 def test_sim_writes_params_yaml_that_repeats_it_and_the_command_line_wins(tmp_path):
     from support import run_camo
@@ -255,6 +274,7 @@ def test_sim_writes_params_yaml_that_repeats_it_and_the_command_line_wins(tmp_pa
     [
         ("/**:\n  ros__parameters:\n    rows: eight\n", "rows must be an integer (got 'eight')"),
         ("camo_sim:\n  ros__parameters:\n    rowz: 8\n", "camo sim has no parameter rowz"),
+        ("camo_smi:\n  ros__parameters:\n    rows: 8\n", "no section for camo_sim (it has /c"),
         (
             "/**:\n  ros__parameters:\n    profile: fancy\n",
             "profile must be one of paper, droplet",

@@ -111,12 +111,21 @@ def parameters_for(path: str | Path, node: str) -> dict:
     """The parameters a file gives a node named `node` (in any namespace): those under `/**`
     first, then those under its own name, `/**/node` or `/ns/node`."""
     general, own = {}, {}
+    sections = []
     for document in check_params_file(path):
         for where, values in _sections(document):
+            sections.append(where)
             if where == "/**":
                 general.update(_flat(values))
             elif where.split("/")[-1] == node:
                 own.update(_flat(values))
+    names = {where.split("/")[-1] for where in sections}
+    if sections and not names & {node, "**"}:
+        # A file for other nodes only (a misspelt node name): nothing of it would be used.
+        raise UsageError(
+            f"{path}: no section for {node} (it has {', '.join(dict.fromkeys(sections))}): "
+            f"name the node /**/{node}, or /** for every node"
+        )
     return {**general, **own}
 
 
