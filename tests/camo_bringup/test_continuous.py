@@ -189,6 +189,8 @@ def test_a_continuous_run_on_a_still_image_camouflages_it_once_and_ends_after_it
         (["--continuous", "--rounds", "0"], "--rounds must be an integer in 1..1000000"),
         (["--continuous", "--then", "desert"], "--continuous and --then do not go together"),
         (["--video", "a.mp4", "--images", "*.png"], "one background source: video and images"),
+        (["--continuous", "--background-topic", "/cam era"], "'/cam era' is not a ROS topic"),
+        (["--continuous", "--background-topic", "/x" * 130], "should not exceed 247 characters"),
         (["--image", "x.png", "--background-topic", "/c"], "image and background_topic"),
     ],
 )

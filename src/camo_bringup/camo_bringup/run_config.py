@@ -369,7 +369,7 @@ def stream_sources(args: argparse.Namespace, stream: dict) -> list[str]:
         raise UsageError(f"one background source: {' and '.join(given)} were given")
     if sources and args.then:
         raise UsageError("--then switches still backgrounds: not with a stream")
-    opened = open_source(stream) if sources != ["background_topic"] else None
+    opened = open_source(stream) if sources else None  # a topic's name checked, too
     if opened is not None:
         opened.close()
     return sources

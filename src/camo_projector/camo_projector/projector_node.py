@@ -46,7 +46,7 @@ from camo_nodes.topics.images import (
     image_from_msg,
     image_to_msg,
 )
-from camo_nodes.topics.names import RunTopics
+from camo_nodes.topics.names import RunTopics, check_topic_name
 from camo_nodes.topics.parameters import (
     JoinParams,
     node_parameters,
@@ -139,6 +139,9 @@ def open_source(values: dict) -> Source | None:
     if len(streams) > 1 or (streams and values.get("image")):
         given = [*(["image"] if values.get("image") else []), *streams]
         raise UsageError(f"the projector projects one source: {' and '.join(given)} were given")
+    if _given(values, "background_topic"):
+        check_topic_name(values["background_topic"], "background_topic")
+        return None  # the node's own subscription
     if _given(values, "video"):
         return VideoSource(values["video"], values["fps"], values["loop"])
     if _given(values, "images"):

@@ -25,6 +25,31 @@ def check_run_id(run_id: str) -> str:
     return run_id
 
 
+class TopicNameError(CamoError):
+    """A topic name the user gave that ROS would refuse."""
+
+
+def check_topic_name(name: str, what: str) -> str:
+    """A topic name the user gave (`what`: where), checked by rclpy's own rules before any node
+    would take it: one line, where rclpy raises a message of three with a caret."""
+    from rclpy.exceptions import InvalidTopicNameException
+    from rclpy.expand_topic_name import expand_topic_name
+    from rclpy.validate_full_topic_name import validate_full_topic_name
+    from rclpy.validate_topic_name import validate_topic_name
+
+    try:
+        validate_topic_name(name)
+        # As a node at the root would take it (a relative name under its namespace): the
+        # length DDS allows is checked on the full name.
+        validate_full_topic_name(expand_topic_name(name, "camo", "/"))
+    except InvalidTopicNameException as exc:
+        reason = str(exc).splitlines()[0].removeprefix("Invalid topic name: ").rstrip(":")
+        reason = reason.replace("'255U - 8U'", "247 characters")  # rmw's limit, as C says it
+        shown = repr(name) if len(name) <= 80 else repr(name[:80]) + "..."
+        raise TopicNameError(f"{what} {shown} is not a ROS topic name: {reason}") from None
+    return name
+
+
 def new_run_id() -> str:
     """Unique per run, so that two runs in one domain never share a topic."""
     return f"run_{secrets.token_hex(3)}"
