@@ -138,6 +138,22 @@ def test_bench_whole_process_times_camo_sim_in_a_subprocess():
     assert "whole process: python -m camo_core.cli sim" in bench.format_table(report)
 
 
+@pytest.mark.parametrize("force", [[], ["--force"]])
+@pytest.mark.parametrize("where", ["file", "file/below", "/dev/null"])
+def test_an_output_folder_that_is_a_file_is_one_line_and_the_file_is_kept(
+    tmp_path, capsys, where, force
+):
+    """A file (or a device) where a folder should be, or above it: never replaced, --force
+    or not."""
+    mine = tmp_path / "file"
+    mine.write_text("keep me")
+    out = where if where.startswith("/") else str(tmp_path / where)
+    assert commands.main(["sim", "--rows", "2", "--cols", "2", "--out", out, *force]) == 2
+    err = capsys.readouterr().err
+    assert "not a folder" in err and len(err.strip().splitlines()) == 1, err
+    assert mine.read_text() == "keep me" and sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
 @pytest.mark.slow(PROCESS)
 def test_an_output_folder_that_holds_something_is_refused_unless_forced(tmp_path):
     out = tmp_path / "taken"

@@ -81,6 +81,7 @@ def test_key_files_are_made_private_and_read_back(tmp_path):
     assert len(made.secret) == 32 and made.secret != keys.new_key_file(tmp_path / "b").secret
     with pytest.raises(UsageError, match="there already"):
         keys.new_key_file(tmp_path / "run.key")
+    assert keys.read_key_file(tmp_path / "run.key").secret == made.secret  # never replaced
 
 
 @pytest.mark.parametrize(

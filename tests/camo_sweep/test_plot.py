@@ -2,6 +2,7 @@
 another axis, a heat map of two, and one-line errors."""
 
 import cv2
+import numpy as np
 import pytest
 from support import PROCESS, sweep
 
@@ -69,6 +70,28 @@ def test_an_axis_the_sweep_does_not_have_is_one_line(swept):
     done = sweep("plot", str(swept), "--x", "rows")
     assert done.returncode == 2 and "'rows' is not an axis of this sweep" in done.stderr
     assert "rho_comm, threshold" in done.stderr
+
+
+@pytest.mark.parametrize("theirs", [b"mine", b"\x89PNG\r\n\x1a\n broken", "a real png"])
+def test_a_file_camo_did_not_write_is_never_replaced_and_its_own_is(
+    swept, tmp_path, capsys, theirs
+):
+    from camo_sweep import cli
+
+    path = tmp_path / "figure.png"
+    if theirs == "a real png":  # another program's PNG: a picture, but not camo's
+        cv2.imwrite(str(path), np.zeros((8, 8, 3), np.uint8))
+    else:
+        path.write_bytes(theirs)
+    before = path.read_bytes()
+    argv = ["plot", str(swept), "--x", "rho_comm", "--out", str(path)]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "camo did not write it" in err and len(err.strip().splitlines()) == 1, err
+    assert path.read_bytes() == before
+    own = tmp_path / "own.png"
+    assert cli.main([*argv[:-1], str(own)]) == 0 and cli.main([*argv[:-1], str(own)]) == 0
+    assert cv2.imread(str(own)) is not None  # drawn, then drawn again over its own picture
 
 
 def test_a_text_axis_of_numbers_and_words_is_ordered_as_numbers_then_words():

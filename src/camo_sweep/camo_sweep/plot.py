@@ -14,6 +14,7 @@ import numpy as np
 
 from camo_core.cli.options import Parser
 from camo_core.exceptions import UsageError
+from camo_core.results.folders import PNG_SOFTWARE, check_replaceable_png
 from camo_sweep.table import read
 
 METRICS = (
@@ -147,7 +148,7 @@ def plot(folder: Path, x: str, y: str, by: str | None, heat: str | None, out: Pa
     ax.set_xlabel(x)
     ax.set_title(f"{y} against {x} ({len(values)} trials)")
     fig.tight_layout()
-    fig.savefig(out, dpi=100)
+    fig.savefig(out, dpi=100, metadata={"Software": f"{PNG_SOFTWARE} sweep plot"})
     plt.close(fig)
     return out
 
@@ -160,6 +161,7 @@ def cmd_plot(argv: list[str]) -> int:
         raise UsageError(f"--out names a .png file (got {out})")
     if not out.parent.is_dir():
         raise UsageError(f"--out {out}: no folder {out.parent}")
+    check_replaceable_png(out, "--out")
     plot(args.folder, args.x, args.y, args.by, args.heat, out)
     print(f"wrote {out}")
     return 0

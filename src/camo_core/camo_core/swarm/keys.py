@@ -89,8 +89,9 @@ def new_key_file(path: str | Path) -> RunKey:
     try:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     except FileExistsError:
+        there = "a key file or another file" if not path.is_dir() else "a folder"
         raise UsageError(
-            f"{path}: a key file is there already; a new run gets a new one"
+            f"{path}: {there} is there already (never replaced); give a new file name"
         ) from None
     except OSError as exc:
         raise UsageError(f"cannot write the run's key file {path}: {exc.strerror}") from None
