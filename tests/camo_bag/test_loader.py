@@ -16,7 +16,7 @@ from bag_files import (
     write_mcap,
     write_metadata,
 )
-from hypothesis import event, given
+from hypothesis import event, given, settings
 from hypothesis import strategies as st
 
 from camo_bag.container import BagError
@@ -287,6 +287,73 @@ def test_a_partial_read_passes_over_an_invalid_metadata_and_says_so(bag):
 
 
 # ---- level 3: the MCAP file ---------------------------------------------------------------
+
+
+def four_chunks(tmp_path):
+    """A bag of four chunks of 20 messages each; the file and where each chunk ends."""
+    from camo_bag.container import BagWriter, TopicInfo
+    from camo_bag.msgdefs import message_definition
+
+    writer = BagWriter(tmp_path / "whole")
+    writer.add_topic(TopicInfo(CHATTER, STRING), message_definition(STRING))
+    ends = [writer.file.stat().st_size]
+    for chunk in range(4):
+        for k in range(20):
+            writer.write(CHATTER, string_cdr(f"{chunk}-{k}"), 10**9 + chunk * 100 + k, 0)
+        writer.flush()
+        ends.append(writer.file.stat().st_size)
+    writer.close()
+    return writer.file, ends
+
+
+@pytest.mark.parametrize("where", ["inside", "header"])
+def test_a_damaged_chunk_costs_its_messages_only_and_repair_says_how_many(tmp_path, where):
+    """Chunks before and after a damaged one are kept, whether its contents or its framing
+    are broken; the message indexes after it count what it held."""
+    from camo_bag.loader import repair
+
+    file, ends = four_chunks(tmp_path)
+    data = bytearray(file.read_bytes())
+    chunk = ends[1]  # the second chunk's record starts where the first one's indexes end
+    assert data[chunk] == 0x06
+    if where == "inside":
+        data[chunk + 80 : chunk + 100] = bytes(20)  # its records: a CRC that does not match
+    else:
+        data[chunk + 1 : chunk + 9] = (2**62).to_bytes(8, "little")  # a length past the end
+    damaged = tmp_path / "damaged"
+    damaged.mkdir()
+    (damaged / "damaged_0.mcap").write_bytes(bytes(data))
+    bag, count = repair(damaged, tmp_path / "fixed")
+    kept = [m.data for m in open_bag(tmp_path / "fixed").messages()]
+    expected = [string_cdr(f"{c}-{k}") for c in (0, 2, 3) for k in range(20)]
+    assert kept == expected and count == 60, (len(kept), bag.ending)
+    assert "1 damaged stretch passed over" in bag.ending, bag.ending
+    if where == "inside":  # its indexes follow it intact
+        assert "20 messages lost" in bag.ending, bag.ending
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 10**6), st.binary(min_size=1, max_size=16)), max_size=4))
+def test_damage_anywhere_keeps_only_whole_messages_or_one_line(tmp_path_factory, damage):
+    """Bytes overwritten anywhere: what partial reading keeps are messages as written, never
+    a broken one; or a BagError."""
+    tmp_path = tmp_path_factory.mktemp("damage")
+    file, _ = four_chunks(tmp_path)
+    data = bytearray(file.read_bytes())
+    for offset, garbage in damage:
+        at = 8 + offset % (len(data) - 8)  # the magic stays: another test breaks it
+        data[at : at + len(garbage)] = garbage
+    damaged = tmp_path / "d"
+    damaged.mkdir()
+    (damaged / "d_0.mcap").write_bytes(bytes(data)[: len(file.read_bytes())])
+    written = {string_cdr(f"{c}-{k}") for c in range(4) for k in range(20)}
+    try:
+        bag = open_bag(damaged, partial=True, stream=True)
+        kept = [m.data for m in bag.messages()]
+    except BagError as exc:
+        assert "\n" not in str(exc)
+        return
+    assert set(kept) <= written and len(kept) == len(set(kept))
 
 
 def test_a_truncated_bag_is_refused_but_read_up_to_the_cut_when_partial(tmp_path):

@@ -28,7 +28,6 @@ from typing import Any
 
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Schema
-from mcap.stream_reader import StreamReader
 
 from camo_bag import msgdefs
 from camo_bag.checks import (
@@ -52,6 +51,7 @@ from camo_bag.container import (
     damaged,
 )
 from camo_bag.qos_yaml import check_profiles
+from camo_bag.salvage import salvage
 from camo_core.inputs.files import checked_path
 from camo_core.inputs.strict_yaml import read_yaml
 from camo_core.swarm.keys import Opener, RunKey, sealed, strip
@@ -345,29 +345,12 @@ def _read_summary(file: Path):
 
 
 def _salvage(file: Path) -> tuple[dict[int, Schema], dict[int, Channel], list[Message], str]:
-    """Everything readable from the start of a file up to where it breaks."""
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    messages: list[Message] = []
-    ending = "complete"
+    """Everything readable of a file: the chunks before and after damaged ones (salvage.py)."""
     try:
-        with open(file, "rb") as stream:
-            for record in StreamReader(
-                stream, skip_magic=False, emit_chunks=False, validate_crcs=True
-            ).records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message):
-                    messages.append(record)
+        found = salvage(file)
     except OSError as exc:
         raise BagError(f"cannot read {file}: {exc.strerror}") from None
-    except Exception as exc:  # noqa: BLE001 - a damaged tail makes the parser fail in many ways
-        ending = f"cut short ({type(exc).__name__})"
-    messages = [m for m in messages if m.channel_id in channels]
-    messages.sort(key=lambda m: m.log_time)
-    return schemas, channels, messages, ending
+    return found.schemas, found.channels, found.messages, found.ending
 
 
 def _full(name: str) -> str:
