@@ -209,6 +209,16 @@ def _network_args(**given):
         ("RMW_IMPLEMENTATION", "rmw_bogus", "RMW_IMPLEMENTATION='rmw_bogus' is not installed"),
         ("RMW_IMPLEMENTATION", "rmw_dds_common", "is not installed"),  # a library, no RMW
         ("RMW_IMPLEMENTATION", " ", "is not installed"),  # rcl takes it for a name too
+        ("ROS_DISCOVERY_SERVER", "garbage!!", "'garbage!!' is not HOST or HOST:PORT"),
+        ("ROS_DISCOVERY_SERVER", "host:0", "is not HOST or HOST:PORT"),
+        ("ROS_DISCOVERY_SERVER", "a:1:2", "is not HOST or HOST:PORT"),
+        ("ROS_DISCOVERY_SERVER", "[::1]:99999", "is not HOST or HOST:PORT"),
+        ("ROS_SUPER_CLIENT", "perhaps", "ROS_SUPER_CLIENT must be one of TRUE, FALSE"),
+        ("ROS_LOCALHOST_ONLY", "2", "ROS_LOCALHOST_ONLY must be one of 0, 1"),
+        ("CAMO_ENCRYPT", "yes", "CAMO_ENCRYPT must be one of 0, 1 (got 'yes')"),
+        ("CAMO_KEY_FILE", "/nonexistent.key", "key file /nonexistent.key: no such file"),
+        ("FASTRTPS_DEFAULT_PROFILES_FILE", "/nonexistent.xml", "is not a file"),
+        ("FASTRTPS_DEFAULT_PROFILES_FILE", __file__, "is not XML"),
     ],
 )
 def test_a_bad_ros_variable_in_the_environment_is_one_line(name, value, said):
@@ -262,6 +272,25 @@ def test_static_peers_of_names_and_addresses_and_an_installed_rmw_pass():
     network_env(_network_args(), {"RMW_IMPLEMENTATION": "", "ROS_STATIC_PEERS": ""})
     env = network_env(_network_args(network="subnet"), {"ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"})
     assert env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "SUBNET"  # --network overrides OFF
+
+
+def test_discovery_servers_switches_and_a_profiles_file_that_fast_dds_reads_pass(tmp_path):
+    from camo_nodes.topics.startup import network_env
+
+    profiles = tmp_path / "profiles.xml"
+    profiles.write_text('<?xml version="1.0"?><dds><profiles/></dds>')
+    given = {
+        "ROS_DISCOVERY_SERVER": "127.0.0.1:11811;;server.lab;[fe80::1]:11812",
+        "ROS_SUPER_CLIENT": "TRUE",
+        "CAMO_ENCRYPT": "1",
+        "FASTRTPS_DEFAULT_PROFILES_FILE": str(profiles),
+    }
+    assert (
+        network_env(_network_args(), given)["ROS_DISCOVERY_SERVER"]
+        == given["ROS_DISCOVERY_SERVER"]
+    )
+    bad = {"ROS_DISCOVERY_SERVER": "garbage!!"}  # --discovery-server overrides it
+    assert network_env(_network_args(discovery_server="h:11811"), bad)["ROS_DISCOVERY_SERVER"]
 
 
 @pytest.mark.slow(PROCESS)

@@ -28,7 +28,7 @@ from camo_core.inputs.files import shown
 from camo_core.inputs.numeric import INTEGER
 from camo_core.shm import remove_stale
 from camo_core.shutdown import stacks_on_faults
-from camo_core.swarm.keys import KEY_FILE_ENV, read_key_file
+from camo_core.swarm.keys import ENCRYPT_ENV, KEY_FILE_ENV, read_key_file
 
 FASTDDS_PROFILE = Path(__file__).parent.parent / "fastdds.xml"
 
@@ -199,6 +199,83 @@ def check_static_peers(value: str) -> None:
             )
 
 
+def _is_host(host: str) -> bool:
+    """An IP address or a host name (RFC 1123)."""
+    try:
+        ipaddress.ip_address(host)
+        return True
+    except ValueError:
+        labels = host.removesuffix(".").split(".")
+        return len(host) <= MAX_PEER_CHARS and all(HOST_LABEL.fullmatch(x) for x in labels)
+
+
+def check_discovery_servers(value: str) -> None:
+    """ROS_DISCOVERY_SERVER as Fast DDS reads it: `;`-separated HOST or HOST:PORT ([IPv6]:PORT),
+    an empty entry keeping a server's place. Anything else leaves every process searching for
+    servers that are not there: a run that waits for good, so a UsageError here."""
+    for entry in value.split(";"):
+        entry = entry.strip()
+        if not entry:
+            continue
+        host, port = entry, ""
+        bracketed = re.fullmatch(r"\[([^\]]+)\](?::(.*))?", entry)
+        if bracketed:
+            host, port = bracketed[1], bracketed[2] or ""
+        elif entry.count(":") == 1:
+            host, port = entry.split(":")
+        good_port = not port or (INTEGER.fullmatch(port) and 0 < int(port) < 65536)
+        if not (_is_host(host) and good_port):
+            raise UsageError(
+                f"ROS_DISCOVERY_SERVER: {shown(entry)!r} is not HOST or HOST:PORT (want "
+                "HOST:PORT;HOST:PORT...): fix or unset it, or give --discovery-server"
+            )
+
+
+# Variables read as a yes or a no, and what they take.
+SWITCHES = {
+    "ROS_SUPER_CLIENT": ("TRUE", "FALSE", "true", "false", "1", "0"),
+    "ROS_LOCALHOST_ONLY": ("0", "1"),
+    ENCRYPT_ENV: ("0", "1"),
+}
+
+
+def check_environment(env: dict[str, str]) -> None:
+    """What DDS and camo read from the environment on a process's behalf, besides the domain,
+    the discovery range, static peers and the RMW: a value they would misread or pass over
+    without a word is one line here, before rcl starts."""
+    check_discovery_servers(env.get("ROS_DISCOVERY_SERVER", ""))
+    for name, values in SWITCHES.items():
+        value = env.get(name, "").strip()
+        if value and value not in values:
+            raise UsageError(
+                f"{name} must be one of {', '.join(values)} (got {shown(value)!r}): "
+                "fix or unset it"
+            )
+    profiles = env.get("FASTRTPS_DEFAULT_PROFILES_FILE", "").strip()
+    if profiles:
+        _check_profiles_file(Path(profiles))
+    if env.get(KEY_FILE_ENV):
+        read_key_file(env[KEY_FILE_ENV])  # missing, malformed or readable by others: one line
+
+
+def _check_profiles_file(path: Path) -> None:
+    """FASTRTPS_DEFAULT_PROFILES_FILE: Fast DDS passes over a file it cannot load, leaving
+    the user's settings unapplied without a word: it must be there and be XML."""
+    import xml.etree.ElementTree as ElementTree
+
+    where = f"FASTRTPS_DEFAULT_PROFILES_FILE {shown(path)}"
+    if not path.is_file():
+        raise UsageError(f"{where} is not a file: fix or unset it")
+    try:
+        if path.stat().st_size > 16 * 1024 * 1024:
+            raise UsageError(f"{where} is over 16 MiB: not a Fast DDS profiles file")
+        ElementTree.parse(path)
+    except ElementTree.ParseError as exc:
+        raise UsageError(f"{where} is not XML ({exc}): fix or unset it") from None
+    except OSError as exc:
+        raise UsageError(f"cannot read {where}: {exc.strerror}") from None
+
+
 def installed_rmws(ament_prefix_path: str) -> set[str]:
     """The RMW implementations installed: those the ament index of a prefix names
     (resource type rmw_typesupport, as rmw_implementation finds them) whose library is there."""
@@ -307,4 +384,5 @@ def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, 
         # A server tells plain clients only of endpoints that match theirs; tools that list the
         # graph (a recorder, a worker looking for its run) must see everything.
         env["ROS_SUPER_CLIENT"] = "TRUE"
+    check_environment(env)  # what the options left of the inherited environment
     return env
