@@ -67,3 +67,30 @@ def test_opening_a_video_or_a_missing_camera_leaves_opencvs_log_level_as_it_was(
     assert cv2.imwrite(str(path), np.random.default_rng(0).random((8, 8)).astype(np.float32))
     with pytest.raises(ImageError, match=r"the decoder says 'OpenCV TIFF: .*32-bit samples'"):
         load_image(path)
+
+
+def test_every_file_of_images_is_checked_before_any_is_shown(tmp_path):
+    """Kinds, multi-frame files and sizes against the grid: the whole sequence up front, the
+    first bad file named in one line."""
+    import pytest
+    from PIL import Image
+
+    from camo_core.inputs.images import ImageError
+    from camo_projector.sources import ImagesSource
+
+    for name, side in (("a.png", 32), ("b.png", 32)):
+        cv2.imwrite(str(tmp_path / name), np.zeros((side, side), np.uint8))
+    assert ImagesSource(str(tmp_path / "*.png"), 1.0, grid=(32, 32)).files
+    cv2.imwrite(str(tmp_path / "c.png"), np.zeros((8, 40), np.uint8))  # 40 wide, 8 high
+    with pytest.raises(ImageError, match=r"c.png is 40x8 pixels, smaller than the 32x32 robot"):
+        ImagesSource(str(tmp_path / "*.png"), 1.0, grid=(32, 32))
+    (tmp_path / "c.png").unlink()
+    frames = [Image.new("L", (32, 32), k) for k in (0, 255)]
+    frames[0].save(tmp_path / "d.gif", save_all=True, append_images=frames[1:])
+    with pytest.raises(ImageError, match="more than one frame"):
+        ImagesSource(str(tmp_path / "*"), 1.0, grid=(32, 32))
+    (tmp_path / "d.gif").unlink()
+    (tmp_path / "e.png").write_bytes(b"not an image at all")
+    with pytest.raises(ImageError, match=r"e\.png") as refused:
+        ImagesSource(str(tmp_path / "*.png"), 1.0)
+    assert "\n" not in str(refused.value)

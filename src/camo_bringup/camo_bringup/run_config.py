@@ -297,7 +297,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
             f"--continuous and {given} do not go together: a continuous swarm starts its own "
             "rounds, on projected frames only"
         )
-    sources = stream_sources(args, stream)
+    sources = stream_sources(args, stream, (params.rows, params.cols))
     image, label = image_from(args)
     sense_image(image, params.rows, params.cols, params.profile)  # a too-small image fails here
     images = [image]
@@ -358,7 +358,9 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
     )
 
 
-def stream_sources(args: argparse.Namespace, stream: dict) -> list[str]:
+def stream_sources(
+    args: argparse.Namespace, stream: dict, grid: tuple[int, int] | None = None
+) -> list[str]:
     """The stream the run projects (one at most, with neither --image nor --then), its file or
     device opened as the projector will open it: a missing video or camera is one line before
     anything starts, not a projector that fails in a running swarm."""
@@ -369,7 +371,7 @@ def stream_sources(args: argparse.Namespace, stream: dict) -> list[str]:
         raise UsageError(f"one background source: {' and '.join(given)} were given")
     if sources and args.then:
         raise UsageError("--then switches still backgrounds: not with a stream")
-    opened = open_source(stream) if sources else None  # a topic's name checked, too
+    opened = open_source(stream, grid) if sources else None  # a topic's name checked, too
     if opened is not None:
         opened.close()
     return sources

@@ -132,7 +132,7 @@ class ProjectorParams:
 PROJECTOR_PARAMETERS = (ProjectorParams, JoinParams)
 
 
-def open_source(values: dict) -> Source | None:
+def open_source(values: dict, grid: tuple[int, int] | None = None) -> Source | None:
     """The file or device stream the parameters name (a topic is the node's own), checked: an
     ImageError in one line for a missing video, an empty pattern, a camera that is not there."""
     streams = [n for n in ("background_topic", "video", "images", "camera") if _given(values, n)]
@@ -145,7 +145,8 @@ def open_source(values: dict) -> Source | None:
     if _given(values, "video"):
         return VideoSource(values["video"], values["fps"], values["loop"])
     if _given(values, "images"):
-        return ImagesSource(values["images"], values["period"])  # in turn, again and again
+        # in turn, again and again
+        return ImagesSource(values["images"], values["period"], grid=grid)
     if _given(values, "camera"):
         return CameraSource(values["camera"])
     return None

@@ -118,7 +118,10 @@ class VideoSource(Source):
 class ImagesSource(Source):
     """Image files matching a glob pattern, in name order, each for `period` seconds; looped."""
 
-    def __init__(self, pattern: str, period: float, loop: bool = True) -> None:
+    def __init__(
+        self, pattern: str, period: float, loop: bool = True, grid: tuple[int, int] | None = None
+    ) -> None:
+        """`grid`: (rows, cols) of the swarm, if known: every file must cover it."""
         names = sorted(glob.glob(pattern))
         files = [n for n in names if Path(n).is_file()]
         if not files:
@@ -128,7 +131,14 @@ class ImagesSource(Source):
                 f"--images {shown(pattern)}: {len(files)} files, more than {MAX_SEQUENCE}"
             )
         for file in files:  # each header checked as --image checks it, at once; decoded when due
-            image_header(checked_file(file, "image", MAX_IMAGE_BYTES, ImageError))
+            width, height, _, _ = image_header(
+                checked_file(file, "image", MAX_IMAGE_BYTES, ImageError)
+            )
+            if grid is not None and (height < grid[0] or width < grid[1]):
+                raise ImageError(
+                    f"--images {shown(pattern)}: {shown(file)} is {width}x{height} pixels, "
+                    f"smaller than the {grid[1]}x{grid[0]} robot grid"
+                )
         self.files = files
         self.period, self.loop = period, loop
         self.started: float | None = None

@@ -8,6 +8,7 @@ import numpy as np
 from sensor_msgs.msg import Image
 
 from camo_core.exceptions import CamoError
+from camo_core.inputs.images import MAX_IMAGE_PIXELS
 
 
 class ImageEncodingError(CamoError):
@@ -50,6 +51,13 @@ def image_from_msg(msg: Image) -> np.ndarray:
     if channels is None:
         raise ImageEncodingError(
             f"unsupported image encoding {msg.encoding!r} (mono8, bgr8, rgb8)"
+        )
+    if msg.width == 0 or msg.height == 0:
+        raise ImageEncodingError(f"an empty image ({msg.width}x{msg.height} pixels)")
+    if msg.width * msg.height > MAX_IMAGE_PIXELS:
+        raise ImageEncodingError(
+            f"an image of {msg.width}x{msg.height} pixels, more than the {MAX_IMAGE_PIXELS} "
+            "camo decodes"
         )
     if msg.height * msg.step != len(msg.data) or msg.step < msg.width * channels:
         raise ImageEncodingError(
