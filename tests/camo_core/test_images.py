@@ -275,7 +275,7 @@ def test_what_native_code_writes_to_fd_2_while_decoding_is_kept_whole_and_off_st
             os.write(2, said[start : start + 4096])
         return "decoded"
 
-    result, text = images._captured_stderr(decode)
+    result, text = images.captured_stderr(decode)
     assert result == "decoded" and text == said[: images.MAX_DECODER_TEXT].decode()
     assert capfd.readouterr().err == ""
     os.write(2, b"after\n")

@@ -94,3 +94,45 @@ def test_every_file_of_images_is_checked_before_any_is_shown(tmp_path):
     with pytest.raises(ImageError, match=r"e\.png") as refused:
         ImagesSource(str(tmp_path / "*.png"), 1.0)
     assert "\n" not in str(refused.value)
+
+
+def test_a_damaged_video_frame_is_skipped_counted_and_its_decoder_kept_quiet(tmp_path, capfd):
+    """FFmpeg decodes a damaged MJPG frame to something, saying so on stderr: that frame is
+    refused in one line (the projector logs it and projects nothing), the others come."""
+    import pytest
+
+    from camo_core.inputs.images import ImageError
+
+    mjpg = cv2.VideoWriter_fourcc(*"MJPG")
+    writer = cv2.VideoWriter(str(tmp_path / "v.avi"), mjpg, 25, (64, 32))
+    for k in range(20):
+        writer.write(np.full((32, 64, 3), 10 * k, np.uint8))  # frame k: grey 10 k
+    writer.release()
+    data = bytearray((tmp_path / "v.avi").read_bytes())
+    starts = [k for k in range(len(data) - 1) if data[k : k + 2] == b"\xff\xd8"]
+
+    def damage(frame: int) -> None:  # its scan's bytes, from its start-of-scan to its end
+        scan = data.index(b"\xff\xda", starts[frame]) + 14
+        end = data.index(b"\xff\xd9", scan)
+        data[scan:end] = bytes(range(end - scan))
+
+    damage(10)
+    (tmp_path / "bad.avi").write_bytes(bytes(data))
+    clean = VideoSource(str(tmp_path / "v.avi"), fps=10.0)
+    greys = [float(clean.frame(k / 10.0).mean()) for k in range(19)]  # as this FFmpeg decodes
+    video = VideoSource(str(tmp_path / "bad.avi"), fps=10.0)
+    seen, refused = [], []
+    for k in range(19):  # FFmpeg gives this file's last frame as none
+        try:
+            grey = float(video.frame(k / 10.0).mean())
+            seen.append(min(range(19), key=lambda j: abs(greys[j] - grey)))  # its frame
+        except ImageError as exc:
+            refused.append(str(exc))
+    assert seen == [*range(10), *range(11, 19)] and video.damaged == 1, (seen, refused)
+    (said,) = refused
+    assert "frame 10 is damaged (the decoder says" in said and "1 so far" in said
+    assert "mjpeg" not in capfd.readouterr().err  # quoted in the line, not on the terminal
+    damage(0)
+    (tmp_path / "first.avi").write_bytes(bytes(data))
+    with pytest.raises(ImageError, match="first frame is damaged"):
+        VideoSource(str(tmp_path / "first.avi"))

@@ -211,7 +211,7 @@ class ProjectorNode(Node):
         if self.source is not None:
             try:
                 image = self.source.frame(time.monotonic())
-            except CamoError as exc:  # a file of --images that broke since it was checked
+            except CamoError as exc:  # a file of --images that broke, a damaged video frame
                 self.get_logger().error(f"frame not projected: {exc}", throttle_duration_sec=5.0)
                 return
             if image is not None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import glob
 import math
+import re
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -13,13 +14,25 @@ import cv2
 import numpy as np
 
 from camo_core.inputs.files import checked_file, shown
-from camo_core.inputs.images import MAX_IMAGE_BYTES, ImageError, image_header, load_image
+from camo_core.inputs.images import (
+    MAX_IMAGE_BYTES,
+    MAX_QUOTED,
+    ImageError,
+    captured_stderr,
+    decoder_messages,
+    image_header,
+    load_image,
+)
 
 MAX_SEQUENCE = 10_000  # image files of one --images pattern at most
 MAX_VIDEO_BYTES = 1 << 40  # a video is read frame by frame: its size costs no memory
 # Frames of a video whose time passed skipped per call at most: after a stall (a busy machine, a
 # stopped process) a call does not decode seconds of video before its caller's loop turns again.
 SKIPPED_PER_CALL = 64
+# What FFmpeg's decoders write of a frame they could not decode whole ("[mjpeg @ 0x...] error
+# count: ...", "concealing 120 DC, ... errors", "Invalid data found", "corrupt decoded frame"):
+# such a frame decodes to something, but not to the picture, and is never projected.
+VIDEO_DAMAGE = re.compile(r"\berror\b|[Cc]orrupt|[Ii]nvalid|concealing|[Mm]issing", re.ASCII)
 
 
 @contextmanager
@@ -66,13 +79,26 @@ class VideoSource(Source):
         self.loop = loop
         self.started: float | None = None
         self.shown = -1  # the index of the last frame given
+        self.damaged = 0  # frames the decoder said it could not decode whole: not projected
+        self.said = ""  # what it said of the latest
         first = self._read()
         if first is None:
             raise ImageError(f"video {shown(path)}: it holds no frame OpenCV can decode")
+        if self.damaged:
+            raise ImageError(
+                f"video {shown(path)}: its first frame is damaged (the decoder says {self.said!r})"
+            )
         self.first = first
 
     def _read(self) -> np.ndarray | None:
-        ok, frame = self.capture.read()
+        """The next frame decoded, what the decoder writes kept from the terminal; a frame it
+        says is damaged is counted (`damaged`, `said`) and given all the same: the caller
+        skips it."""
+        (ok, frame), text = captured_stderr(self.capture.read)
+        damage = [m for m in decoder_messages(text) if VIDEO_DAMAGE.search(m)]
+        if damage:
+            self.damaged += 1
+            self.said = damage[0][:MAX_QUOTED]
         return frame if ok and frame is not None and frame.size else None
 
     def _next(self, keep: bool) -> np.ndarray | bool | None:
@@ -106,9 +132,15 @@ class VideoSource(Source):
             if self._next(keep=False) is None:
                 return None
             self.shown += 1
+        damaged = self.damaged
         frame = self._next(keep=True)
         if frame is not None:
             self.shown += 1
+        if self.damaged > damaged:  # decoded, but not whole: never projected
+            raise ImageError(
+                f"video {shown(self.path)}: frame {self.shown} is damaged (the decoder says "
+                f"{self.said!r}); skipped, {self.damaged} so far"
+            )
         return frame
 
     def close(self) -> None:

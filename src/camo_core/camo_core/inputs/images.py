@@ -117,7 +117,7 @@ def decoder_messages(text: str) -> list[str]:
     return [(_OPENCV_LOG.sub(r"\1", line)).strip() for line in lines if line]
 
 
-def _captured_stderr(decode):
+def captured_stderr(decode):
     """decode()'s result and what native code wrote to file descriptor 2 meanwhile (libpng,
     libjpeg and OpenCV's logging write there, around camo's one line of error), through a
     pipe a thread drains (no disk needed, no writer blocked on a full pipe). Anything another
@@ -163,7 +163,7 @@ def _decoded(path: Path, flags: int) -> np.ndarray | None:
     say is damaged (a truncated JPEG decodes, half grey, with only a warning) is an
     ImageError quoting their first word on it."""
     try:
-        image, text = _captured_stderr(lambda: cv2.imread(str(path), flags))
+        image, text = captured_stderr(lambda: cv2.imread(str(path), flags))
     except cv2.error as exc:
         detail = str(exc).strip().splitlines()[-1].strip() if str(exc).strip() else "cv2.error"
         raise ImageError(f"cannot decode image {shown(path)}: {detail}") from None
