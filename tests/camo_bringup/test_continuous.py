@@ -184,14 +184,14 @@ def test_a_continuous_run_on_a_still_image_camouflages_it_once_and_ends_after_it
 @pytest.mark.parametrize(
     "argv, said",
     [
-        (["--rounds", "3"], "--rounds ends a --continuous run"),
-        (["--duration", "5"], "--duration ends a --continuous run"),
+        (["--rounds", "3"], "--rounds needs --continuous: it ends a --continuous run"),
+        (["--duration", "5"], "--duration needs --continuous"),
         (["--continuous", "--rounds", "0"], "--rounds must be an integer in 1..1000000"),
         (["--continuous", "--then", "desert"], "--continuous and --then do not go together"),
-        (["--video", "a.mp4", "--images", "*.png"], "one background source: video and images"),
+        (["--video", "a.mp4", "--images", "*.png"], "--video and --images do not go together"),
         (["--continuous", "--background-topic", "/cam era"], "'/cam era' is not a ROS topic"),
         (["--continuous", "--background-topic", "/x" * 130], "should not exceed 247 characters"),
-        (["--image", "x.png", "--background-topic", "/c"], "image and background_topic"),
+        (["--image", "x.png", "--background-topic", "/c"], "--image and --background-topic do"),
     ],
 )
 def test_continuous_options_that_do_not_fit_are_one_line(argv, said, capsys):

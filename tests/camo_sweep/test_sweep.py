@@ -191,7 +191,7 @@ def test_a_table_part_that_is_not_a_sweeps_is_named_in_one_line(tmp_path):
         (["--axis", "rho_comm=0.1", "--sett", "rows=4"], "unrecognized arguments: --sett"),
         (["--axis", "rho_comm=0.1", "--scheduler", "tcp://127.0.0.1:9"], "cannot reach the Dask"),
         (["BAD_YAML"], "is not YAML"),
-        (["--axis", "rho_comm=0.1", "--print-job-script"], "goes with --slurm"),
+        (["--axis", "rho_comm=0.1", "--print-job-script"], "--print-job-script needs --slurm"),
         (["--axis", "rows=4,0"], "rows must be an integer in 1..8192 (got 0)"),
         (["--axis", "rho_comm=0,2"], "rho_comm must be a number in [0, 1]"),
         (["--axis", "image=missing.png"], "cannot read image missing.png: not found"),

@@ -19,6 +19,7 @@ from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import Calibration, image_digest, sense_image
 from camo_core.cli.options import (
+    Combination,
     Parser,
     add_options,
     add_run_options,
@@ -162,7 +163,28 @@ def build_parser() -> Parser:
         help="start no projector: the background comes from elsewhere, e.g. "
         "./camo replay BAG --topics /RUN/camo/background --run-id RUN",
     )
+    parser.combine(*RUN_COMBINATIONS)
     return parser
+
+
+SOURCES = ("--image", "--video", "--images", "--background-topic", "--camera")
+CONTINUOUS_ONLY = "a continuous swarm starts its own rounds, on projected frames only"
+# Which options of `camo run` need, exclude or mean nothing without which others.
+RUN_COMBINATIONS = (
+    Combination("--rounds", needs=("--continuous",), why="it ends a --continuous run"),
+    Combination("--duration", needs=("--continuous",), why="it ends a --continuous run"),
+    Combination("--continuous", excludes=("--then", "--bridge"), why=CONTINUOUS_ONLY),
+    Combination("--no-key", excludes=("--key-file", "--encrypt")),
+    *(
+        Combination(source, excludes=SOURCES[k + 1 :], why="one background source")
+        for k, source in enumerate(SOURCES)
+    ),
+    Combination("--then", excludes=SOURCES[1:], why="--then switches still backgrounds"),
+    Combination("--fps", needs=("--video",), why="the frame rate of a video"),
+    Combination("--loop", needs=("--video",), why="a video played again"),
+    Combination("--period", needs=("--images",), why="each file's time"),
+    Combination("--no-projector", excludes=SOURCES + ("--pattern", "--then")),
+)
 
 
 @dataclass
@@ -290,13 +312,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
             raise UsageError(problem or f"--record {record}: give a bag folder, not a .mcap file")
     stream = {n: v for n, v in options_of(args, ProjectorParams).items() if n in STREAM_OPTIONS}
     ProjectorParams(**stream)  # each in its range, before anything starts
-    until_rounds, until_seconds = continuous_ends(args, protocol)
-    if protocol.continuous and (args.then or bridges):
-        given = "--then" if args.then else "--bridge"
-        raise UsageError(
-            f"--continuous and {given} do not go together: a continuous swarm starts its own "
-            "rounds, on projected frames only"
-        )
+    until_rounds, until_seconds = continuous_ends(args)
     sources = stream_sources(args, stream, (params.rows, params.cols))
     image, label = image_from(args)
     sense_image(image, params.rows, params.cols, params.profile)  # a too-small image fails here
@@ -321,8 +337,6 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         projector = ros_arguments(ProjectorParams(image=str(Path(args.image).resolve())))
     else:
         projector = ros_arguments(ProjectorParams(pattern=args.pattern or args.default_pattern))
-    if args.no_key and (args.key_file or args.encrypt):
-        raise UsageError("--no-key does not go with --key-file or --encrypt")
     folder = out_dir(args)
     env.pop(KEY_FILE_ENV, None)
     env.pop(ENCRYPT_ENV, None)
@@ -365,23 +379,15 @@ def stream_sources(
     device opened as the projector will open it: a missing video or camera is one line before
     anything starts, not a projector that fails in a running swarm."""
     sources = [n for n in ("background_topic", "video", "images") if stream.get(n)]
-    sources += ["camera"] if stream.get("camera", -1) >= 0 else []
-    if len(sources) > 1 or (sources and args.image is not None):
-        given = [*(["image"] if args.image is not None else []), *sources]
-        raise UsageError(f"one background source: {' and '.join(given)} were given")
-    if sources and args.then:
-        raise UsageError("--then switches still backgrounds: not with a stream")
+    sources += ["camera"] if stream.get("camera", -1) >= 0 else []  # one: RUN_COMBINATIONS
     opened = open_source(stream, grid) if sources else None  # a topic's name checked, too
     if opened is not None:
         opened.close()
     return sources
 
 
-def continuous_ends(args: argparse.Namespace, protocol: ProtocolParams):
-    """--rounds and --duration, checked: only with --continuous, in range."""
-    for option, value in (("--rounds", args.rounds), ("--duration", args.duration)):
-        if value is not None and not protocol.continuous:
-            raise UsageError(f"{option} ends a --continuous run: give --continuous too")
+def continuous_ends(args: argparse.Namespace):
+    """--rounds and --duration, each in its range (only with --continuous: RUN_COMBINATIONS)."""
     if args.rounds is not None and not 1 <= args.rounds <= MAX_ROUNDS:
         raise UsageError(f"--rounds must be an integer in 1..{MAX_ROUNDS} (got {args.rounds})")
     if args.duration is not None and not 0 < args.duration <= MAX_WAIT:

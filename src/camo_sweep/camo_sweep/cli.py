@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from camo_core.cli.options import Parser, a_path
+from camo_core.cli.options import Combination, Parser, a_path
 from camo_core.exceptions import CamoError, UsageError, reported
 from camo_core.inputs.numeric import integer
 from camo_core.inputs.strict_yaml import dump_yaml, read_yaml
@@ -23,6 +23,16 @@ from camo_sweep.spec import (
 from camo_sweep.sweep import plan, run_sweep
 
 SPEC_FILE = "sweep.yaml"
+
+
+SLURM_FLAGS = {
+    "queue": "partition",
+    "account": "account",
+    "cores": "cores per job: one worker process each",
+    "memory": "memory per job, e.g. 8GB",
+    "walltime": "time limit per job, e.g. 02:00:00",
+    "max-jobs": "jobs at most",
+}
 
 
 def build_parser() -> Parser:
@@ -64,14 +74,7 @@ def build_parser() -> Parser:
     engine.add_argument(
         "--slurm", action="store_true", help="Dask workers in SLURM jobs (dask-jobqueue)"
     )
-    for key, what in (
-        ("queue", "partition"),
-        ("account", "account"),
-        ("cores", "cores per job: one worker process each"),
-        ("memory", "memory per job, e.g. 8GB"),
-        ("walltime", "time limit per job, e.g. 02:00:00"),
-        ("max-jobs", "jobs at most"),
-    ):
+    for key, what in SLURM_FLAGS.items():
         parser.add_argument(f"--slurm-{key}", default=None, help=f"SLURM {what}")
     parser.add_argument(
         "--print-job-script",
@@ -98,6 +101,12 @@ def build_parser() -> Parser:
         "a sweep lists its trials in memory before it starts)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.combine(
+        *(
+            Combination(flag, needs=("--slurm",), why="a setting of SLURM jobs")
+            for flag in ("--print-job-script", *(f"--slurm-{k}" for k in SLURM_FLAGS))
+        )
+    )
     return parser
 
 
@@ -173,8 +182,6 @@ def cmd_sweep(argv: list[str]) -> int:
     check_numbers(args)
     data = spec_from_yaml(args.file) if args.file else None
     if args.print_job_script:
-        if not args.slurm:
-            raise UsageError("--print-job-script goes with --slurm")
         cluster = engines.slurm_cluster(slurm_settings(args, (data or {}).get("slurm", {})))
         try:
             print(cluster.job_script())
@@ -187,8 +194,6 @@ def cmd_sweep(argv: list[str]) -> int:
     spec.refuse_more_than(args.max_trials, "--max-trials")
     before = check_folder(args.out, spec)
     work = plan(spec, args.out)  # options that cannot run fail here, before any write
-    if not args.quiet:
-        print(f"camo sweep: {said_of(work)}", file=sys.stderr)
     engine = make_engine(args, spec)  # and an unreachable scheduler here
     try:
         if spec.driver == "ros" and isinstance(engine, engines.DaskEngine):
@@ -197,6 +202,8 @@ def cmd_sweep(argv: list[str]) -> int:
                     f"no worker of {engine.name} offers the 'ros' resource: start workers with "
                     "--resources ros=1"
                 )
+        if not args.quiet:  # once nothing is left to refuse: an error stays one line
+            print(f"camo sweep: {said_of(work)}", file=sys.stderr)
         args.out.mkdir(parents=True, exist_ok=True)
         # The most replicates any run of this sweep asked for: what the table may hold.
         kept = spec.with_trials(max(spec.trials, before.trials if before else 0))

@@ -7,6 +7,7 @@ import copy
 import itertools
 import re
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import NoReturn
 
@@ -23,6 +24,19 @@ from camo_core.results.folders import output_folder
 from camo_core.schema import Declared, with_role
 
 
+@dataclass(frozen=True)
+class Combination:
+    """How an option goes with others: it `needs` one of them, or `excludes` each of them
+    (`why`: said after the one line). Options are named by their flags; an option counts as
+    given when its value differs from its declared default (from the command line or a
+    parameters file)."""
+
+    option: str
+    needs: tuple[str, ...] = ()
+    excludes: tuple[str, ...] = ()
+    why: str = ""
+
+
 class Parser(argparse.ArgumentParser):
     """argparse with one-line errors, and no abbreviations: `--row` is not `--rows`. With
     `add_params_file_option()`, options can come from a ROS 2 parameters file too."""
@@ -34,6 +48,34 @@ class Parser(argparse.ArgumentParser):
         # `١`); argparse looks types up here, for this parser's groups and subcommands too.
         self.register("type", int, strict_int)
         self.register("type", float, strict_float)
+        self.combinations: list[Combination] = []
+        self._declared: dict[str, object] | None = None  # each option's default as declared
+
+    def combine(self, *rules: Combination) -> None:
+        """Rules of which options need, exclude or mean nothing without which others: checked
+        once every option is parsed (and a parameters file read), in one line."""
+        self.combinations.extend(rules)
+
+    def given(self, args: argparse.Namespace, flag: str) -> bool:
+        action = self._option_actions()[flag]
+        value = getattr(args, action.dest, None)
+        declared = (self._declared or {}).get(action.dest, action.default)
+        unset = value is None or value is False or (isinstance(value, list | str) and not value)
+        return not unset and value != declared  # (0 is a value: --camera 0)
+
+    def _option_actions(self) -> dict[str, argparse.Action]:
+        return {flag: a for a in self._actions for flag in a.option_strings}
+
+    def check_combinations(self, args: argparse.Namespace) -> None:
+        for rule in self.combinations:
+            if not self.given(args, rule.option):
+                continue
+            why = f": {rule.why}" if rule.why else ""
+            if rule.needs and not any(self.given(args, n) for n in rule.needs):
+                self.error(f"{rule.option} needs {' or '.join(rule.needs)}{why}")
+            for other in rule.excludes:
+                if self.given(args, other):
+                    self.error(f"{rule.option} and {other} do not go together{why}")
 
     def error(self, message: str) -> NoReturn:  # one line, not usage + message
         # `--sensed -1,1=5`: argparse takes "-1,1=5" for an option, and says only this.
@@ -63,6 +105,13 @@ class Parser(argparse.ArgumentParser):
         return self.parse_args(argv[:at]), argv[at:]
 
     def parse_known_args(self, args=None, namespace=None):
+        if self._declared is None:  # before a parameters file changes the defaults
+            self._declared = {a.dest: a.default for a in self._actions}
+        parsed, rest = self._parse_with_file(args, namespace)
+        self.check_combinations(parsed)
+        return parsed, rest
+
+    def _parse_with_file(self, args, namespace):
         if not any(a.dest == "params_file" for a in self._actions):  # (a subcommand's, say)
             return super().parse_known_args(args, namespace)
         first, _ = super().parse_known_args(args, copy.copy(namespace))
