@@ -80,3 +80,37 @@ def test_a_fault_of_no_finite_duration_is_refused(option, value, tmp_path, capsy
     assert emulator.main(argv) == 2
     err = capsys.readouterr().err  # nan and inf are no numbers to a Parser's type=float
     assert "must be seconds in 0..3600" in err or f"invalid float value: '{value}'" in err
+
+
+@pytest.mark.parametrize("there", ["file", "folder", "tmp file", "pty link"])
+def test_a_link_path_that_is_not_an_emulators_is_never_replaced(tmp_path, there):
+    """A file, a folder, or a file where the link's temporary name goes: one line, kept.
+    An emulator's old link to a pseudo-terminal is taken over."""
+    import os
+
+    from camo_core.exceptions import UsageError
+
+    link = tmp_path / "droplet"
+    if there == "file":
+        link.write_text("mine")
+    elif there == "folder":
+        link.mkdir()
+    elif there == "tmp file":
+        (tmp_path / "droplet.tmp").write_text("mine")
+    else:
+        os.symlink("/dev/pts/999", link)
+    args = emulator.build_parser().parse_args(["--link", str(link), "--cell", "0,0"])
+    made = emulator.emulator_from(args)
+    if there == "pty link":
+        made.start()
+        try:
+            target = os.readlink(link)
+            assert target.startswith("/dev/pts/") and target != "/dev/pts/999"
+        finally:
+            made.stop()
+        return
+    with pytest.raises(UsageError, match="is never replaced") as refused:
+        made.start()
+    assert "\n" not in str(refused.value)
+    kept = tmp_path / ("droplet.tmp" if there == "tmp file" else "droplet")
+    assert kept.is_dir() if there == "folder" else kept.read_text() == "mine"

@@ -62,6 +62,14 @@ def emulated_rgb(
     return r, g, b
 
 
+def _a_pty_link(path: Path) -> bool:
+    """A symlink to a pseudo-terminal: an emulator's link (this one's, or a dead one's)."""
+    try:
+        return path.is_symlink() and os.readlink(path).startswith("/dev/pts/")
+    except OSError:
+        return False
+
+
 class DropletEmulator:
     def __init__(
         self,
@@ -88,6 +96,12 @@ class DropletEmulator:
     # ---- the pty ------------------------------------------------------------------
 
     def _attach(self) -> None:
+        for path in (self.link, self.link.with_name(self.link.name + ".tmp")):
+            if (path.exists() or path.is_symlink()) and not _a_pty_link(path):
+                raise UsageError(
+                    f"--link {path} is there already and is not an emulator's link to a "
+                    "pseudo-terminal: it is never replaced; give another path"
+                )
         self._master, self._slave = pty.openpty()
         tty.setraw(self._slave)  # no line discipline: bytes pass as a UART passes them
         tmp = self.link.with_name(self.link.name + ".tmp")
@@ -95,7 +109,7 @@ class DropletEmulator:
         os.symlink(os.ttyname(self._slave), tmp)
         os.replace(tmp, self.link)
 
-    def _detach(self) -> None:
+    def _detach(self) -> None:  # the link is this emulator's own (checked when made)
         self.link.unlink(missing_ok=True)
         for fd in (self._master, self._slave):
             if fd is not None:
