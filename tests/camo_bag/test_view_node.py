@@ -201,3 +201,11 @@ def test_every_option_of_view_with_a_bad_value_is_one_line_and_exit_2(
     options, problems = bad_values_of_a_ros_tool(command, [], monkeypatch, capsys)
     assert len(options) >= 4
     assert problems == []
+
+
+def test_exit_with_run_without_a_run_id_is_one_line(capsys):
+    from camo_bag import view_node
+
+    assert view_node.main(["--exit-with-run"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == "camo view: error: --exit-with-run needs --run-id: the run to end with"

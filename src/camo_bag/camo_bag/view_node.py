@@ -26,7 +26,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from camo_bag import msgdefs
 from camo_bag.graph_topics import new_topics, taking_qos
-from camo_core.cli.options import Parser
+from camo_core.cli.options import Combination, Parser
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.shutdown import StopFlag
 from camo_nodes.topics import keyed
@@ -187,14 +187,13 @@ def main(argv: list[str] | None = None) -> int:
         help="end when the --run-id run ends (as ./camo run --foxglove's view does)",
     )
     add_network_options(parser)
+    parser.combine(Combination("--exit-with-run", needs=("--run-id",), why="the run to end with"))
     try:
         args, ros_args = parser.parse_with_ros_args(argv)
         if not 0 <= args.port <= 65535:
             raise UsageError(f"--port must be in 0..65535 (got {args.port})")
         os.environ.update(network_env(args, os.environ))
         run_id = check_run_id(args.run_id) if args.run_id else None
-        if args.exit_with_run and run_id is None:
-            raise UsageError("--exit-with-run needs the --run-id of the run to end with")
     except CamoError as exc:
         print(f"camo view: error: {exc}", file=sys.stderr)
         return 2
