@@ -183,7 +183,8 @@ RUN_COMBINATIONS = (
     Combination("--fps", needs=("--video",), why="the frame rate of a video"),
     Combination("--loop", needs=("--video",), why="a video played again"),
     Combination("--period", needs=("--images",), why="each file's time"),
-    Combination("--no-projector", excludes=SOURCES + ("--pattern", "--then")),
+    # (--pattern stays: what the run's own projector would have shown, in its parameters)
+    Combination("--no-projector", excludes=(*SOURCES[1:], "--then"), why="no projector shows it"),
 )
 
 
