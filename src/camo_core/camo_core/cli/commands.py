@@ -21,7 +21,6 @@ from camo_core.algorithm.modes.scopes import Previous
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import pattern_said
 from camo_core.cli.options import (
-    Combination,
     Parser,
     add_contrast_option,
     add_run_options,
@@ -78,6 +77,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     modes = modes_of(params)
     image, label = image_from(args)
     exempt = None
+    if args.sensed and not modes.layout.grid:  # the mode, not a flag: from a file too
+        raise UsageError("--sensed names grid cells: it does not go with a layout")
     raw, raw_colours = modes.layout.sense(image, params.profile)
     overrides = sensed_overrides(args.sensed, params.rows, params.cols)
     if overrides:
@@ -221,7 +222,6 @@ def add_sim_arguments(sim: Parser) -> Parser:
     )
     sim.add_params_file_option("camo_sim")
     sim.set_defaults(func=cmd_sim, options_parser=sim)
-    sim.combine(Combination("--sensed", excludes=("--layout",), why="--sensed names grid cells"))
     return sim
 
 
