@@ -357,21 +357,10 @@ def test_damage_anywhere_keeps_only_whole_messages_or_one_line(tmp_path_factory,
 
 
 def test_a_truncated_bag_is_refused_but_read_up_to_the_cut_when_partial(tmp_path):
-    from camo_bag.container import BagWriter, TopicInfo
-    from camo_bag.msgdefs import message_definition
-
-    writer = BagWriter(tmp_path / "whole")
-    writer.add_topic(TopicInfo(CHATTER, STRING), message_definition(STRING))
-    ends = []
-    for chunk in range(4):
-        for k in range(20):
-            writer.write(CHATTER, string_cdr(f"{chunk}-{k}"), 10**9 + chunk * 100 + k, 0)
-        writer.flush()
-        ends.append(writer.file.stat().st_size)
-    writer.close()
+    file, ends = four_chunks(tmp_path)
     cut = tmp_path / "cut"
     cut.mkdir()
-    (cut / "cut_0.mcap").write_bytes((writer.file).read_bytes()[: ends[1] + 10])
+    (cut / "cut_0.mcap").write_bytes(file.read_bytes()[: ends[2] + 10])  # two chunks whole
     assert "is truncated or was not closed" in refused(cut)
     loaded = open_bag(cut, partial=True)
     assert not loaded.complete and loaded.ending.startswith("cut short")
