@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ctypes
 import fcntl
 import json
 import mmap
@@ -14,7 +15,7 @@ import pytest
 from support import MACHINE, PROCESS, ROOT
 
 from camo_bringup.soak import camo_processes
-from camo_core.shm import orphans, remove_stale, stale_files
+from camo_core.shm import SHM, orphans, remove_stale, stale_files
 
 
 @pytest.mark.slow(PROCESS)
@@ -67,6 +68,11 @@ def test_shared_memory_of_a_dead_owner_is_stale_and_of_a_live_one_is_not(tmp_pat
         (tmp_path / name).write_bytes(b"")
     (tmp_path / "sem.fastrtps_dead_mutex").write_bytes(b"")
     (tmp_path / "unrelated").write_bytes(b"")
+    for name in ("fastrtps_dead", "fastrtps_dead_el", "sem.fastrtps_dead_mutex"):
+        os.utime(tmp_path / name, (time.time() - 60, time.time() - 60))
+    # A lock file made a moment ago by a process that has not locked it yet: not judged.
+    for name in ("fastrtps_newborn", "fastrtps_newborn_el"):
+        (tmp_path / name).write_bytes(b"")
     # Left empty by a creator killed at birth (Fast DDS would wait for it for ever), and one
     # being created right now.
     (tmp_path / "fastrtps_port7411").write_bytes(b"")
@@ -84,6 +90,8 @@ def test_shared_memory_of_a_dead_owner_is_stale_and_of_a_live_one_is_not(tmp_pat
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "fastrtps_live",
         "fastrtps_live_el",
+        "fastrtps_newborn",
+        "fastrtps_newborn_el",
         "fastrtps_port7413",
         "unrelated",
     ]
@@ -121,3 +129,41 @@ def test_shared_memory_no_process_has_open_or_mapped_is_an_orphan_once_old(tmp_p
         "sem.mp-young",
         "unrelated",
     ]
+
+
+def _sem(name: str, create: bool = False):
+    """A POSIX named semaphore as Fast DDS's port mutexes are (glibc: /dev/shm/sem.<name>)."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.sem_open.restype = ctypes.c_void_p
+    libc.sem_open.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.c_uint, ctypes.c_uint]
+    return libc, libc.sem_open(f"/{name}".encode(), os.O_CREAT if create else 0, 0o644, 1)
+
+
+def test_a_port_being_opened_is_never_removed_and_a_dead_one_goes_with_its_mutex():
+    # A port file a process gone left (its listener's lock free, old): the next process of that
+    # port number opens it, holding the port's mutex as Fast DDS does. Removed meanwhile, it
+    # would listen on a file nobody else can open: so nothing of a port goes while its mutex
+    # is held by another, and all of it goes once the mutex is free.
+    port = f"fastrtps_port{9_000_000 + os.getpid()}"  # no real port is numbered so
+    files = [SHM / port, SHM / f"{port}_el"]
+    for path in files:
+        path.write_bytes(bytes(64))
+        os.utime(path, (time.time() - 60, time.time() - 60))
+    libc, mutex = _sem(f"{port}_mutex", create=True)
+    try:
+        assert mutex and libc.sem_trywait(ctypes.c_void_p(mutex)) == 0  # opening the port
+        assert {SHM / port, SHM / f"{port}_el"} <= set(stale_files())
+        remove_stale()
+        assert all(path.exists() for path in files)
+        assert (SHM / f"sem.{port}_mutex").exists()
+        libc.sem_post(ctypes.c_void_p(mutex))  # opened, or gave up: the port is free to judge
+        libc.sem_close(ctypes.c_void_p(mutex))
+        mutex = None
+        remove_stale()
+        assert not any(path.exists() for path in files)
+        assert not (SHM / f"sem.{port}_mutex").exists()
+    finally:
+        if mutex:
+            libc.sem_close(ctypes.c_void_p(mutex))
+        for path in [*files, SHM / f"sem.{port}_mutex"]:
+            path.unlink(missing_ok=True)

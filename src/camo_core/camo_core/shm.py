@@ -21,18 +21,36 @@ kinds, this user's, older than ORPHAN_AGE (semaphores SEMAPHORE_AGE), that
 no process this one can see (/proc) has open or mapped. Processes in another PID
 namespace sharing this /dev/shm are not seen: a container shares its /dev/shm
 with no other by default, and should not share it with another run's.
+
+Every camo process cleans at its start, while other processes (of this run, of
+other runs) are creating and opening these files, so no test above may be taken
+half-way through another process's steps:
+- A port file is reused by name: a process opening port N finds the file a
+  process gone left and maps it. Removed meanwhile, that process listens on a
+  file nobody else can open, and the writers that come later make a new one:
+  one port split in two, which hear nothing of each other (a run stuck in
+  discovery). Fast DDS opens, creates and locks a port holding its named mutex
+  `sem.fastrtps_port<N>_mutex`, so a port's files are judged and removed only
+  while this process holds that mutex (`_PortMutexes`); a port whose mutex is
+  busy is left for the next clean.
+- A segment's lock file is made, then locked: one younger than ORPHAN_AGE is not
+  judged (segment names are never reused, so a lock file's age is its owner's).
 """
 
 from __future__ import annotations
 
+import ctypes
 import fcntl
 import os
+import re
 import time
 from pathlib import Path
 
 SHM = Path("/dev/shm")
 PREFIX = "fastrtps_"
 LOCK_SUFFIX = "_el"
+# A port's files: the port, its listeners' lock files (_el), its mutex (glibc's file for it)
+PORT_FILE = re.compile(r"^(?:sem\.)?(fastrtps_port\d+)(?:_el|_sl|_mutex)?$")
 
 
 def _held(lock_file: Path) -> bool:
@@ -54,6 +72,13 @@ def _held(lock_file: Path) -> bool:
 UNFINISHED_AGE = 10.0  # s: an empty segment this old was never going to be finished
 
 
+def _age(path: Path, now: float) -> float:
+    try:
+        return now - path.stat().st_mtime
+    except OSError:
+        return 0.0  # gone meanwhile: nothing to judge
+
+
 def _unfinished(path: Path, now: float) -> bool:
     """A segment or port file left empty: its creator was killed between creating and sizing it.
     Fast DDS waits for it to be initialised, for ever: a process that opens it hangs (seen in
@@ -63,6 +88,12 @@ def _unfinished(path: Path, now: float) -> bool:
     except OSError:
         return False
     return info.st_size == 0 and now - info.st_mtime > UNFINISHED_AGE
+
+
+def port_of(name: str) -> str | None:
+    """The port (`fastrtps_port<N>`) a file of /dev/shm belongs to, if it is a port's."""
+    match = PORT_FILE.match(name)
+    return match.group(1) if match else None
 
 
 def stale_files(root: Path = SHM) -> list[Path]:
@@ -80,6 +111,8 @@ def stale_files(root: Path = SHM) -> list[Path]:
         if _unfinished(segment, now) and not (lock.exists() and _held(lock)):
             stale.append(segment)
     for lock in locks:
+        if port_of(lock.name) is None and _age(lock, now) <= ORPHAN_AGE:
+            continue  # made a moment ago, perhaps not locked yet
         if _held(lock):
             continue
         base = lock.name[: -len(LOCK_SUFFIX)]
@@ -98,9 +131,9 @@ ORPHAN_AGE = 1.0
 SEMAPHORE_AGE = 600.0
 
 
-def in_use(root: Path = SHM) -> set[str]:
-    """Names of the files in `root` that a process this one can see has open or mapped."""
-    used: set[str] = set()
+def users(root: Path = SHM) -> dict[str, set[int]]:
+    """The files in `root` that a process this one can see has open or mapped: name -> pids."""
+    used: dict[str, set[int]] = {}
     prefix = str(root) + "/"
     mark = prefix.encode()
     for pid in os.listdir("/proc"):
@@ -112,17 +145,17 @@ def in_use(root: Path = SHM) -> set[str]:
                     at = line.find(mark)
                     if at >= 0:
                         name = line[at + len(mark) :].rstrip(b"\n").removesuffix(b" (deleted)")
-                        used.add(name.decode(errors="replace"))
+                        used.setdefault(name.decode(errors="replace"), set()).add(int(pid))
             for fd in os.listdir(f"/proc/{pid}/fd"):
                 target = os.readlink(f"/proc/{pid}/fd/{fd}")
                 if target.startswith(prefix):
-                    used.add(target[len(prefix) :])
+                    used.setdefault(target[len(prefix) :], set()).add(int(pid))
         except OSError:
             continue  # gone meanwhile, or not ours to look at
     return used
 
 
-def orphans(root: Path = SHM) -> list[Path]:
+def orphans(root: Path = SHM, used: dict[str, set[int]] | None = None) -> list[Path]:
     """Fast DDS port files and semaphores, and multiprocessing semaphores, of this user that
     no live process has open or mapped (see the module's text)."""
     try:
@@ -131,7 +164,7 @@ def orphans(root: Path = SHM) -> list[Path]:
         return []
     if not names:
         return []
-    used = in_use(root)
+    used = users(root) if used is None else used
     now, uid = time.time(), os.geteuid()
     found = []
     for name in names:
@@ -147,13 +180,91 @@ def orphans(root: Path = SHM) -> list[Path]:
     return found
 
 
+class _PortMutexes:
+    """Fast DDS's named mutexes of ports (POSIX named semaphores, glibc's files
+    /dev/shm/sem.<name>), taken without waiting: a port whose mutex another process holds is
+    being opened right now. Only /dev/shm has them: another root (a test's) has no process to
+    keep out."""
+
+    def __init__(self, root: Path) -> None:
+        self.real = root == SHM
+        self.held: dict[str, int] = {}
+        if self.real:
+            libc = ctypes.CDLL(None, use_errno=True)
+            self._open, self._try = libc.sem_open, libc.sem_trywait
+            self._post, self._close = libc.sem_post, libc.sem_close
+            self._open.restype = ctypes.c_void_p
+            self._open.argtypes = [ctypes.c_char_p, ctypes.c_int, ctypes.c_uint, ctypes.c_uint]
+            for function in (self._try, self._post, self._close):
+                function.argtypes = [ctypes.c_void_p]
+
+    def take(self, port: str) -> bool:
+        """Hold `port`'s mutex (made if it is not there, as Fast DDS makes it); False if busy."""
+        if not self.real:
+            self.held[port] = 0
+            return True
+        sem = self._open(f"/{port}_mutex".encode(), os.O_CREAT, 0o644, 1)
+        if not sem:
+            return False  # not ours to open: another user's port
+        if self._try(sem) != 0:
+            self._close(sem)
+            return False  # errno EAGAIN: a process is opening or creating this port
+        self.held[port] = sem
+        return True
+
+    def release(self) -> None:
+        for sem in self.held.values():
+            if sem:
+                self._post(sem)
+                self._close(sem)
+        self.held.clear()
+
+
+def _removable_ports(ports: dict[str, list[Path]], root: Path) -> list[Path]:
+    """The files of `ports` still dead now that no process can be opening them (their mutexes
+    held by this one). A port whose listeners' lock files are all free has no listener: its
+    files go though writers still map them (as `fastdds shm clean` judges); one without lock
+    files goes if no process has it open or mapped. A port's mutex goes with its port file but
+    for this process's own hold on it (one who waits on it has it mapped)."""
+    used = users(root)
+    me = os.getpid()
+    removable: list[Path] = []
+    for port, files in ports.items():
+        locks = [root / f"{port}{end}" for end in ("_el", "_sl")]
+        locks = [lock for lock in locks if lock.exists()]
+        if any(_held(lock) for lock in locks) or (not locks and port in used):
+            continue
+        mutex = root / f"sem.{port}_mutex"
+        removable += [path for path in files if path != mutex]
+        removable += [path for path in (root / port, *locks) if path not in removable]
+        if mutex.exists() and not used.get(mutex.name, set()) - {me}:
+            removable.append(mutex)
+    return removable
+
+
 def remove_stale(root: Path = SHM) -> int:
-    """Remove what dead Fast DDS processes left, and files no process uses; how many."""
-    removed = 0
-    for path in [*stale_files(root), *orphans(root)]:
-        try:
-            path.unlink()
-            removed += 1
-        except OSError:
-            pass  # removed meanwhile, or not ours to remove
-    return removed
+    """Remove what dead Fast DDS processes left, and files no process uses; how many. A port's
+    files only while holding its mutex (see the module's text), but for one left empty: its
+    creator was killed holding the mutex."""
+    ports: dict[str, list[Path]] = {}
+    others: list[Path] = []
+    now = time.time()
+    for path in dict.fromkeys([*stale_files(root), *orphans(root)]):
+        port = port_of(path.name)
+        if port is None or _unfinished(path, now):
+            others.append(path)
+        else:
+            ports.setdefault(port, []).append(path)
+    mutexes = _PortMutexes(root)
+    try:
+        taken = {port: files for port, files in ports.items() if mutexes.take(port)}
+        removed = 0
+        for path in [*others, *(_removable_ports(taken, root) if taken else [])]:
+            try:
+                path.unlink()
+                removed += 1
+            except OSError:
+                pass  # removed meanwhile, or not ours to remove
+        return removed
+    finally:
+        mutexes.release()
