@@ -219,3 +219,52 @@ def test_a_projector_plays_a_video_at_the_rate_given_and_loops_it(tmp_path):
     assert set(steps) <= {50, 100} and steps.count(50) >= 9 and greys.count(0) >= 2, greys
     gaps = np.diff(stamps)
     assert 0.15 <= np.median(gaps) <= 0.25, gaps  # 5 frames a second, not the file's 25
+
+
+class Frames:
+    """A stream that gives the frames it holds, one a call."""
+
+    ended = False
+
+    def __init__(self, *frames) -> None:
+        self.frames = list(frames)
+
+    def frame(self, now: float):
+        return self.frames.pop(0) if self.frames else None
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("from_topic", [False, True])
+def test_a_stream_frame_too_small_for_the_runs_robots_is_counted_and_not_projected(from_topic):
+    # The run's setup says 8x8 robots on the grid: a 4x6 frame would give some none of its
+    # pixels; a stream's frame (a camera's, a video's) is judged as --image is, the scene kept.
+    import numpy as np
+    from sensor_msgs.msg import Image
+    from std_msgs.msg import String
+
+    from camo_core.algorithm.params import CamoParams
+    from camo_core.swarm.run_setup import RunSetup
+    from camo_nodes.topics.images import image_to_msg
+    from camo_nodes.topics.names import RunTopics
+    from camo_projector.projector_node import ProjectorNode
+
+    small, fits = np.zeros((4, 6), np.uint8), np.full((8, 8), 90, np.uint8)
+    with ros_context() as context:
+        args = ["--ros-args", "-p", "background_topic:=/cam/image_raw"] if from_topic else []
+        source = None if from_topic else Frames(small, fits)
+        node = ProjectorNode(RunTopics("sized"), source=source, context=context, cli_args=args)
+        projected: list[Image] = []
+        node.publisher.publish = projected.append  # what it would send to the swarm
+        try:
+            setup = RunSetup(run="sized", params=CamoParams(rows=8, cols=8))
+            node._on_setup(String(data=setup.to_json()))
+            for frame in (small, fits):
+                if from_topic:
+                    node._on_frame(image_to_msg(frame))
+                node._next_frame()
+        finally:
+            node.destroy_node()
+    assert node.rejected == 1
+    assert [(m.width, m.height, m.header.frame_id) for m in projected] == [(8, 8, "arena/frame_0")]

@@ -3,6 +3,7 @@ of frames a call, in order."""
 
 import cv2
 import numpy as np
+import pytest
 
 from camo_projector.sources import SKIPPED_PER_CALL, VideoSource
 
@@ -82,7 +83,7 @@ def test_every_file_of_images_is_checked_before_any_is_shown(tmp_path):
         cv2.imwrite(str(tmp_path / name), np.zeros((side, side), np.uint8))
     assert ImagesSource(str(tmp_path / "*.png"), 1.0, grid=(32, 32)).files
     cv2.imwrite(str(tmp_path / "c.png"), np.zeros((8, 40), np.uint8))  # 40 wide, 8 high
-    with pytest.raises(ImageError, match=r"c.png is 40x8 pixels, smaller than the 32x32 robot"):
+    with pytest.raises(ImageError, match=r"c.png of 40x8 pixels is smaller than the 32x32 robot"):
         ImagesSource(str(tmp_path / "*.png"), 1.0, grid=(32, 32))
     (tmp_path / "c.png").unlink()
     frames = [Image.new("L", (32, 32), k) for k in (0, 255)]
@@ -136,3 +137,12 @@ def test_a_damaged_video_frame_is_skipped_counted_and_its_decoder_kept_quiet(tmp
     (tmp_path / "first.avi").write_bytes(bytes(data))
     with pytest.raises(ImageError, match="first frame is damaged"):
         VideoSource(str(tmp_path / "first.avi"))
+
+
+def test_a_video_smaller_than_the_grid_is_refused_before_it_plays(tmp_path):
+    from camo_core.inputs.images import ImageError
+
+    path = numbered_video(tmp_path / "small.avi")  # 32x16 pixels
+    VideoSource(path, grid=(16, 32)).close()  # a pixel each: enough
+    with pytest.raises(ImageError, match=r"small.avi of 32x16 pixels is smaller than the 32x20"):
+        VideoSource(path, grid=(20, 32))

@@ -34,6 +34,8 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
+from camo_core.algorithm.modes import modes_of
+from camo_core.algorithm.modes.layouts import Layout
 from camo_core.cli.options import Parser, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.inputs.images import load_image
@@ -143,12 +145,12 @@ def open_source(values: dict, grid: tuple[int, int] | None = None) -> Source | N
         check_topic_name(values["background_topic"], "background_topic")
         return None  # the node's own subscription
     if _given(values, "video"):
-        return VideoSource(values["video"], values["fps"], values["loop"])
+        return VideoSource(values["video"], values["fps"], values["loop"], grid=grid)
     if _given(values, "images"):
         # in turn, again and again
         return ImagesSource(values["images"], values["period"], grid=grid)
     if _given(values, "camera"):
-        return CameraSource(values["camera"])
+        return CameraSource(values["camera"], grid=grid)
     return None
 
 
@@ -175,7 +177,7 @@ class ProjectorNode(Node):
         )
         self.frame = -1  # the number of the last frame projected
         self._last_stamp = 0
-        self.rejected = 0  # frames from the background topic that could not be used
+        self.rejected = 0  # stream frames not projected: undecodable, or too small
         self.source = source
         self._latest: Image | None = None  # the topic's newest frame, not projected yet
         self.add_on_set_parameters_callback(self._on_set)
@@ -183,6 +185,7 @@ class ProjectorNode(Node):
         # its goals' images; refusals are counted.
         self.listed: tuple[str, ...] = ()
         self.refused = 0
+        self.layout: Layout | None = None  # the run's robots, once its setup is heard
         run = topics.run
         keyed.subscription(self, String, topics.load, self._on_load, 10, run, self._refuse)
         keyed.subscription(
@@ -214,23 +217,35 @@ class ProjectorNode(Node):
             except CamoError as exc:  # a file of --images that broke, a damaged video frame
                 self.get_logger().error(f"frame not projected: {exc}", throttle_duration_sec=5.0)
                 return
-            if image is not None:
+            if image is not None and self._fits(image.shape[1], image.shape[0], "a frame"):
                 self.publish(image)
             return
         msg, self._latest = self._latest, None
         if msg is None:
             return
+        where = f"frame from {self.values['background_topic']}"
         try:
             image_from_msg(msg)  # a frame the swarm could not decode is not projected
         except ImageEncodingError as exc:
-            self.rejected += 1
-            self.get_logger().error(
-                f"frame from {self.values['background_topic']} not projected: {exc} "
-                f"({self.rejected} so far)",
-                throttle_duration_sec=5.0,
-            )
+            self._reject(f"{where} not projected: {exc}")
             return
-        self._publish_msg(msg)  # as it came: its pixels are what the robots sense
+        if self._fits(msg.width, msg.height, where):
+            self._publish_msg(msg)  # as it came: its pixels are what the robots sense
+
+    def _fits(self, width: int, height: int, what: str) -> bool:
+        """Whether the run's robots can sense a frame of this size; one they cannot is counted
+        and not projected: the swarm keeps the scene it has."""
+        try:
+            if self.layout is not None:
+                self.layout.check_frame(width, height, what)
+        except CamoError as exc:
+            self._reject(f"not projected: {exc}")
+            return False
+        return True
+
+    def _reject(self, said: str) -> None:
+        self.rejected += 1
+        self.get_logger().error(f"{said} ({self.rejected} so far)", throttle_duration_sec=5.0)
 
     def _stop_stream(self) -> None:
         if self.source is not None:
@@ -252,6 +267,10 @@ class ProjectorNode(Node):
         setup = setup_from(msg.data, self.topics.run)
         if setup is not None:
             self.listed = setup.backgrounds
+            try:
+                self.layout = modes_of(setup.params).layout
+            except CamoError:  # a layout file this machine does not have: the robots judge
+                self.layout = None
 
     def _on_load(self, msg: String) -> None:
         name = msg.data.strip()

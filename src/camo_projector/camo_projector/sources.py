@@ -13,6 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from camo_core.algorithm.sensing import check_covers
 from camo_core.inputs.files import checked_file, shown
 from camo_core.inputs.images import (
     MAX_IMAGE_BYTES,
@@ -68,7 +69,10 @@ class Source:
 class VideoSource(Source):
     """A video file at its own frame rate (or `fps`), once or looped."""
 
-    def __init__(self, path: str, fps: float = 0.0, loop: bool = False) -> None:
+    def __init__(
+        self, path: str, fps: float = 0.0, loop: bool = False, grid: tuple[int, int] | None = None
+    ) -> None:
+        """`grid`: (rows, cols) of the swarm, if known: its frames must cover it."""
         self.path = checked_file(path, "video", MAX_VIDEO_BYTES, ImageError)
         with _quiet_opencv():
             self.capture = cv2.VideoCapture(str(self.path))
@@ -88,6 +92,8 @@ class VideoSource(Source):
             raise ImageError(
                 f"video {shown(path)}: its first frame is damaged (the decoder says {self.said!r})"
             )
+        if grid is not None:
+            check_covers(first.shape[1], first.shape[0], *grid, what=f"video {shown(path)}")
         self.first = first
 
     def _read(self) -> np.ndarray | None:
@@ -166,10 +172,9 @@ class ImagesSource(Source):
             width, height, _, _ = image_header(
                 checked_file(file, "image", MAX_IMAGE_BYTES, ImageError)
             )
-            if grid is not None and (height < grid[0] or width < grid[1]):
-                raise ImageError(
-                    f"--images {shown(pattern)}: {shown(file)} is {width}x{height} pixels, "
-                    f"smaller than the {grid[1]}x{grid[0]} robot grid"
+            if grid is not None:
+                check_covers(
+                    width, height, *grid, what=f"--images {shown(pattern)}: {shown(file)}"
                 )
         self.files = files
         self.period, self.loop = period, loop
@@ -192,7 +197,8 @@ class ImagesSource(Source):
 class CameraSource(Source):
     """A local camera (OpenCV's device `index`): its newest frame whenever asked."""
 
-    def __init__(self, index: int) -> None:
+    def __init__(self, index: int, grid: tuple[int, int] | None = None) -> None:
+        """`grid`: (rows, cols) of the swarm, if known: the camera's frames must cover it."""
         try:
             with _quiet_opencv():
                 self.capture = cv2.VideoCapture(index)
@@ -202,6 +208,14 @@ class CameraSource(Source):
         if not self.capture.isOpened():
             raise ImageError(f"camera {index}: there is none (OpenCV opened no device {index})")
         self.index = index
+        width = int(self.capture.get(cv2.CAP_PROP_FRAME_WIDTH))
+        height = int(self.capture.get(cv2.CAP_PROP_FRAME_HEIGHT))
+        if grid is not None and width > 0 and height > 0:  # 0: a device that does not say
+            try:
+                check_covers(width, height, *grid, what=f"camera {index}")
+            except ImageError:
+                self.capture.release()
+                raise
 
     def frame(self, now: float) -> np.ndarray | None:
         ok, frame = self.capture.read()

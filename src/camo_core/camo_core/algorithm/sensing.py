@@ -112,13 +112,19 @@ class Calibration:
         return cls(gain, offset)
 
 
+def check_covers(width: int, height: int, rows: int, cols: int, what: str = "image") -> None:
+    """ImageError unless an image of `width` x `height` pixels gives each robot of the
+    `rows` x `cols` grid a pixel at least."""
+    if height < rows or width < cols:
+        raise ImageError(
+            f"{what} of {width}x{height} pixels is smaller than the {cols}x{rows} robot grid"
+        )
+
+
 def block_means(gray: np.ndarray, rows: int, cols: int) -> np.ndarray:
     """Mean grey value of the image block each robot covers (rows x cols float64)."""
     height, width = gray.shape[:2]
-    if height < rows or width < cols:
-        raise ImageError(
-            f"image of {width}x{height} pixels is smaller than the {cols}x{rows} robot grid"
-        )
+    check_covers(width, height, rows, cols)
     return cv2.resize(gray.astype(np.float64), (cols, rows), interpolation=cv2.INTER_AREA)
 
 

@@ -24,7 +24,7 @@ from camo_core.algorithm.layout import (
 )
 from camo_core.algorithm.orientation import ORIENTED
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.sensing import sense_colours, sense_image
+from camo_core.algorithm.sensing import check_covers, sense_colours, sense_image
 
 # A robot's formation step: (state, pattern code, states by slot, knight cells) -> next state.
 Former = Callable[[int, int, Sequence[int | None], Sequence[int | None]], int]
@@ -64,6 +64,10 @@ class Grid:
             sense_image(image, self.rows, self.cols, profile),
             sense_colours(image, self.rows, self.cols),
         )
+
+    def check_frame(self, width: int, height: int, what: str = "frame") -> None:
+        """ImageError if robots could not sense a frame of this size (a pixel each at least)."""
+        check_covers(width, height, self.rows, self.cols, what)
 
     def former(self, place: Place | None, params: CamoParams) -> Former:
         """A robot's formation rule, (state, pattern code, states received by slot, relayed
@@ -108,6 +112,9 @@ class Positions(Grid):
 
     def sense(self, image: np.ndarray, profile: str) -> tuple[np.ndarray, np.ndarray]:
         return self.sense_greys(image, profile), self.sense_colours(image)
+
+    def check_frame(self, width: int, height: int, what: str = "frame") -> None:
+        """Any frame with pixels: each robot takes the mean round its own position."""
 
     def sense_greys(self, image: np.ndarray, profile: str) -> np.ndarray:
         """Each robot's grey (rows x cols): the image's mean round its position."""
