@@ -13,6 +13,7 @@ VALUES = {
     "--rounds": "2", "--duration": "5", "--image": "a.png", "--video": "a.mp4",
     "--images": "*.png", "--background-topic": "/cam", "--camera": "0", "--then": "desert",
     "--fps": "10", "--period": "2", "--key-file": "k", "--pattern": "forest", "--bridge": "0,0=/x",
+    "--max-fps": "5",
 }  # fmt: skip
 FLAGS = sorted({f for r in RUN_COMBINATIONS for f in (r.option, *r.needs, *r.excludes)})
 

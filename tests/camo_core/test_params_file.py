@@ -343,3 +343,14 @@ def test_a_params_file_of_wrong_types_and_ranges_is_one_line_or_runs(
         return
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and err.startswith("camo: error: "), err
+
+
+def test_a_pattern_from_a_parameters_file_and_an_image_on_the_command_line_is_one_line(tmp_path):
+    # argparse's --image/--pattern group sees the command line only; the table sees both.
+    from camo_core.cli.commands import build_parser
+
+    params = tmp_path / "p.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    pattern: desert\n")
+    with pytest.raises(UsageError, match="--pattern and --image do not go together"):
+        build_parser().parse_args(["sim", "--params-file", str(params), "--image", "a.png"])
+    build_parser().parse_args(["sim", "--params-file", str(params)])

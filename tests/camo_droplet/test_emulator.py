@@ -77,6 +77,7 @@ def test_every_option_of_the_emulator_with_a_bad_value_is_one_line_and_exit_2(
 @pytest.mark.parametrize("value", ["nan", "1e300", "inf"])
 def test_a_fault_of_no_finite_duration_is_refused(option, value, tmp_path, capsys):
     argv = ["--link", str(tmp_path / "pty"), option, value]
+    argv += ["--disconnect-after", "1"] if option == "--disconnect-for" else []
     assert emulator.main(argv) == 2
     err = capsys.readouterr().err  # nan and inf are no numbers to a Parser's type=float
     assert "must be seconds in 0..3600" in err or f"invalid float value: '{value}'" in err
@@ -114,3 +115,12 @@ def test_a_link_path_that_is_not_an_emulators_is_never_replaced(tmp_path, there)
     assert "\n" not in str(refused.value)
     kept = tmp_path / ("droplet.tmp" if there == "tmp file" else "droplet")
     assert kept.is_dir() if there == "folder" else kept.read_text() == "mine"
+
+
+def test_a_disconnects_length_without_disconnects_is_one_line_naming_both(tmp_path):
+    from camo_core.exceptions import UsageError
+
+    link = ["--link", str(tmp_path / "x")]
+    emulator.build_parser().parse_args([*link, "--disconnect-after", "3", "--disconnect-for", "1"])
+    with pytest.raises(UsageError, match="--disconnect-for needs --disconnect-after"):
+        emulator.build_parser().parse_args([*link, "--disconnect-for", "1"])

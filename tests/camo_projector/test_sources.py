@@ -146,3 +146,23 @@ def test_a_video_smaller_than_the_grid_is_refused_before_it_plays(tmp_path):
     VideoSource(path, grid=(16, 32)).close()  # a pixel each: enough
     with pytest.raises(ImageError, match=r"small.avi of 32x16 pixels is smaller than the 32x20"):
         VideoSource(path, grid=(20, 32))
+
+
+@pytest.mark.parametrize(
+    "options, said",
+    [
+        (["--fps", "5"], "--fps needs --video"),
+        (["--loop", "--images", "a*.png"], "--loop needs --video"),
+        (["--period", "2", "--video", "v.mp4"], "--period needs --images"),
+        (["--max-fps", "2"], "--max-fps needs --background-topic or --video"),
+        (["--snapshot", "--image", "a.png"], "--snapshot needs --background-topic"),
+        (["--pattern", "desert", "--camera", "0"], "--pattern and --camera do not go together"),
+    ],
+)
+def test_a_projector_option_that_means_nothing_with_the_others_is_one_line(options, said):
+    from camo_core.exceptions import UsageError
+    from camo_projector.projector_node import options_to_ros_args
+
+    with pytest.raises(UsageError, match=said):
+        options_to_ros_args(["projector_node", *options])
+    assert "-p" in options_to_ros_args(["projector_node", "--fps", "5", "--video", "v.mp4"])

@@ -39,7 +39,7 @@ from camo_core.swarm.run_setup import MAX_WAIT, ProtocolParams, RunSetup, contig
 from camo_nodes.topics.names import RunTopics, check_run_id, new_run_id
 from camo_nodes.topics.parameters import ros_arguments
 from camo_nodes.topics.startup import add_network_options, network_env, use_camo_dds_settings
-from camo_projector.projector_node import ProjectorParams, open_source
+from camo_projector.projector_node import STREAM_COMBINATIONS, ProjectorParams, open_source
 
 # The projector's stream options `./camo run` takes (camo_projector: what it projects).
 STREAM_OPTIONS = (
@@ -180,9 +180,8 @@ RUN_COMBINATIONS = (
         for k, source in enumerate(SOURCES)
     ),
     Combination("--then", excludes=SOURCES[1:], why="--then switches still backgrounds"),
-    Combination("--fps", needs=("--video",), why="the frame rate of a video"),
-    Combination("--loop", needs=("--video",), why="a video played again"),
-    Combination("--period", needs=("--images",), why="each file's time"),
+    *STREAM_COMBINATIONS,
+    Combination("--pattern", excludes=SOURCES[1:], why="one background source"),
     # (--pattern stays: what the run's own projector would have shown, in its parameters)
     Combination("--no-projector", excludes=(*SOURCES[1:], "--then"), why="no projector shows it"),
 )

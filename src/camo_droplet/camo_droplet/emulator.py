@@ -32,7 +32,7 @@ import numpy as np
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import block_means
-from camo_core.cli.options import Parser, a_path, add_options, options_of
+from camo_core.cli.options import Combination, Parser, a_path, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer, items
@@ -243,6 +243,9 @@ def build_parser() -> Parser:
             default=Faults.__dataclass_fields__[name.replace("-", "_")].default,
             help=text,
         )
+    parser.combine(
+        Combination("--disconnect-for", needs=("--disconnect-after",), why="how long each lasts")
+    )
     return parser
 
 

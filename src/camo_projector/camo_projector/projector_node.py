@@ -36,7 +36,7 @@ from std_msgs.msg import String
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.modes.layouts import Layout
-from camo_core.cli.options import Parser, add_options, options_of
+from camo_core.cli.options import Combination, Parser, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.inputs.images import load_image
 from camo_core.schema import check_fields, param, with_role
@@ -132,6 +132,19 @@ class ProjectorParams:
 
 
 PROJECTOR_PARAMETERS = (ProjectorParams, JoinParams)
+STREAMS = ("--background-topic", "--video", "--images", "--camera")
+# Which of a stream's options mean nothing without which stream (`camo run` takes them too).
+STREAM_COMBINATIONS = (
+    Combination("--fps", needs=("--video",), why="the frame rate of a video"),
+    Combination("--loop", needs=("--video",), why="a video played again"),
+    Combination("--period", needs=("--images",), why="each file's time"),
+    Combination("--max-fps", needs=STREAMS, why="the rate a stream's frames are projected at"),
+)
+PROJECTOR_COMBINATIONS = (
+    *STREAM_COMBINATIONS,
+    Combination("--snapshot", needs=STREAMS, why="a stream's first frame only"),
+    Combination("--pattern", excludes=("--image", *STREAMS), why="one background source"),
+)
 
 
 def open_source(values: dict, grid: tuple[int, int] | None = None) -> Source | None:
@@ -349,6 +362,7 @@ def options_to_ros_args(argv: list[str]) -> list[str]:
         ours, ros = argv[:at], argv[at + 1 :]
     parser = Parser(prog="projector_node", add_help=False)
     add_options(parser, ProjectorParams)
+    parser.combine(*PROJECTOR_COMBINATIONS)
     options, rest = parser.parse_known_args(ours[1:])
     declared = with_role(ProjectorParams, "cli")
     # Only what the command line names: the rest is left to ROS (a parameters file, -p).

@@ -260,6 +260,8 @@ def add_run_options(
     add_options(parser, CamoParams)
     add_out_options(parser)
     parser.set_defaults(default_pattern=default_pattern)
+    if isinstance(parser, Parser):  # (argparse's group cannot see a parameters file's)
+        parser.combine(Combination("--pattern", excludes=("--image",), why="one background"))
 
 
 def add_out_options(parser: argparse.ArgumentParser) -> None:
