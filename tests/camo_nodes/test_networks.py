@@ -254,7 +254,44 @@ def test_a_discovery_server_port_is_ascii_digits_in_1_to_65535(server):
 
     with pytest.raises(UsageError, match="--discovery-server takes HOST:PORT"):
         network_env(_network_args(discovery_server=server), {})
-    assert network_env(_network_args(discovery_server="h:11811"), {})["ROS_SUPER_CLIENT"]
+    assert network_env(_network_args(discovery_server="localhost:11811"), {})["ROS_SUPER_CLIENT"]
+
+
+def test_a_discovery_servers_name_is_given_to_fast_dds_as_its_address_once_it_resolves(
+    monkeypatch,
+):
+    # Fast DDS looks a name up once, as a participant starts: in a compose network whose DNS
+    # did not serve it yet, that process searched for no server, for good (docker/compose.yaml).
+    import socket
+
+    from camo_core.exceptions import UsageError
+    from camo_nodes.topics import startup
+
+    def env(server: str) -> str:
+        return startup.network_env(_network_args(discovery_server=server), {})[
+            "ROS_DISCOVERY_SERVER"
+        ]
+
+    assert env("localhost:11811") == "127.0.0.1:11811"
+    assert env("10.0.0.5:11811") == "10.0.0.5:11811"
+    real, tries = socket.getaddrinfo, []
+
+    def late(host, *args):
+        tries.append(host)
+        if len(tries) < 3:
+            raise socket.gaierror(socket.EAI_AGAIN, "Temporary failure in name resolution")
+        return real("localhost", *args)
+
+    monkeypatch.setattr(startup.socket, "getaddrinfo", late)
+    monkeypatch.setattr(startup.time, "sleep", lambda s: None)
+    assert env("discovery:11811") == "127.0.0.1:11811" and len(tries) == 3
+    monkeypatch.setattr(startup.socket, "getaddrinfo", real)
+    monkeypatch.setattr(startup, "RESOLVE_WAIT", 0.0)
+    with pytest.raises(UsageError) as caught:
+        env("no-such-host.invalid:11811")
+    said = str(caught.value)
+    assert said.startswith("--discovery-server no-such-host.invalid:11811: 'no-such-host.invalid'")
+    assert "has no IPv4 address" in said and "\n" not in said
 
 
 def test_static_peers_of_names_and_addresses_and_an_installed_rmw_pass():
@@ -290,7 +327,9 @@ def test_discovery_servers_switches_and_a_profiles_file_that_fast_dds_reads_pass
         == given["ROS_DISCOVERY_SERVER"]
     )
     bad = {"ROS_DISCOVERY_SERVER": "garbage!!"}  # --discovery-server overrides it
-    assert network_env(_network_args(discovery_server="h:11811"), bad)["ROS_DISCOVERY_SERVER"]
+    assert network_env(_network_args(discovery_server="127.0.0.1:11811"), bad)[
+        "ROS_DISCOVERY_SERVER"
+    ]
 
 
 @pytest.mark.slow(PROCESS)

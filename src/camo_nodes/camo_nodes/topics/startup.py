@@ -12,7 +12,9 @@ import argparse
 import ipaddress
 import os
 import re
+import socket
 import sys
+import time
 from pathlib import Path
 
 import rclpy
@@ -335,6 +337,35 @@ def add_network_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+RESOLVE_WAIT = 20.0  # s a server's name is tried for: a container's may come up a moment late
+
+
+def server_address(host: str, given: str) -> str:
+    """A discovery server's host as Fast DDS is given it: an IP address. A name is resolved
+    here, tried again for RESOLVE_WAIT: Fast DDS resolves it once, as the participant starts,
+    and a process whose lookup failed (a compose network's name not served yet) said so in a
+    log line and searched for no server, for good. A name that never resolves is one line."""
+    bare = host.removeprefix("[").removesuffix("]")
+    try:
+        ipaddress.ip_address(bare)
+        return host
+    except ValueError:
+        pass
+    deadline = time.monotonic() + RESOLVE_WAIT
+    while True:
+        try:
+            found = socket.getaddrinfo(host, None, socket.AF_INET, socket.SOCK_DGRAM)
+            return str(found[0][4][0])
+        except (OSError, UnicodeError) as exc:
+            if time.monotonic() >= deadline:
+                said = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+                raise UsageError(
+                    f"--discovery-server {shown(given)}: {shown(host)!r} has no IPv4 address "
+                    f"({said})"
+                ) from None
+        time.sleep(0.5)
+
+
 def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, str]:
     """The environment a ROS process of ours runs in, from --network, --discovery-server and
     --domain-id (raises UsageError)."""
@@ -380,7 +411,7 @@ def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, 
         host, _, port = args.discovery_server.rpartition(":")
         if not host or not INTEGER.fullmatch(port) or not 0 < int(port) < 65536:
             raise UsageError(f"--discovery-server takes HOST:PORT (got {args.discovery_server!r})")
-        env["ROS_DISCOVERY_SERVER"] = args.discovery_server
+        env["ROS_DISCOVERY_SERVER"] = f"{server_address(host, args.discovery_server)}:{port}"
         # A server tells plain clients only of endpoints that match theirs; tools that list the
         # graph (a recorder, a worker looking for its run) must see everything.
         env["ROS_SUPER_CLIENT"] = "TRUE"
