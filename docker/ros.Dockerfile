@@ -1,9 +1,10 @@
 # camo on the official ROS 2 Jazzy image, for users of stock ROS tools:
-#   docker build -f docker/Dockerfile -t camo .        (from the repository root)
-#   docker run --rm -it -v $PWD/bags:/bags camo ros2 bag info /bags/run1
-#   docker run --rm -it -v $PWD/bags:/bags camo ros2 bag play /bags/run1
-#   docker run --rm -it camo ros2 run camo_nodes robot_node --ros-args -p rows:=8 -p cols:=8 -p row:=0 -p col:=0
-# Not built on the project's development machines (they run no Docker engine); see docs/bags.md.
+#   docker build -f docker/ros.Dockerfile -t camo-ros .        (from the repository root)
+#   docker run --rm -it -v $PWD/bags:/bags camo-ros ros2 bag info /bags/run1
+#   docker run --rm -it -v $PWD/bags:/bags camo-ros ros2 bag play /bags/run1
+#   docker run --rm -it camo-ros ros2 run camo_nodes robot_node --ros-args -p rows:=8 -p cols:=8 -p row:=0 -p col:=0
+# Not built here (no registry these machines reach serves ros:jazzy); camo's own image is
+# docker/Dockerfile. See docs/containers.md.
 FROM ros:jazzy
 
 # rosbag2's MCAP storage, so `ros2 bag` reads the bags camo writes.

@@ -1,10 +1,10 @@
-"""The Dockerfile for stock ROS tools (not built here: no Docker engine)."""
+"""The ROS image's Dockerfile, for stock ROS tools (not built here: no registry serves it)."""
 
 from support import ROOT
 
 
 def test_dockerfile_builds_on_ros_jazzy_and_copies_files_that_exist():
-    dockerfile = ROOT / "docker" / "Dockerfile"
+    dockerfile = ROOT / "docker" / "ros.Dockerfile"
     lines = [line.strip() for line in dockerfile.read_text().splitlines()]
     assert lines[[line.startswith("FROM") for line in lines].index(True)].startswith(
         "FROM ros:jazzy"

@@ -26,6 +26,7 @@ FRESH_SHELL = {"HOME": os.environ.get("HOME", "/root"), "PATH": "/usr/local/bin:
 SERVES = "serves until stopped: run until it is up, then Ctrl-C"
 RULES = [
     ("./camo test", "skip", "the test suite itself"),
+    ("./camo image", "skip", "builds camo's image: tests/test_containers.py builds and runs it"),
     ("./camo run --rows 64 --cols 64 --remote-cells", "parse", "waits for a second machine"),
     ("./camo run ... --discovery-server", "parse", "an excerpt of a command"),
     ("./camo run --pattern forest --bridge", "parse", "needs Droplets on serial ports"),

@@ -89,4 +89,4 @@ def test_the_readmes_apt_get_line_holds_every_package_the_set_up_names():
     packages = set(line.split())
     named = {"python3-venv", "python3-dev", *NEEDED}
     assert named <= packages, named - packages
-    assert {"iproute2", "iptables", "nodejs", "npm"} <= packages  # what the tests use
+    assert {"iproute2", "iptables", "nodejs", "npm", "podman", "debootstrap"} <= packages
