@@ -238,3 +238,40 @@ def test_every_option_of_record_with_a_bad_value_is_one_line_and_exit_2(
     options, problems = bad_values_of_a_ros_tool(command, ["bag"], monkeypatch, capsys)
     assert len(options) >= 4
     assert problems == []
+
+
+@pytest.mark.slow(SWARM)
+def test_recording_named_topics_without_a_run_records_them_and_ends_on_ctrl_c(tmp_path):
+    import rclpy
+    from std_msgs.msg import String
+    from support import ros_context
+
+    from camo_bag.loader import open_bag
+
+    bag = tmp_path / "bag"
+    domain_id = domain()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_bag.recorder_node", str(bag), "--topics", "/lab/note"],
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain_id)},
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        wait_for_line(proc, "recording", timeout=60)
+        with ros_context(domain_id) as context:
+            node = rclpy.create_node("noter", context=context)
+            publisher = node.create_publisher(String, "/lab/note", 10)
+            for _ in range(30):  # while the recorder finds the topic
+                publisher.publish(String(data="hello"))
+                time.sleep(0.2)
+            node.destroy_node()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        _, err = finished(proc, 60)
+    assert proc.returncode == 0, err[-2000:]
+    counts = {t.name: t.count for t in open_bag(bag).summary.topics}
+    assert counts.get("/lab/note", 0) >= 1, counts
+    bad = bag_tool("recorder_node", str(tmp_path / "b2"), "--topics", "{run}/x")
+    assert bad.returncode == 2 and bad.stderr.strip().splitlines() == [
+        "recorder_node: error: --topics '{run}/x' is not a ROS topic name: unknown "
+        "substitution: {run}"
+    ]

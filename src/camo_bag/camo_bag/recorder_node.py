@@ -47,7 +47,7 @@ from camo_core.shutdown import StopFlag
 from camo_core.swarm.keys import sealed
 from camo_nodes.topics import keyed
 from camo_nodes.topics.images import frame_number
-from camo_nodes.topics.names import RunTopics, check_run_id
+from camo_nodes.topics.names import RunTopics, check_run_id, check_topic_name
 from camo_nodes.topics.qos import LATCHED
 from camo_nodes.topics.robot_messages import RaggedColumns, senders_rounds_steps
 from camo_nodes.topics.runs import result_from, run_ended, setup_from, wait_for_run
@@ -208,7 +208,10 @@ class RecorderNode(Node):
 
     def report(self, final: bool = False) -> None:
         """/<run>/swarm/recorded: per round, how many robots' rounds the bag holds completely.
-        `final`: sent now, and waited for (a second at most) until its readers have it."""
+        `final`: sent now, and waited for (a second at most) until its readers have it. (With
+        --topics there is no run to report to.)"""
+        if self.report_pub is None:
+            return
         ledger = self.ledger
         rounds = ledger.rounds or 0
         report = {
@@ -280,10 +283,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args, ros_args = parser.parse_with_ros_args(argv)
         os.environ.update(network_env(args, os.environ))
-        run_id = check_run_id(args.run_id) if args.run_id else None
+        run_id = check_run_id(args.run_id) if args.run_id is not None else None
         problem = new_folder_problem(Path(args.path), "the bag")
         if problem:
             raise UsageError(problem)
+        for topic in args.topics or []:
+            check_topic_name(topic, "--topics")
     except CamoError as exc:
         print(f"recorder_node: error: {exc}", file=sys.stderr)
         return 2

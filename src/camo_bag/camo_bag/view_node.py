@@ -193,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
         if not 0 <= args.port <= 65535:
             raise UsageError(f"--port must be in 0..65535 (got {args.port})")
         os.environ.update(network_env(args, os.environ))
-        run_id = check_run_id(args.run_id) if args.run_id else None
+        run_id = check_run_id(args.run_id) if args.run_id is not None else None
     except CamoError as exc:
         print(f"camo view: error: {exc}", file=sys.stderr)
         return 2

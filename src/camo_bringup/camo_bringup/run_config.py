@@ -323,7 +323,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
     env = network_env(args, os.environ if environ is None else environ)
     use_camo_dds_settings(env)
     deferred = deferred_discovery(env, params.count, bool(remote))
-    topics = RunTopics(check_run_id(args.run_id) if args.run_id else new_run_id())
+    topics = RunTopics(check_run_id(args.run_id) if args.run_id is not None else new_run_id())
     if args.no_projector:
         projector = None
         # The background is whatever another projector publishes: say so, not the default's name.

@@ -120,7 +120,7 @@ def join(node: Node, args, stop) -> tuple[RunTopics, RunSetup]:
     def spin() -> None:
         rclpy.spin_once(node, timeout_sec=0.1)
 
-    run_id = check_run_id(args.run_id) if args.run_id else None
+    run_id = check_run_id(args.run_id) if args.run_id is not None else None
     print(
         f"camo worker: waiting for {'run ' + run_id if run_id else 'a run'} "
         f"(up to {args.wait:g} s; Ctrl-C to stop)",

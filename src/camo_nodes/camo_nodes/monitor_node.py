@@ -423,7 +423,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args, ros_args = parser.parse_with_ros_args(argv)
         os.environ.update(network_env(args, os.environ))
-        run_id = check_run_id(args.run_id) if args.run_id else None
+        run_id = check_run_id(args.run_id) if args.run_id is not None else None
         folder = out_dir(args)
     except CamoError as exc:
         print(f"monitor_node: error: {exc}", file=sys.stderr)

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from camo_core.exceptions import CamoError
 
-RUN_ID = re.compile(r"^[a-z][a-z0-9_]{0,39}$")
+RUN_ID = re.compile(r"[a-z][a-z0-9_]{0,39}")  # the whole id (fullmatch: no newline after)
 PARAMS_SUFFIX = "/swarm/params"
 
 
@@ -17,7 +17,7 @@ class RunIdError(CamoError):
 
 
 def check_run_id(run_id: str) -> str:
-    if not RUN_ID.match(run_id):
+    if not (isinstance(run_id, str) and RUN_ID.fullmatch(run_id)):
         raise RunIdError(
             f"a run id is a lowercase letter then up to 39 lowercase letters, digits or _ "
             f"(got {run_id!r})"
@@ -42,8 +42,9 @@ def check_topic_name(name: str, what: str) -> str:
         # As a node at the root would take it (a relative name under its namespace): the
         # length DDS allows is checked on the full name.
         validate_full_topic_name(expand_topic_name(name, "camo", "/"))
-    except InvalidTopicNameException as exc:
+    except (InvalidTopicNameException, ValueError) as exc:  # (an unknown {substitution})
         reason = str(exc).splitlines()[0].removeprefix("Invalid topic name: ").rstrip(":")
+        reason = reason.removeprefix(f"topic name {name!r} is invalid: ").split(", at /")[0]
         reason = reason.replace("'255U - 8U'", "247 characters")  # rmw's limit, as C says it
         shown = repr(name) if len(name) <= 80 else repr(name[:80]) + "..."
         raise TopicNameError(f"{what} {shown} is not a ROS topic name: {reason}") from None
