@@ -13,7 +13,7 @@ VALUES = {
     "--rounds": "2", "--duration": "5", "--image": "a.png", "--video": "a.mp4",
     "--images": "*.png", "--background-topic": "/cam", "--camera": "0", "--then": "desert",
     "--fps": "10", "--period": "2", "--key-file": "k", "--pattern": "forest", "--bridge": "0,0=/x",
-    "--max-fps": "5",
+    "--max-fps": "5", "--sense-period": "0.5", "--change-window": "5", "--change-threshold": "9",
 }  # fmt: skip
 FLAGS = sorted({f for r in RUN_COMBINATIONS for f in (r.option, *r.needs, *r.excludes)})
 
@@ -54,3 +54,30 @@ def test_an_option_from_a_parameters_file_counts_as_given(tmp_path):
     with pytest.raises(UsageError, match="--rounds needs --continuous"):
         build_parser().parse_args(["--params-file", str(params)])
     build_parser().parse_args(["--params-file", str(params), "--continuous"])
+
+
+@pytest.mark.parametrize(
+    "argv, environ, said",
+    [
+        (["--record", "{tmp}/x", "--out", "{tmp}/x"], {}, "--record {tmp}/x holds --out"),
+        (["--record", "{tmp}/x", "--out", "{tmp}/x/r"], {}, "give them apart"),
+        (["--no-key"], {"CAMO_ENCRYPT": "1"}, "CAMO_ENCRYPT=1 and --no-key do not go together"),
+        (["--discovery-server", "10.0.0.1:11811", "--network", "subnet"], {}, "do not go"),
+        (["--image", "{tmp}/figure.png", "--out", "{tmp}", "--force"], {}, "would replace"),
+    ],
+)
+def test_a_run_whose_options_would_lose_or_ignore_something_is_refused_first(
+    tmp_path, argv, environ, said
+):
+    # Each was found to run to its end and then lose the recording, drop the encryption or
+    # overwrite its own input.
+    import cv2
+    import numpy as np
+
+    from camo_bringup.run_config import config_from
+
+    cv2.imwrite(str(tmp_path / "figure.png"), np.full((16, 16), 90, np.uint8))
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    with pytest.raises(UsageError, match=said.replace("{tmp}", str(tmp_path))):
+        config_from(build_parser().parse_args(["--rows", "3", "--cols", "3", *argv]), environ)
+    assert not (tmp_path / "x").exists() and (tmp_path / "figure.png").exists()

@@ -383,3 +383,11 @@ def test_a_value_beginning_with_a_dash_says_how_to_give_it():
     assert parser.parse_args(["--sensed=-1,1=5"]).sensed == ["-1,1=5"]
     with pytest.raises(UsageError, match="outside the 4x4 grid"):
         commands.sensed_overrides(["-1,1=5"], 4, 4)
+
+
+@pytest.mark.parametrize("sizes", ["-5", "100000", "4", "abc", ""])
+def test_bench_sizes_out_of_range_are_one_line_before_anything_is_timed(sizes, capsys):
+    # -5 reached numpy's seeding, 100000 a 75 GiB allocation, "" the default sizes.
+    assert commands.main(["bench", "sim", "--sizes", sizes]) == 2
+    said = capsys.readouterr().err.strip().splitlines()
+    assert len(said) == 1 and "--sizes" in said[0], said

@@ -345,12 +345,29 @@ def test_a_params_file_of_wrong_types_and_ranges_is_one_line_or_runs(
     assert code == 2 and len(err.splitlines()) == 1 and err.startswith("camo: error: "), err
 
 
-def test_a_pattern_from_a_parameters_file_and_an_image_on_the_command_line_is_one_line(tmp_path):
-    # argparse's --image/--pattern group sees the command line only; the table sees both.
+def test_an_image_on_the_command_line_overrides_a_parameters_files_pattern(tmp_path):
+    # A run's params.yaml names its pattern: repeated with --image, the image is the background.
+    import cv2
+    import numpy as np
+
     from camo_core.cli.commands import build_parser
+    from camo_core.cli.options import image_from
 
     params = tmp_path / "p.yaml"
     params.write_text("/**:\n  ros__parameters:\n    pattern: desert\n")
-    with pytest.raises(UsageError, match="--pattern and --image do not go together"):
-        build_parser().parse_args(["sim", "--params-file", str(params), "--image", "a.png"])
-    build_parser().parse_args(["sim", "--params-file", str(params)])
+    image = tmp_path / "a.png"
+    cv2.imwrite(str(image), np.full((16, 16), 90, np.uint8))
+    args = build_parser().parse_args(["sim", "--params-file", str(params), "--image", str(image)])
+    shown, label = image_from(args)
+    assert label == str(image) and shown.shape[:2] == (16, 16)
+
+
+def test_a_scope_scale_without_a_local_scope_is_one_line_from_a_file_too(tmp_path):
+    from camo_core.cli.commands import build_parser
+
+    params = tmp_path / "p.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    scope_scale: 3.0\n")
+    for argv in (["--params-file", str(params)], ["--scope-scale", "3"]):
+        with pytest.raises(UsageError, match="--scope-scale needs --scope: the size of"):
+            build_parser().parse_args(["sim", *argv])
+        build_parser().parse_args(["sim", *argv, "--scope", "local"])

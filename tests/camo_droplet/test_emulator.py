@@ -124,3 +124,17 @@ def test_a_disconnects_length_without_disconnects_is_one_line_naming_both(tmp_pa
     emulator.build_parser().parse_args([*link, "--disconnect-after", "3", "--disconnect-for", "1"])
     with pytest.raises(UsageError, match="--disconnect-for needs --disconnect-after"):
         emulator.build_parser().parse_args([*link, "--disconnect-for", "1"])
+
+
+@pytest.mark.parametrize("where", ["folder", "under a file"])
+def test_an_led_log_that_cannot_be_appended_to_is_one_line_at_start(tmp_path, where):
+    # A folder failed only at the first LED command, in the serving thread: no more replies.
+    from camo_core.exceptions import UsageError
+
+    (tmp_path / "file").write_text("")
+    log = tmp_path if where == "folder" else tmp_path / "file" / "led.log"
+    args = emulator.build_parser().parse_args(
+        ["--link", str(tmp_path / "x"), "--led-log", str(log)]
+    )
+    with pytest.raises(UsageError, match="--led-log"):
+        emulator.emulator_from(args)

@@ -219,6 +219,11 @@ def _network_args(**given):
         ("CAMO_KEY_FILE", "/nonexistent.key", "key file /nonexistent.key: no such file"),
         ("FASTRTPS_DEFAULT_PROFILES_FILE", "/nonexistent.xml", "is not a file"),
         ("FASTRTPS_DEFAULT_PROFILES_FILE", __file__, "is not XML"),
+        ("FASTDDS_DEFAULT_PROFILES_FILE", "/nonexistent.xml", "FASTDDS_DEFAULT_PROFILES_FILE"),
+        ("ROS_DISCOVERY_SERVER", ";;;;", "names no server"),
+        ("ROS_LOG_DIR", "/dev/null", "ROS_LOG_DIR /dev/null is not a folder"),
+        ("ROS_HOME", "/dev/null/x", "ROS_HOME /dev/null/x is not a folder (nor under one)"),
+        ("ROS_LOG_DIR", "/proc/1/x", "may not be written"),
     ],
 )
 def test_a_bad_ros_variable_in_the_environment_is_one_line(name, value, said):

@@ -330,3 +330,23 @@ def test_a_sweep_says_how_many_trials_it_has_and_runs_before_it_starts(tmp_path,
     assert "camo sweep: 4 trials, 4 to run\n" in capsys.readouterr().err
     assert cli.main([*argv[:-6], "--trials", "3", *argv[-4:]]) == 0  # one replicate more
     assert "camo sweep: 6 trials (4 in the table already), 2 to run\n" in capsys.readouterr().err
+
+
+def test_more_local_workers_than_the_machine_can_run_is_one_line(tmp_path, capsys):
+    # A thousand on two cores started for minutes, then broke in multiprocessing and hung.
+    import os
+
+    from camo_sweep import cli
+
+    argv = ["--axis", "rho_comm=0,0.5", "--set", "rows=3", "--set", "cols=3"]
+    limit = min(1024, 8 * (os.cpu_count() or 1))
+    for workers in (limit + 1, 0):
+        out = tmp_path / f"s{workers}"
+        assert cli.main([*argv, "--workers", str(workers), "--out", str(out)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [
+            f"camo sweep: error: --workers must be in 1..{limit} on this machine "
+            f"({os.cpu_count()} cores, 8 a core at most; got {workers}): more go to a "
+            "cluster, --scheduler or --slurm"
+        ]
+        assert not out.exists()

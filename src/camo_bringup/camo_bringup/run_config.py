@@ -174,6 +174,10 @@ RUN_COMBINATIONS = (
     Combination("--rounds", needs=("--continuous",), why="it ends a --continuous run"),
     Combination("--duration", needs=("--continuous",), why="it ends a --continuous run"),
     Combination("--continuous", excludes=("--then", "--bridge"), why=CONTINUOUS_ONLY),
+    *(
+        Combination(flag, needs=("--continuous",), why="how a --continuous swarm watches")
+        for flag in ("--sense-period", "--change-window", "--change-threshold")
+    ),
     Combination("--no-key", excludes=("--key-file", "--encrypt")),
     *(
         Combination(source, excludes=SOURCES[k + 1 :], why="one background source")
@@ -310,6 +314,14 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
         problem = new_folder_problem(record, "the bag")
         if problem or record.suffix == ".mcap":
             raise UsageError(problem or f"--record {record}: give a bag folder, not a .mcap file")
+        out = Path(args.out).resolve() if args.out else None
+        if out is not None and (out == record.resolve() or record.resolve() in out.parents):
+            # The results would be in the bag's folder before the recorder makes it: refused
+            # then, after the whole run.
+            raise UsageError(f"--record {record} holds --out {args.out}: give them apart")
+    inherited = os.environ if environ is None else environ
+    if args.no_key and inherited.get(ENCRYPT_ENV, "").strip() == "1":
+        raise UsageError(f"{ENCRYPT_ENV}=1 and --no-key do not go together: it takes a key")
     stream = {n: v for n, v in options_of(args, ProjectorParams).items() if n in STREAM_OPTIONS}
     ProjectorParams(**stream)  # each in its range, before anything starts
     until_rounds, until_seconds = continuous_ends(args)

@@ -34,6 +34,7 @@ from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import block_means
 from camo_core.cli.options import Combination, Parser, a_path, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
+from camo_core.inputs.files import shown
 from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer, items
 from camo_core.shutdown import interrupt_on_signals
@@ -274,6 +275,12 @@ def emulator_from(args: argparse.Namespace) -> DropletEmulator:
     )
     if image.shape[0] < arena.rows or image.shape[1] < arena.cols:
         raise UsageError(f"the image is smaller than the {arena.rows}x{arena.cols} arena")
+    if args.led_log is not None:  # appended to at every LED command: a folder would fail then
+        log = Path(args.led_log)
+        if log.exists() and not log.is_file():
+            raise UsageError(f"--led-log {shown(log)} is not a file: give a file to append to")
+        if not log.parent.is_dir():
+            raise UsageError(f"--led-log {shown(log)}: {shown(log.parent)} is not a folder")
     faults = Faults(
         args.drop,
         args.delay,

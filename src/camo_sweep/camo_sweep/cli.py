@@ -170,8 +170,7 @@ def make_engine(args, spec: SweepSpec):
     if args.slurm:
         return engines.slurm_engine(slurm_settings(args, spec.slurm))
     workers = (os.cpu_count() or 1) if args.workers is None else args.workers
-    if not 1 <= workers <= 1024:
-        raise UsageError(f"--workers must be in 1..1024 (got {workers})")
+    engines.check_local_workers(workers)
     if workers == 1:
         return engines.InProcess()
     return engines.local_engine(workers, args.ros_per_worker)

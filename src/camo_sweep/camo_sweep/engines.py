@@ -125,6 +125,21 @@ def worker_environment() -> None:
     os.environ["NUMBA_NUM_THREADS"] = "1"
 
 
+PER_CORE = 8  # local worker processes a core at most: more only wait (and each takes ~200 MB)
+
+
+def check_local_workers(workers: int) -> None:
+    """--workers: 1..1024, and no more local processes than PER_CORE a core of this machine
+    (a thousand on two cores started for minutes and then broke in multiprocessing)."""
+    cores = os.cpu_count() or 1
+    if not 1 <= workers <= min(1024, PER_CORE * cores):
+        raise UsageError(
+            f"--workers must be in 1..{min(1024, PER_CORE * cores)} on this machine "
+            f"({cores} cores, {PER_CORE} a core at most; got {workers}): more go to a "
+            "cluster, --scheduler or --slurm"
+        )
+
+
 def local_engine(workers: int, ros_per_worker: int = 1) -> DaskEngine:
     """A LocalCluster of `workers` single-threaded processes over TCP on 127.0.0.1, its
     dashboard on 127.0.0.1 only."""

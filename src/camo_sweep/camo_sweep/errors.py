@@ -185,8 +185,7 @@ def run(argv: list[str] | None) -> int:
     params = params_from(args)  # bad values fail here, in one line
     if args.trials < 1 or args.trials > 10_000:
         raise UsageError(f"--trials must be an integer in 1..10000 (got {args.trials})")
-    if not 1 <= args.workers <= 1024:
-        raise UsageError(f"--workers must be in 1..1024 (got {args.workers})")
+    engines.check_local_workers(args.workers)
     rhos = parse_rhos(args.rhos)
     _, label = image_from(args)  # an unreadable image fails here
     if args.rho_meas or args.rho_comm:

@@ -24,6 +24,7 @@ from camo_core.algorithm.perrobot import run_per_robot
 from camo_core.algorithm.simulator import simulate
 
 SIZES = (64, 256, 1024)
+MAX_SIZE = 2048  # a side's p-arrays and copies take about 1 GB; 4096 would take 4
 TARGETS = {0.0: 10.0, 0.1: 60.0}  # ratio to the copy baseline, per rho_comm
 WHOLE_SIDE = 1024  # robots per side of the whole-process run
 WHOLE_IMAGE_SIDE = 2048  # its input image, pixels per side

@@ -193,7 +193,14 @@ def cmd_key(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from camo_core.cli import bench  # numba: only for what simulates
 
-    sizes = tuple(integer(s) for s in items(args.sizes, "--sizes")) if args.sizes else bench.SIZES
+    sizes: tuple[int, ...] = bench.SIZES
+    if args.sizes is not None:
+        sizes = tuple(integer(s, "--sizes") for s in items(args.sizes, "--sizes"))
+        if not sizes or not all(8 <= n <= bench.MAX_SIZE for n in sizes):
+            raise UsageError(
+                f"--sizes takes grid sides in 8..{bench.MAX_SIZE}, comma-separated "
+                f"(got {args.sizes!r})"
+            )
     report = bench.run(sizes=sizes, whole=args.whole)
     print(json.dumps(report) if args.json else bench.format_table(report))
     return 0

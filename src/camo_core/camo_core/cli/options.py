@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import copy
 import itertools
+import os
 import re
 import sys
 from dataclasses import dataclass
@@ -17,10 +18,10 @@ from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.sensing import with_contrast
 from camo_core.exceptions import UsageError
-from camo_core.inputs.files import checked_path
+from camo_core.inputs.files import checked_path, shown
 from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer, number
-from camo_core.results.folders import output_folder
+from camo_core.results.folders import FolderDenied, output_folder
 from camo_core.schema import Declared, with_role
 
 
@@ -260,8 +261,12 @@ def add_run_options(
     add_options(parser, CamoParams)
     add_out_options(parser)
     parser.set_defaults(default_pattern=default_pattern)
-    if isinstance(parser, Parser):  # (argparse's group cannot see a parameters file's)
-        parser.combine(Combination("--pattern", excludes=("--image",), why="one background"))
+    if isinstance(parser, Parser):
+        # (A parameters file's pattern with --image on the command line: the command line's
+        # background overrides the file's, as any option does.)
+        parser.combine(
+            Combination("--scope-scale", needs=("--scope",), why="the size of --scope local's")
+        )
 
 
 def add_out_options(parser: argparse.ArgumentParser) -> None:
@@ -307,9 +312,43 @@ def add_contrast_option(parser: argparse.ArgumentParser) -> None:
     )
 
 
+# The files a command writes into its output folder, and the options that name input files.
+OUTPUT_NAMES = frozenset(
+    ("summary.json", "figure.png", "run.gif", "params.yaml", "timing.json", "processes.json",
+     "run.key", "background.png", "rounds.csv", "timeline.png", "layout.csv", "errors.png",
+     "errors.csv")
+)  # fmt: skip
+INPUT_OPTIONS = ("image", "params_file", "calibration", "video", "then", "after")
+
+
 def out_dir(args: argparse.Namespace) -> Path:
-    """The output folder of --out and --force (results.folders.output_folder)."""
-    return output_folder(args.out, getattr(args, "force", False))
+    """The output folder of --out and --force (results.folders.output_folder). With --force,
+    never one where an output would replace a file the command reads (its --image, its
+    --params-file: the run could then not be repeated)."""
+    force = getattr(args, "force", False)
+    if force and args.out is not None:
+        out = Path(args.out).resolve()
+        for option in INPUT_OPTIONS:
+            given = getattr(args, option, None)
+            for value in given if isinstance(given, list) else [given]:
+                path = Path(value).resolve() if isinstance(value, str | Path) else None
+                if path is not None and path.parent == out and path.name in OUTPUT_NAMES:
+                    flag = "--" + option.replace("_", "-")
+                    raise UsageError(
+                        f"--out {shown(args.out)} would replace {path.name}, which {flag} "
+                        "reads: choose another folder"
+                    )
+    try:
+        return output_folder(args.out, force)
+    except FolderDenied as exc:
+        if not os.environ.get(IN_IMAGE):
+            raise
+        raise UsageError(
+            f"{exc} (camo's image runs as uid {os.getuid()}: mount a folder it may write)"
+        ) from None
+
+
+IN_IMAGE = "CAMO_IN_IMAGE"  # set in camo's container image (docker/Dockerfile)
 
 
 def parse_ranges(texts: list[str], count: int, option: str = "--cells") -> list[tuple[int, int]]:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import errno
 import itertools
-import os
 import time
 from pathlib import Path
 
@@ -59,16 +58,13 @@ def output_folder(folder: Path | None, force: bool = False) -> Path:
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        hint = ""
-        if exc.errno in (errno.EACCES, errno.EPERM) and os.environ.get(IN_IMAGE):
-            hint = f" (camo's image runs as uid {os.getuid()}: mount a folder it may write)"
-        raise UsageError(
-            f"cannot create output folder {shown(folder)}: {exc.strerror}{hint}"
-        ) from None
+        error = FolderDenied if exc.errno in (errno.EACCES, errno.EPERM) else UsageError
+        raise error(f"cannot create output folder {shown(folder)}: {exc.strerror}") from None
     return folder
 
 
-IN_IMAGE = "CAMO_IN_IMAGE"  # set in camo's container image (docker/Dockerfile)
+class FolderDenied(UsageError):
+    """An output folder this user may not make (the command line says which user it is)."""
 
 
 PNG_SOFTWARE = "camo"  # the Software text of the PNGs camo writes to a path the user named

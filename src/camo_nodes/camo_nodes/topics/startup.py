@@ -23,7 +23,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
-from camo_core.cli.options import Parser
+from camo_core.cli.options import Combination, Parser
 from camo_core.cli.params_file import check_ros_args
 from camo_core.exceptions import EXIT_USAGE, UsageError
 from camo_core.inputs.files import shown
@@ -215,6 +215,11 @@ def check_discovery_servers(value: str) -> None:
     """ROS_DISCOVERY_SERVER as Fast DDS reads it: `;`-separated HOST or HOST:PORT ([IPv6]:PORT),
     an empty entry keeping a server's place. Anything else leaves every process searching for
     servers that are not there: a run that waits for good, so a UsageError here."""
+    if value.strip() and not value.replace(";", "").strip():
+        raise UsageError(
+            f"ROS_DISCOVERY_SERVER {shown(value)!r} names no server (want HOST:PORT;...): "
+            "fix or unset it, or give --discovery-server"
+        )
     for entry in value.split(";"):
         entry = entry.strip()
         if not entry:
@@ -253,19 +258,33 @@ def check_environment(env: dict[str, str]) -> None:
                 f"{name} must be one of {', '.join(values)} (got {shown(value)!r}): "
                 "fix or unset it"
             )
-    profiles = env.get("FASTRTPS_DEFAULT_PROFILES_FILE", "").strip()
-    if profiles:
-        _check_profiles_file(Path(profiles))
+    for name in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
+        profiles = env.get(name, "").strip()
+        if profiles:
+            _check_profiles_file(Path(profiles), name)
+    for name in ("ROS_LOG_DIR", "ROS_HOME"):  # rcl makes its log folder there, or fails
+        if env.get(name, "").strip():
+            _check_writable_folder(Path(env[name]), name)
     if env.get(KEY_FILE_ENV):
         read_key_file(env[KEY_FILE_ENV])  # missing, malformed or readable by others: one line
 
 
-def _check_profiles_file(path: Path) -> None:
-    """FASTRTPS_DEFAULT_PROFILES_FILE: Fast DDS passes over a file it cannot load, leaving
-    the user's settings unapplied without a word: it must be there and be XML."""
+def _check_writable_folder(path: Path, name: str) -> None:
+    """A folder rcl writes into (its logs): one there, or one it can make, that it may write."""
+    where = f"{name} {shown(path)}"
+    there = path if path.exists() else next((p for p in path.parents if p.exists()), None)
+    if there is None or not there.is_dir():
+        raise UsageError(f"{where} is not a folder (nor under one): fix or unset it")
+    if not os.access(there, os.W_OK | os.X_OK):
+        raise UsageError(f"{where}: {shown(there)} may not be written: fix or unset it")
+
+
+def _check_profiles_file(path: Path, name: str = "FASTRTPS_DEFAULT_PROFILES_FILE") -> None:
+    """FASTRTPS_DEFAULT_PROFILES_FILE (or FASTDDS_...): Fast DDS passes over a file it cannot
+    load, leaving the user's settings unapplied without a word: it must be there and be XML."""
     import xml.etree.ElementTree as ElementTree
 
-    where = f"FASTRTPS_DEFAULT_PROFILES_FILE {shown(path)}"
+    where = f"{name} {shown(path)}"
     if not path.is_file():
         raise UsageError(f"{where} is not a file: fix or unset it")
     try:
@@ -328,6 +347,8 @@ def add_network_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--domain-id", type=int, default=None, help="ROS_DOMAIN_ID (default: inherited, else 0)"
     )
+    if isinstance(parser, Parser):  # a server is found by its address, not by a range
+        parser.combine(Combination("--discovery-server", excludes=("--network",)))
     parser.add_argument(
         "--key-file",
         metavar="FILE",
