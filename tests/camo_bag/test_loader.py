@@ -306,10 +306,14 @@ def four_chunks(tmp_path):
     return writer.file, ends
 
 
-@pytest.mark.parametrize("where", ["inside", "header"])
+@pytest.mark.parametrize(
+    "where", ["inside", "length", "opcode", "length, no summary", "opcode, no summary"]
+)
 def test_a_damaged_chunk_costs_its_messages_only_and_repair_says_how_many(tmp_path, where):
     """Chunks before and after a damaged one are kept, whether its contents or its framing
-    are broken; the message indexes after it count what it held."""
+    are broken. A chunk whose framing is broken is read by the summary's chunk index while
+    the summary reads; without it, the chunk is passed over, and the repair says it cannot
+    tell what it held (it used to say 0 messages lost)."""
     from camo_bag.loader import repair
 
     file, ends = four_chunks(tmp_path)
@@ -318,18 +322,28 @@ def test_a_damaged_chunk_costs_its_messages_only_and_repair_says_how_many(tmp_pa
     assert data[chunk] == 0x06
     if where == "inside":
         data[chunk + 80 : chunk + 100] = bytes(20)  # its records: a CRC that does not match
-    else:
+    elif where.startswith("length"):
         data[chunk + 1 : chunk + 9] = (2**62).to_bytes(8, "little")  # a length past the end
+    else:
+        data[chunk] = 0x7F  # an opcode MCAP does not have
+    if where.endswith("no summary"):
+        data[-8:] = bytes(8)  # its closing magic: the footer and summary are not to be trusted
     damaged = tmp_path / "damaged"
     damaged.mkdir()
     (damaged / "damaged_0.mcap").write_bytes(bytes(data))
     bag, count = repair(damaged, tmp_path / "fixed")
     kept = [m.data for m in open_bag(tmp_path / "fixed").messages()]
+    if where in ("length", "opcode"):
+        assert count == 80 and len(kept) == 80, bag.ending
+        assert bag.ending.startswith("1 chunk with damaged framing read by the summary's index")
+        return
     expected = [string_cdr(f"{c}-{k}") for c in (0, 2, 3) for k in range(20)]
     assert kept == expected and count == 60, (len(kept), bag.ending)
     assert "1 damaged stretch passed over" in bag.ending, bag.ending
     if where == "inside":  # its indexes follow it intact
         assert "20 messages lost" in bag.ending, bag.ending
+    else:
+        assert "(what 1 of them held is not known)" in bag.ending, bag.ending
 
 
 @settings(max_examples=40, deadline=None)
