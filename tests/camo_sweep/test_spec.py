@@ -235,6 +235,7 @@ NAMES = st.one_of(
     st.sampled_from(
         ["rows", "cols", "rho_comm", "rho_meas,rho_comm", "threshold", "pattern", "image"]
         + ["seed", "layout", "sensed", "contrast", "force", "out", "bogus", "", "rows,rows"]
+        + ["after"]
     ),
     st.integers(0, 2),
     st.none(),
@@ -350,3 +351,13 @@ def test_more_local_workers_than_the_machine_can_run_is_one_line(tmp_path, capsy
             "cluster, --scheduler or --slurm"
         ]
         assert not out.exists()
+
+
+def test_a_previous_round_is_no_axis_of_a_sweep(tmp_path, capsys):
+    # --after's value was passed over and every trial recorded "ok" as a first round.
+    from camo_sweep import cli
+
+    argv = ["--axis", "after=/a,/b", "--workers", "1", "--out", str(tmp_path / "s")]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown option or axis 'after'" in err[0], err

@@ -33,8 +33,9 @@ from camo_core.inputs.strict_yaml import described, read_yaml
 
 DRIVERS = ("sim", "ros")
 # Options of ./camo sim that are not a trial's: where it writes, the seed (a trial's own, from the
-# root seed), real readings and parameters files.
-NOT_AXES = {"out", "force", "seed", "sensed", "params_file", "help"}
+# root seed), real readings, parameters files and a previous round (--after: a trial is a
+# first round; its value was passed over, the table's rows wrong).
+NOT_AXES = {"out", "force", "seed", "sensed", "params_file", "help", "after"}
 SPEC_KEYS = {"seed", "trials", "driver", "options", "axes", "blocks", "slurm"}
 MAX_TRIALS = 10_000_000
 MAX_FILE_BYTES = 16 * 1024 * 1024  # a sweep file is a few lines
