@@ -191,3 +191,21 @@ def test_a_process_on_a_layout_senses_each_robots_grey_and_colour_round_its_posi
         reading = ProjectedSensor(projection, *divmod(robot, params.cols)).read()
         assert reading.value == greys[robot] and reading.rgb == tuple(colours[robot])
     assert not np.allclose(colours[:, 0], colours[:, 2])  # a colour image's channels differ
+
+
+@pytest.mark.slow(SWARM)
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_a_robot_stopped_while_it_waits_for_a_run_ends_without_a_traceback(sig):
+    import signal
+    import time
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_nodes.robot_node", "--ros-args", "-p", "rows:=2",
+         "-p", "cols:=2", "-p", "row:=0", "-p", "col:=0"],
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    time.sleep(3)  # no run in its domain: it waits for one
+    proc.send_signal(getattr(signal, sig))
+    _, err = finished(proc, 30)
+    assert proc.returncode == 0 and "Traceback" not in err, err

@@ -166,3 +166,18 @@ def test_a_projector_option_that_means_nothing_with_the_others_is_one_line(optio
     with pytest.raises(UsageError, match=said):
         options_to_ros_args(["projector_node", *options])
     assert "-p" in options_to_ros_args(["projector_node", "--fps", "5", "--video", "v.mp4"])
+
+
+def test_a_truncated_video_is_one_line_with_what_its_decoder_said(tmp_path, capfd):
+    # FFmpeg wrote "moov atom not found" on the terminal above camo's own line.
+    from camo_core.inputs.images import ImageError
+
+    path = tmp_path / "cut.mp4"
+    path.write_bytes(b"\x00\x00\x00\x18ftypmp42" + bytes(range(256)) * 8)
+    with pytest.raises(ImageError) as caught:
+        VideoSource(str(path))
+    assert str(caught.value) == (
+        f"video {path}: OpenCV cannot read it (not a video it knows): the decoder says "
+        "'moov atom not found'"
+    )
+    assert capfd.readouterr().err == ""

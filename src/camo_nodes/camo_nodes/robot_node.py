@@ -286,6 +286,8 @@ def main(args=None) -> int:
     except CamoError as exc:
         print(f"robot_node: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM while it waited for its run
+        return 0
     finally:
         rclpy.try_shutdown()
 

@@ -74,10 +74,15 @@ class VideoSource(Source):
     ) -> None:
         """`grid`: (rows, cols) of the swarm, if known: its frames must cover it."""
         self.path = checked_file(path, "video", MAX_VIDEO_BYTES, ImageError)
-        with _quiet_opencv():
-            self.capture = cv2.VideoCapture(str(self.path))
+        with _quiet_opencv():  # FFmpeg's own words (a truncated file's "moov atom not found")
+            self.capture, text = captured_stderr(lambda: cv2.VideoCapture(str(self.path)))
         if not self.capture.isOpened():
-            raise ImageError(f"video {shown(path)}: OpenCV cannot read it (not a video it knows)")
+            said = decoder_messages(text)
+            words = re.sub(r"^\[[^\]]*\] ", "", said[0]) if said else ""  # [mov,... @ 0x...]
+            why = f": the decoder says {words[:MAX_QUOTED]!r}" if said else ""
+            raise ImageError(
+                f"video {shown(path)}: OpenCV cannot read it (not a video it knows){why}"
+            )
         own = self.capture.get(cv2.CAP_PROP_FPS)
         self.fps = fps or (own if math.isfinite(own) and 0 < own <= 1000 else 25.0)
         self.loop = loop
