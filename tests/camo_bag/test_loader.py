@@ -778,3 +778,22 @@ def test_every_option_of_the_discovery_server_with_a_bad_value_is_one_line(
     monkeypatch.setattr(command, "server_command", lambda *a: ("x", ["x"], {}))
     for option in ("--port", "--address", "--server-id"):
         assert bad_value_outcomes(command.main, [], option, capsys) == [], option
+
+
+def test_a_bag_whose_opening_magic_is_damaged_is_repaired_whole(tmp_path):
+    # Its first 8 bytes overwritten: every reader said "not an MCAP file", and its messages
+    # were out of reach though every chunk was whole.
+    from camo_bag.loader import repair
+
+    file, _ = four_chunks(tmp_path)
+    data = bytearray(file.read_bytes())
+    data[:8] = b"garbage!"
+    damaged = tmp_path / "damaged"
+    damaged.mkdir()
+    (damaged / "damaged_0.mcap").write_bytes(bytes(data))
+    said = refused(damaged)
+    assert "its first bytes are damaged" in said and "bag repair" in said and "\n" not in said
+    bag, count = repair(damaged, tmp_path / "fixed")
+    assert count == 80 and "its opening magic is damaged" in bag.note()
+    kept = [m.data for m in open_bag(tmp_path / "fixed").messages()]
+    assert kept == [string_cdr(f"{c}-{k}") for c in range(4) for k in range(20)]

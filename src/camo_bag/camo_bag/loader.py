@@ -206,14 +206,28 @@ def load_metadata(file: Path) -> dict:
 # ---- levels 3 and 4: the MCAP file and its channels ------------------------------------
 
 
-def check_magic(file: Path) -> None:
+def check_magic(file: Path, tolerate: bool = False) -> str:
+    """BagError unless `file` opens with MCAP's magic. One that ends with it (its closing
+    magic) is an MCAP file whose first bytes are damaged: `tolerate` (bag repair) reads it by
+    its records all the same, and says so (the returned note)."""
     try:
         with open(file, "rb") as stream:
             head = stream.read(len(MAGIC))
+            size = stream.seek(0, 2)
+            stream.seek(max(size - len(MAGIC), 0))
+            tail = stream.read(len(MAGIC))
     except OSError as exc:
         raise BagError(f"cannot read {file}: {exc.strerror}") from None
-    if head != MAGIC:
-        raise BagError(f"{file} is not an MCAP file")
+    if head == MAGIC:
+        return ""
+    if tail == MAGIC and size > 2 * len(MAGIC):
+        if tolerate:
+            return "its opening magic is damaged: read by its records"
+        raise BagError(
+            f"{file}: its first bytes are damaged (it ends as an MCAP file does); "
+            f"`./camo bag repair` writes a readable copy of what it holds"
+        )
+    raise BagError(f"{file} is not an MCAP file")
 
 
 def _truncated(path: Path) -> BagError:
@@ -484,7 +498,8 @@ def open_bag(path: str | Path, partial: bool = False, stream: bool = False) -> B
     (with `partial`) reads every file so, from its start, even one with a summary."""
     path = bag_path(path)
     metadata, file, notes = _bag_file(path, partial)
-    check_magic(file)
+    damaged_head = check_magic(file, tolerate=partial and stream)
+    notes = [*notes, damaged_head] if damaged_head else notes
     found = None if partial and stream else _read_summary(file)
     salvaged = None
     if found is not None:
