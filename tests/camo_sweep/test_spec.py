@@ -361,3 +361,17 @@ def test_a_previous_round_is_no_axis_of_a_sweep(tmp_path, capsys):
     assert cli.main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown option or axis 'after'" in err[0], err
+
+
+def test_a_sweep_listed_slowly_says_so_before_it_lists(tmp_path, capsys, monkeypatch):
+    # 10^7 trials (the most a sweep may have) took minutes and 3 GB before a word.
+    from camo_sweep import cli
+
+    monkeypatch.setattr(cli, "LISTED_SLOWLY", 4)
+    argv = ["--axis", "rho_comm=0,0.5", "--set", "rows=3", "--set", "cols=3", "--trials", "2"]
+    assert cli.main([*argv, "--workers", "1", "--out", str(tmp_path / "s")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err[:2] == [
+        "camo sweep: listing 4 trials before it starts",
+        "camo sweep: 4 trials, 4 to run",
+    ]

@@ -176,6 +176,9 @@ def make_engine(args, spec: SweepSpec):
     return engines.local_engine(workers, args.ros_per_worker)
 
 
+LISTED_SLOWLY = 100_000  # trials: listing this many (and the table's) takes seconds or more
+
+
 def cmd_sweep(argv: list[str]) -> int:
     args = build_parser().parse_args(argv)
     check_numbers(args)
@@ -191,6 +194,8 @@ def cmd_sweep(argv: list[str]) -> int:
         raise UsageError("the following arguments are required: --out")
     spec = build_spec(data, args.axis, args.set, args.trials, args.seed, args.driver)
     spec.refuse_more_than(args.max_trials, "--max-trials")
+    if spec.count() >= LISTED_SLOWLY and not args.quiet:  # listing 10^7 trials takes minutes
+        print(f"camo sweep: listing {spec.count():,} trials before it starts", file=sys.stderr)
     before = check_folder(args.out, spec)
     work = plan(spec, args.out)  # options that cannot run fail here, before any write
     engine = make_engine(args, spec)  # and an unreachable scheduler here
