@@ -797,3 +797,12 @@ def test_a_bag_whose_opening_magic_is_damaged_is_repaired_whole(tmp_path):
     assert count == 80 and "its opening magic is damaged" in bag.note()
     kept = [m.data for m in open_bag(tmp_path / "fixed").messages()]
     assert kept == [string_cdr(f"{c}-{k}") for c in range(4) for k in range(20)]
+
+
+@pytest.mark.parametrize("size", [9, 30, 40])
+def test_a_file_shorter_than_any_footer_is_truncated_not_an_os_error(tmp_path, size):
+    # A 30-byte MCAP said "cannot read ...: Invalid argument" (a seek before its start).
+    folder = tmp_path / "short"
+    folder.mkdir()
+    (folder / "short_0.mcap").write_bytes((b"\x89MCAP0\r\n" + bytes(64))[:size])
+    assert "is truncated or was not closed" in refused(folder)

@@ -19,6 +19,7 @@ gives one line (BagError), never a traceback.
 
 from __future__ import annotations
 
+import errno
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
@@ -350,6 +351,8 @@ def _read_summary(file: Path):
         with open(file, "rb") as stream:
             summary = make_reader(stream, validate_crcs=True).get_summary()
     except OSError as exc:
+        if exc.errno == errno.EINVAL:  # a seek before the start: shorter than any footer
+            return None
         raise BagError(f"cannot read {file}: {exc.strerror}") from None
     except DAMAGE:
         return None
