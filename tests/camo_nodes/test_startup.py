@@ -1,11 +1,15 @@
 """How a process's many lean nodes are spread over DDS participants: every node is in the ROS
 graph whatever participant holds it, and the participants a process added end with it."""
 
+import os
+import subprocess
+import sys
 import time
 
+import pytest
 import rclpy
 from rclpy.node import Node
-from support import ros_context
+from support import PROCESS, domain, ros_context
 
 from camo_nodes.topics.startup import GROUPED_NODE, LEAN_NODE, Participants
 
@@ -46,3 +50,19 @@ def test_nodes_beyond_a_participants_share_go_to_new_participants_and_all_are_in
             time.sleep(0.05)
         assert not wanted & graph_names(observer, set())
         observer.destroy_node()
+
+
+@pytest.mark.slow(PROCESS)
+@pytest.mark.parametrize("rule", [":=x", "a:="])
+def test_a_remap_rule_rcl_refuses_is_one_line_without_rcls_log(rule):
+    # rcl logged "[ERROR] [rcl]: Failed to parse global arguments" above camo's own line.
+    done = subprocess.run(
+        [sys.executable, "-m", "camo_projector.projector_node", "--ros-args", "-r", rule],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
+    )
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    assert lines[0].startswith("projector_node: error: ROS arguments refused: Couldn't parse")

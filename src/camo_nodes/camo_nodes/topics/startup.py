@@ -58,7 +58,7 @@ def start_ros(
             args = node_command_line(prog, args)
         check_ros_args(sys.argv if args is None else args)
         try:
-            rclpy.init(args=args, **options)
+            _init_holding_rcl_log(args, options)
         except _rclpy.RCLError as exc:
             text = re.sub(r", at /\S+:\d+", "", str(exc)).removeprefix(
                 "failed to initialize rcl: "
@@ -70,6 +70,26 @@ def start_ros(
     except UsageError as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         raise SystemExit(EXIT_USAGE) from None
+
+
+def _init_holding_rcl_log(args: list[str] | None, options: dict) -> None:
+    """rclpy.init, with what rcl logs on stderr meanwhile held back: when it refuses the
+    arguments, its "[ERROR] [rcl]: Failed to parse global arguments" would stand above camo's
+    one line, which says the same; when it starts, what it wrote is written out as it came."""
+    from camo_core.inputs.images import captured_stderr
+
+    def init():
+        try:
+            rclpy.init(args=args, **options)
+        except (_rclpy.RCLError, _rclpy.UnknownROSArgsError) as exc:
+            return exc
+        return None
+
+    refused, text = captured_stderr(init)
+    if refused is not None:
+        raise refused
+    if text:
+        sys.stderr.write(text)
 
 
 # Nodes with no parameter, rosout or type-description services: no DDS entities of their own
