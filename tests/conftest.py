@@ -34,6 +34,12 @@ settings.load_profile("explore" if os.environ.get("CAMO_FUZZ") == "explore" else
 
 
 def pytest_configure(config):
+    if not in_a_worker(config) and runs_container_tests(config):
+        import tempfile
+
+        import images
+
+        images.start_in_background(Path(tempfile.gettempdir()))  # the workers inherit its env
     config.addinivalue_line(
         "markers",
         "slow(why): a test that takes seconds, with the reason (support.SWARM, PROCESS, CLUSTER, "
@@ -44,6 +50,16 @@ def pytest_configure(config):
         "alone(why): a test that times a swarm against the wall clock or counts what the whole "
         "machine holds (support.TIMED, MACHINE): under pytest-xdist no other test runs beside it",
     )
+
+
+def runs_container_tests(config) -> bool:
+    """Whether this session's selection holds tests/test_containers.py (a -k or "not slow"
+    selection is not looked into: its tests build the images when they need them)."""
+    if config.option.keyword or "not slow" in (config.option.markexpr or ""):
+        return False
+    wanted = ROOT / "tests" / "test_containers.py"
+    paths = [Path(arg.split("::")[0]).resolve() for arg in config.args] or [ROOT / "tests"]
+    return any(path == wanted or path in wanted.parents for path in paths)
 
 
 def pytest_collection_modifyitems(config, items):

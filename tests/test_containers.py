@@ -8,32 +8,17 @@ from __future__ import annotations
 import json
 import os
 import re
-import shutil
 import subprocess
 import uuid
 from pathlib import Path
 
 import pytest
+from images import BUILD, CONF, IMAGE, readme_packages, wait_for_images
 from support import PROCESS, ROOT, assert_like_sim, run_camo
 
-BASE = "localhost/camo-debian:bookworm"  # debootstrap's minbase, imported: nothing else
-IMAGE = "localhost/camo:test"
-BUILD = "localhost/camo-build:test"  # the image's build stage: the README's set-up, done
-CONF = ROOT / "tests" / "containers.conf"
 BUILDS = "builds images: minutes the first time, seconds when podman has its layers"
 
 pytestmark = pytest.mark.slow(BUILDS)
-
-
-# The README's packages that only the tests which build images use: not in the images.
-CONTAINER_TOOLS = ("podman", "runc", "debootstrap", "podman-compose")
-
-
-def readme_packages() -> list[str]:
-    """The README's apt-get line's packages, but CONTAINER_TOOLS."""
-    line = next(x for x in (ROOT / "README.md").read_text().splitlines() if "apt-get install" in x)
-    words = line.split()[line.split().index("install") + 1 :]
-    return [word for word in words if word[0] != "-" and word not in CONTAINER_TOOLS]
 
 
 def podman(*args: str, timeout: float = 900, **env: str) -> subprocess.CompletedProcess:
@@ -50,48 +35,14 @@ def podman(*args: str, timeout: float = 900, **env: str) -> subprocess.Completed
 
 @pytest.fixture(scope="session")
 def images(tmp_path_factory):
-    """The base (debootstrap's, once a machine), then camo's image and its build stage, built
-    with the README's apt-get line as its PACKAGES, by `./camo image` (one process of the
-    session at a time; the other waits and finds them built)."""
+    """camo's image and its build stage (tests/images.py: built once a session, by the
+    session's controller as the session starts where it can)."""
     from conftest import locked, session_folder
 
-    if not shutil.which("podman"):
-        pytest.fail("the container tests need podman: apt-get install podman runc debootstrap")
     with locked(session_folder(tmp_path_factory) / "images.lock"):
-        exists = subprocess.run(
-            ["podman", "image", "exists", BASE], env={**os.environ, "CONTAINERS_CONF": str(CONF)}
-        )
-        if exists.returncode != 0:
-            root = tmp_path_factory.mktemp("debian")
-            made = subprocess.run(
-                ["debootstrap", "--variant=minbase", "bookworm", str(root)],
-                capture_output=True,
-                text=True,
-                timeout=900,
-            )
-            assert made.returncode == 0, made.stdout[-2000:] + made.stderr[-2000:]
-            tar = subprocess.Popen(["tar", "-C", str(root), "-c", "."], stdout=subprocess.PIPE)
-            imported = subprocess.run(
-                ["podman", "import", "-", BASE],
-                stdin=tar.stdout,
-                capture_output=True,
-                timeout=300,
-                env={**os.environ, "CONTAINERS_CONF": str(CONF)},
-            )
-            assert tar.wait() == 0 and imported.returncode == 0, imported.stderr[-2000:]
-            shutil.rmtree(root, ignore_errors=True)
-        packages = f"PACKAGES={' '.join(readme_packages())}"
-        for target, tag in (("build", BUILD), (None, IMAGE)):
-            argv = [str(ROOT / "camo"), "image", "--build-arg", f"BASE={BASE}"]
-            argv += ["--build-arg", packages, "-t", tag, *(["--target", target] if target else [])]
-            built = subprocess.run(
-                argv,
-                capture_output=True,
-                text=True,
-                timeout=1800,
-                env={**os.environ, "CONTAINERS_CONF": str(CONF), "CAMO_ENGINE": "podman"},
-            )
-            assert built.returncode == 0, built.stdout[-3000:] + built.stderr[-3000:]
+        problem = wait_for_images()
+    if problem:
+        pytest.fail(problem)
     return IMAGE
 
 
