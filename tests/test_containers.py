@@ -135,6 +135,13 @@ def test_a_swarm_across_containers_gives_the_simulators_summary(images, tmp_path
         assert_like_sim(Path(results) / "run", tmp_path / "sim")
     finally:
         subprocess.run([*compose, "down", "-v"], capture_output=True, timeout=300, env=env)
+        # podman-compose 1.0 leaves the project's network: one a session would pile up
+        subprocess.run(
+            ["podman", "network", "rm", "-f", f"{project}_default"],
+            capture_output=True,
+            timeout=60,
+            env=env,
+        )
 
 
 @pytest.mark.slow(PROCESS)
