@@ -609,3 +609,14 @@ def bad_values_of_a_ros_tool(module, argv, monkeypatch, capsys) -> tuple[list[st
         p for o in options for p in bad_value_outcomes(module.main, argv, o, capsys, parser)
     ]
     return options, problems
+
+
+def path_without(tmp_path, *tools: str) -> str:
+    """A PATH of every program of /usr/bin and /bin but `tools` (links in one folder)."""
+    folder = tmp_path / "bin"
+    folder.mkdir()
+    for where in ("/usr/bin", "/bin"):
+        for entry in os.scandir(where):
+            if entry.name not in tools and not os.path.lexists(folder / entry.name):
+                (folder / entry.name).symlink_to(entry.path)
+    return str(folder)

@@ -6,20 +6,9 @@ import shutil
 import subprocess
 
 import pytest
-from support import ROOT
+from support import ROOT, path_without
 
 NEEDED = ("cmake", "make", "gcc", "g++")
-
-
-def path_without(tmp_path, *tools: str) -> str:
-    """A PATH of every program of /usr/bin and /bin but `tools` (links in one folder)."""
-    folder = tmp_path / "bin"
-    folder.mkdir()
-    for where in ("/usr/bin", "/bin"):
-        for entry in os.scandir(where):
-            if entry.name not in tools and not os.path.lexists(folder / entry.name):
-                (folder / entry.name).symlink_to(entry.path)
-    return str(folder)
 
 
 def setup(tmp_path, path: str, **env: str) -> subprocess.CompletedProcess:
