@@ -13,6 +13,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+import warm_cli
 from hypothesis import HealthCheck, settings
 from support import BAG_OPTIONS, FOXGLOVE_CLIENT, ROOT, camo_run, run_keeping_output
 
@@ -34,6 +35,7 @@ settings.load_profile("explore" if os.environ.get("CAMO_FUZZ") == "explore" else
 
 
 def pytest_configure(config):
+    warm_cli.remember_environment()
     if not in_a_worker(config) and runs_container_tests(config):
         import tempfile
 

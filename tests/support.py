@@ -17,6 +17,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import psutil
+import warm_cli
 
 from camo_core.algorithm.link import LinkBook
 from camo_core.algorithm.params import CamoParams
@@ -100,8 +101,13 @@ def run_keeping_output(args, *, capture_output=False, timeout=None, check=False,
 
 
 def run_camo(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    """Run the camo command line (already set up: we are inside ./camo test)."""
-    return run_whole([sys.executable, "-m", "camo_core.cli", *args], timeout)
+    """Run the camo command line (already set up: we are inside ./camo test), as `python -m
+    camo_core.cli` in a child of a warm process (tests/warm_cli.py) where it can."""
+    forked = warm_cli.run(list(args), ROOT)
+    if forked is None:
+        return run_whole([sys.executable, "-m", "camo_core.cli", *args], timeout)
+    out, err = finished(forked, timeout)  # type: ignore[arg-type] - what it uses of a Popen
+    return subprocess.CompletedProcess(forked.args, forked.returncode, out, err)
 
 
 def sweep(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
