@@ -55,9 +55,13 @@ def pytest_configure(config):
 
 
 def runs_container_tests(config) -> bool:
-    """Whether this session's selection holds tests/test_containers.py (a -k or "not slow"
-    selection is not looked into: its tests build the images when they need them)."""
-    if config.option.keyword or "not slow" in (config.option.markexpr or ""):
+    """Whether this session runs tests/test_containers.py (a -k or "not slow" selection is not
+    looked into: its tests build the images when they need them; --collect-only runs none)."""
+    if (
+        config.option.collectonly
+        or config.option.keyword
+        or "not slow" in (config.option.markexpr or "")
+    ):
         return False
     wanted = ROOT / "tests" / "test_containers.py"
     paths = [Path(arg.split("::")[0]).resolve() for arg in config.args] or [ROOT / "tests"]
