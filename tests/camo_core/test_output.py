@@ -50,3 +50,54 @@ def test_a_forked_writer_that_hangs_is_stopped_after_the_limit_and_said():
     with pytest.raises(CamoError, match=r"writing run\.gif failed"):
         hung.wait("run.gif", limit=0.5)
     assert not hung.process.is_alive()
+
+
+def test_works_run_side_by_side_after_one_shared_prepare(tmp_path):
+    # figure.png and run.gif: matplotlib imported once (prepare), then each drawn in a process
+    # of its own, at the same time.
+    def prepare() -> None:
+        (tmp_path / "prepared").write_text(str(os.getpid()))
+
+    def work(name: str) -> None:
+        assert (tmp_path / "prepared").exists()
+        (tmp_path / f"{name}.start").write_text(str(os.getpid()))
+        deadline = time.monotonic() + 20
+        other = tmp_path / f"{'b' if name == 'a' else 'a'}.start"
+        while not other.exists() and time.monotonic() < deadline:
+            time.sleep(0.01)  # each waits for the other: neither runs after the other
+        (tmp_path / name).write_text(str(other.exists()))
+
+    Parallel(lambda: work("a"), lambda: work("b"), prepare=prepare).wait("a and b")
+    pids = {(tmp_path / f"{name}.start").read_text() for name in "ab"}
+    assert len(pids) == 2 and str(os.getpid()) not in pids
+    assert (tmp_path / "prepared").read_text() in pids  # prepared in the first work's process
+    assert (tmp_path / "a").read_text() == (tmp_path / "b").read_text() == "True"
+
+
+def test_an_error_in_a_forked_work_is_one_line_and_stop_ends_every_work(tmp_path, capfd):
+    def fails() -> None:
+        raise OSError("disk full")
+
+    with pytest.raises(CamoError, match=r"writing figure\.png and run\.gif failed"):
+        Parallel(lambda: None, fails).wait("figure.png and run.gif")
+    assert capfd.readouterr().err.strip() == "camo: error: OSError: disk full"
+    pid_file = tmp_path / "pid"
+    hung = Parallel(
+        lambda: time.sleep(60), lambda: (pid_file.write_text(str(os.getpid())), time.sleep(60))
+    )
+    deadline = time.monotonic() + 20
+    while not pid_file.exists() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    hung.stop()
+    pid = int(pid_file.read_text())
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and os.path.exists(f"/proc/{pid}") and "Z" not in state(pid):
+        time.sleep(0.05)
+    assert not os.path.exists(f"/proc/{pid}") or "Z" in state(pid)  # ended with its parent
+
+
+def state(pid: int) -> str:
+    try:
+        return open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return "gone"

@@ -6,6 +6,7 @@ from __future__ import annotations
 import gc
 import math
 import multiprocessing
+import os
 import signal
 import sys
 from collections.abc import Callable
@@ -13,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from camo_core.exceptions import CamoError
 from camo_core.algorithm.modes import modes_of
 from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.result import RunResult
+from camo_core.exceptions import CamoError
 from camo_core.results.summary import write_summary
 
 
@@ -66,20 +67,26 @@ FORK_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 
 class Parallel:
-    """`work()` in a forked process of its own (where fork is there; else at once, here), so
-    that what a run writes at its end shares the machine's cores. `wait` joins it (`limit`
-    seconds at most): an error in it is one line here. Whoever forks it and cannot wait for it
-    (an error of its own) calls `stop`."""
+    """`works` in a forked process of their own (where fork is there; else at once, here), so
+    that what a run writes at its end shares the machine's cores. That process first runs
+    `prepare` (the imports the works share: matplotlib's, say), then forks once more for each
+    work after the first, so that they run side by side and import it once. `wait` joins it
+    (`limit` seconds at most): an error in any work is one line here. Whoever forks it and
+    cannot wait for it (an error of its own) calls `stop`, which ends the works too."""
 
     LIMIT = 300.0  # s: drawing a round's outputs takes seconds; more is a process that hangs
 
-    def __init__(self, work: Callable[[], None]) -> None:
+    def __init__(
+        self, *works: Callable[[], None], prepare: Callable[[], None] | None = None
+    ) -> None:
         self.process = None
         if "fork" not in multiprocessing.get_all_start_methods():
-            work()
+            for work in (prepare, *works):
+                if work is not None:
+                    work()
             return
         self.process = multiprocessing.get_context("fork").Process(
-            target=_run_reporting, args=(work,), daemon=True
+            target=_run_reporting, args=(works, prepare), daemon=True
         )
         # Forked with Ctrl-C and SIGTERM held back until the child has its own handlers: one
         # that came between the fork and them would run the parent's there (a KeyboardInterrupt
@@ -102,7 +109,7 @@ class Parallel:
             raise CamoError(f"writing {what} failed (exit code {self.process.exitcode})")
 
     def stop(self) -> None:
-        """Stop it, without waiting for what it writes."""
+        """Stop it (and the works it forked), without waiting for what they write."""
         if self.process is not None and self.process.is_alive():
             self.process.terminate()
             self.process.join(2.0)
@@ -111,17 +118,64 @@ class Parallel:
                 self.process.join()
 
 
-def _run_reporting(work: Callable[[], None]) -> None:
-    """A forked worker's body: an error is one line on stderr and exit code 1."""
+def _run_reporting(works: tuple[Callable[[], None], ...], prepare) -> None:
+    """A forked process's body: `prepare`, then each work after the first in a process forked
+    from this one, the first here. An error is one line on stderr and exit code 1."""
     # What the parent held is never finalized here: a forked copy of a ROS process would call
     # into DDS, whose threads it does not have. Its parent's Ctrl-C and stop flags are not its
-    # own: Ctrl-C leaves it to finish, SIGTERM (stop) ends it.
+    # own: Ctrl-C leaves it to finish, SIGTERM (stop) ends it and the works it forked.
     gc.freeze()
+    forked: list[int] = []
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, lambda *_: _end(forked))
     signal.pthread_sigmask(signal.SIG_UNBLOCK, FORK_SIGNALS)  # held back since the fork
+    failed = False
     try:
-        work()
+        if prepare is not None:
+            prepare()
+        for work in works[1:]:
+            forked.append(_fork(work))
+        works[0]()
     except Exception as exc:  # noqa: BLE001 - whatever it is, one line, as the parent says
-        print(f"camo: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        _say(exc)
+        failed = True
+    for pid in forked:
+        failed |= os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) != 0
+    if failed:
         sys.exit(1)
+
+
+def _fork(work: Callable[[], None]) -> int:
+    """`work` in a process forked from this one: its pid (it exits 1 after an error's line)."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGTERM})
+    pid = os.fork()
+    if pid:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        return pid
+    code = 0
+    try:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        work()
+    except Exception as exc:  # noqa: BLE001 - one line, as in the process it was forked from
+        _say(exc)
+        code = 1
+    finally:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)  # never the forked-from process's exit handlers
+
+
+def _end(forked: list[int]) -> None:
+    """SIGTERM in a Parallel's process: its forked works end with it."""
+    for pid in forked:
+        try:
+            os.kill(pid, signal.SIGTERM)
+        except ProcessLookupError:
+            pass
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    os.kill(os.getpid(), signal.SIGTERM)  # ended by the signal, as its parent asked
+
+
+def _say(exc: Exception) -> None:
+    print(f"camo: error: {type(exc).__name__}: {exc}", file=sys.stderr, flush=True)
