@@ -39,9 +39,17 @@ from camo_core.algorithm.result import RunResult
 from camo_core.algorithm.sensing import image_digest
 from camo_core.cli.options import Parser, add_out_options, out_dir, seconds
 from camo_core.exceptions import CamoError
-from camo_core.results.output import Parallel, run_title, write_round
+from camo_core.results.output import (
+    Parallel,
+    draw_animation,
+    draw_figure,
+    import_drawing,
+    round_summary,
+    run_title,
+)
 from camo_core.results.record import Backgrounds, RoundRecord, Rounds
 from camo_core.results.snapshots import Snapshots
+from camo_core.results.summary import write_summary
 from camo_core.shutdown import StopFlag
 from camo_core.swarm.robot_io import CONSENSUS, PHASE_NAMES
 from camo_core.swarm.run_setup import RunSetup
@@ -355,34 +363,30 @@ class MonitorNode(Node):
     ) -> dict:
         """summary.json, figure.png and run.gif of a round (partial: how far a stopped run
         got; `extra`: more fields for its summary)."""
-        from camo_core.results.animation import write_animation  # matplotlib: by what draws
-
         image = self.images.get(round_index)
         record, dead = self.record(round_index), self.dead(round_index)
         title = run_title(label, record.params, "robot nodes")  # the round's seed
         marks = record.marks(dead, self.bridged)
         snapshots = Snapshots.of_record(record)
-        # run.gif in a forked process of its own while this one draws figure.png: the two
+        result = self.result(round_index, partial)
+        # figure.png and run.gif side by side in processes of their own (which import
+        # matplotlib once; this one never does) while this one writes summary.json: the
         # drawings share the machine's cores (the robots' processes are stopping meanwhile).
-        gif = Parallel(
-            lambda: write_animation(
-                snapshots, record.sensed_shown, dead, folder / "run.gif", title, marks
-            )
+        sensed = record.sensed_shown
+        drawings = Parallel(
+            lambda: draw_figure(result, image, folder / "figure.png", title, marks),
+            lambda: draw_animation(snapshots, sensed, dead, folder / "run.gif", title, marks),
+            prepare=import_drawing,
         )
         try:
-            summary = write_round(
-                self.result(round_index, partial),
-                image,
-                folder,
-                title,
-                self.progress_line(round_index) if partial else None,
-                {"rejected_messages": self.rejected_messages(), **(extra or {})},
-                marks,
-            )
+            incomplete = self.progress_line(round_index) if partial else None
+            extra = {"rejected_messages": self.rejected_messages(), **(extra or {})}
+            summary = round_summary(result, incomplete, extra)
+            write_summary(summary, folder)
         except BaseException:
-            gif.stop()  # a round written again must not meet this one's GIF half-written
+            drawings.stop()  # a round written again must not meet this one's drawings
             raise
-        gif.wait("run.gif")
+        drawings.wait("figure.png and run.gif")
         return summary
 
     def _view(self) -> tuple[int, RoundRecord]:

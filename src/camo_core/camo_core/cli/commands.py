@@ -34,7 +34,13 @@ from camo_core.exceptions import UsageError, reported
 from camo_core.inputs.files import checked_file
 from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer, items, number
-from camo_core.results.output import Parallel, run_title
+from camo_core.results.output import (
+    Parallel,
+    draw_animation,
+    draw_figure,
+    import_drawing,
+    run_title,
+)
 from camo_core.results.snapshots import Snapshots
 from camo_core.results.summary import write_summary
 from camo_core.swarm.keys import fingerprint, new_key_file
@@ -118,10 +124,11 @@ def cmd_sim(args: argparse.Namespace) -> int:
     # figure.png and run.gif are drawn side by side in processes of their own (which import
     # matplotlib once) while this one writes summary.json: on two cores a 1024x1024 run's
     # outputs take half the time.
+    dead = np.zeros(result.params.count, bool)  # the simulator loses messages, never robots
     drawings = Parallel(
-        partial(_draw_figure, result, image, folder, title, marks),
-        partial(_draw_gif, result.params, snapshots, folder, title, marks, sensed),
-        prepare=_import_drawing,
+        partial(draw_figure, result, image, folder / "figure.png", title, marks),
+        partial(draw_animation, snapshots, sensed, dead, folder / "run.gif", title, marks),
+        prepare=import_drawing,
     )
     summary = result.summary(arrays=True)
     write_summary(summary, folder)
@@ -169,27 +176,6 @@ def previous_round(folder: str, params: CamoParams, modes: Modes) -> Previous:
     elif modes.palette.k:
         grid = GridPalette(greys=palette)
     return Previous(raw, pattern, final, grid)
-
-
-def _import_drawing() -> None:
-    """What draws figure.png and run.gif imports (matplotlib), once for both."""
-    import camo_core.results.animation  # (both imported for the forked works)
-    import camo_core.results.figures  # noqa: F401
-
-
-def _draw_figure(result, image, folder, title, marks) -> None:
-    """figure.png of a simulator run (matplotlib is imported here, by what draws)."""
-    from camo_core.results import figures
-
-    figures.run_figure(result, image, folder / "figure.png", title=title, marks=marks)
-
-
-def _draw_gif(params, snapshots, folder, title, marks, sensed) -> None:
-    """run.gif of a simulator run."""
-    from camo_core.results.animation import write_animation
-
-    dead = np.zeros(params.count, bool)  # the simulator loses messages, never robots
-    write_animation(snapshots, sensed, dead, folder / "run.gif", title, marks)
 
 
 def cmd_key(args: argparse.Namespace) -> int:

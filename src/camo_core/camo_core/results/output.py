@@ -39,6 +39,20 @@ def no_nan(value):
     return value
 
 
+def round_summary(
+    result: RunResult, incomplete: str | None = None, extra: dict | None = None
+) -> dict:
+    """A round's summary.json document, with `incomplete` saying how far a stopped run got and
+    `extra` keys."""
+    summary = result.summary()
+    if incomplete is not None:
+        # What robots never said is unknown, not a number: null, never NaN.
+        summary = {key: no_nan(value) for key, value in summary.items()}
+        summary["incomplete"] = incomplete
+    summary.update(extra or {})
+    return summary
+
+
 def write_round(
     result: RunResult,
     image: np.ndarray | None,
@@ -48,19 +62,34 @@ def write_round(
     extra: dict | None = None,
     marks: dict[str, np.ndarray] | None = None,
 ) -> dict:
-    """summary.json (with `incomplete` saying how far a stopped run got, and `extra` keys) and
-    figure.png (with `marks`: the robots it marks, as figures.run_figure takes them)."""
-    from camo_core.results import figures  # matplotlib: imported by what draws
-
-    summary = result.summary()
-    if incomplete is not None:
-        # What robots never said is unknown, not a number: null, never NaN.
-        summary = {key: no_nan(value) for key, value in summary.items()}
-        summary["incomplete"] = incomplete
-    summary.update(extra or {})
+    """summary.json (round_summary) and figure.png (with `marks`: the robots it marks, as
+    figures.run_figure takes them), here."""
+    summary = round_summary(result, incomplete, extra)
     write_summary(summary, folder)
-    figures.run_figure(result, image, folder / "figure.png", title=title, marks=marks)
+    draw_figure(result, image, folder / "figure.png", title, marks)
     return summary
+
+
+# What draws imports matplotlib when it draws: a process that only simulates or runs robots
+# never does. figure.png and run.gif are drawn side by side by a Parallel whose `prepare` is
+# import_drawing (one import for both).
+
+
+def import_drawing() -> None:
+    import camo_core.results.animation  # (both imported for the works that draw)
+    import camo_core.results.figures  # noqa: F401
+
+
+def draw_figure(result: RunResult, image, path: Path, title: str, marks=None) -> None:
+    from camo_core.results import figures
+
+    figures.run_figure(result, image, path, title=title, marks=marks)
+
+
+def draw_animation(snapshots, sensed, dead, path: Path, title: str, marks=None) -> None:
+    from camo_core.results.animation import write_animation
+
+    write_animation(snapshots, sensed, dead, path, title, marks)
 
 
 FORK_SIGNALS = {signal.SIGINT, signal.SIGTERM}
