@@ -568,7 +568,9 @@ def test_a_stranger_without_the_key_hosting_the_runs_cells_first_changes_nothing
     stranger = stranger_hosting("lab", domain_id, "4-8")
     try:
         options = ["--rows", "3", "--cols", "3", "--seed", "4", "--pattern", "forest"]
-        options += ["--consensus-steps", "400"]  # seconds: its processes report what they refused
+        # Seconds of steps: the run's processes hear the stranger (under load, discovery can
+        # miss its first announcements and wait for the next) and report what they refused.
+        options += ["--consensus-steps", "3000"]
         run = start_run(
             *options,
             *["--run-id", "lab", "--procs", "2", "--key-file", key],
