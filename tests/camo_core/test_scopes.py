@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 from scipy import ndimage
-from support import PROCESS, ROOT, Bus, run_camo
+from support import COMPUTE, PROCESS, ROOT, Bus, run_camo
 
 from camo_core.algorithm.backgrounds import background
 from camo_core.algorithm.change import params_of_round
@@ -158,6 +158,7 @@ def previous_of(result, raw) -> Previous:
     return Previous(raw, result.selected, result.final, GridPalette(result.palette))
 
 
+@pytest.mark.slow(COMPUTE)  # the per-robot driver over 32x32 robots: seconds each
 @pytest.mark.parametrize("options", [{}, {"rho_comm": 0.1}, {"levels": 3, "rho_comm": 0.1}])
 def test_a_change_in_one_region_re_camouflages_that_region_and_only_it(options):
     before, after = changed_scene(1010, 32, 1, 1017)
