@@ -39,14 +39,7 @@ from camo_core.algorithm.result import RunResult
 from camo_core.algorithm.sensing import image_digest
 from camo_core.cli.options import Parser, add_out_options, out_dir, seconds
 from camo_core.exceptions import CamoError
-from camo_core.results.output import (
-    Parallel,
-    draw_animation,
-    draw_figure,
-    import_drawing,
-    round_summary,
-    run_title,
-)
+from camo_core.results.output import round_summary, run_title, start_drawings
 from camo_core.results.record import Backgrounds, RoundRecord, Rounds
 from camo_core.results.snapshots import Snapshots
 from camo_core.results.summary import write_summary
@@ -369,14 +362,9 @@ class MonitorNode(Node):
         marks = record.marks(dead, self.bridged)
         snapshots = Snapshots.of_record(record)
         result = self.result(round_index, partial)
-        # figure.png and run.gif side by side in processes of their own (which import
-        # matplotlib once; this one never does) while this one writes summary.json: the
-        # drawings share the machine's cores (the robots' processes are stopping meanwhile).
-        sensed = record.sensed_shown
-        drawings = Parallel(
-            lambda: draw_figure(result, image, folder / "figure.png", title, marks),
-            lambda: draw_animation(snapshots, sensed, dead, folder / "run.gif", title, marks),
-            prepare=import_drawing,
+        # (the robots' processes are stopping meanwhile: the drawings share their cores)
+        drawings = start_drawings(
+            result, image, snapshots, record.sensed_shown, dead, folder, title, marks
         )
         try:
             incomplete = self.progress_line(round_index) if partial else None

@@ -10,7 +10,6 @@ import argparse
 import gc
 import json
 import sys
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -34,13 +33,7 @@ from camo_core.exceptions import UsageError, reported
 from camo_core.inputs.files import checked_file
 from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer, items, number
-from camo_core.results.output import (
-    Parallel,
-    draw_animation,
-    draw_figure,
-    import_drawing,
-    run_title,
-)
+from camo_core.results.output import run_title, start_drawings
 from camo_core.results.snapshots import Snapshots
 from camo_core.results.summary import write_summary
 from camo_core.swarm.keys import fingerprint, new_key_file
@@ -121,15 +114,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
     title = run_title(label, params)
     marks = None if exempt is None else {"real reading": exempt}
     sensed = modes.sensing.shown(result.sensed, result.sensed_rgb)
-    # figure.png and run.gif are drawn side by side in processes of their own (which import
-    # matplotlib once) while this one writes summary.json: on two cores a 1024x1024 run's
-    # outputs take half the time.
     dead = np.zeros(result.params.count, bool)  # the simulator loses messages, never robots
-    drawings = Parallel(
-        partial(draw_figure, result, image, folder / "figure.png", title, marks),
-        partial(draw_animation, snapshots, sensed, dead, folder / "run.gif", title, marks),
-        prepare=import_drawing,
-    )
+    drawings = start_drawings(result, image, snapshots, sensed, dead, folder, title, marks)
     summary = result.summary(arrays=True)
     write_summary(summary, folder)
     write_params_file(args.options_parser, args, folder)

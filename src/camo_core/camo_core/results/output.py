@@ -92,6 +92,19 @@ def draw_animation(snapshots, sensed, dead, path: Path, title: str, marks=None) 
     write_animation(snapshots, sensed, dead, path, title, marks)
 
 
+def start_drawings(
+    result: RunResult, image, snapshots, sensed, dead, folder: Path, title: str, marks=None
+) -> Parallel:
+    """figure.png and run.gif of a round, side by side in processes of their own (which import
+    matplotlib once; the caller never does) while the caller writes summary.json: on two
+    cores a large round's outputs take half the time. The caller waits for it, or stops it."""
+    return Parallel(
+        lambda: draw_figure(result, image, folder / "figure.png", title, marks),
+        lambda: draw_animation(snapshots, sensed, dead, folder / "run.gif", title, marks),
+        prepare=import_drawing,
+    )
+
+
 FORK_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 
