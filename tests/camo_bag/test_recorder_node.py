@@ -275,3 +275,22 @@ def test_recording_named_topics_without_a_run_records_them_and_ends_on_ctrl_c(tm
         "recorder_node: error: --topics '{run}/x' is not a ROS topic name: unknown "
         "substitution: {run}"
     ]
+
+
+def test_a_recorder_names_its_run_in_the_bag_before_discovery_shows_any_topic(tmp_path):
+    """Killed before discovery showed the run's topics (a loaded machine), the recorder still
+    leaves a bag that `bag info` calls the run's and incomplete, not a stranger's."""
+    from support import ros_context
+
+    from camo_bag.recorder_node import RecorderNode
+    from camo_nodes.topics.names import RunTopics
+
+    run = RunTopics("run_abc123")
+    with ros_context() as context:
+        node = RecorderNode(str(tmp_path / "bag"), run, context=context)
+        assert run.params in node.bag.topics  # nobody publishes: discovery shows nothing
+        node.close()
+        node.destroy_node()
+    info = bag_tool("cli", "info", str(tmp_path / "bag"))
+    assert info.returncode == 0, info.stderr
+    assert "INCOMPLETE" in info.stdout and "parameters" in info.stdout, info.stdout

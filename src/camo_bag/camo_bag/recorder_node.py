@@ -101,6 +101,11 @@ class RecorderNode(Node):
             self.report_pub = keyed.publisher(self, String, run.recorded, LATCHED, run.run)
             self.create_timer(0.25, self.report)
         self._reported = None
+        if run is not None and self._wants(run.params):
+            # Its type and QoS are known: taken at once, the bag names its run from the start,
+            # however late discovery shows the run's topics (a recorder killed then still
+            # leaves a bag `bag info` calls the run's and incomplete).
+            self._subscribe(run.params, "std_msgs/msg/String", [LATCHED])
         self.discover()
         self.report()
 
