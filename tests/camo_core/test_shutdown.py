@@ -89,3 +89,29 @@ def test_a_module_run_through_shutdown_gets_its_arguments_and_exit_code(tmp_path
         timeout=30,
     )
     assert proc.returncode == 3 and proc.stdout == "['a', '--b']\n"
+
+
+EXITING = """
+import atexit, multiprocessing, os, sys, time
+from camo_core.shutdown import exit_at_once
+atexit.register(lambda: print("exit handler ran", file=sys.stderr))
+child = multiprocessing.get_context("fork").Process(target=time.sleep, args=(60,), daemon=True)
+child.start()
+print(child.pid)
+sys.stdout.write("unflushed")
+exit_at_once(4)
+"""
+
+
+def test_exiting_at_once_keeps_the_exit_code_the_output_the_exit_handlers_and_ends_daemons():
+    """A command that ends without the interpreter's teardown still says all it wrote, runs the
+    exit handlers (multiprocessing's ends its daemon processes) and exits with its code."""
+    proc = subprocess.run(
+        [sys.executable, "-c", EXITING], capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 4
+    pid, rest = proc.stdout.split("\n")
+    assert rest == "unflushed"
+    assert proc.stderr == "exit handler ran\n"
+    with pytest.raises(ProcessLookupError):  # the daemon ended with it, reaped by multiprocessing
+        os.kill(int(pid), 0)

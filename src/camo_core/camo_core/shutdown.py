@@ -12,11 +12,27 @@ Ctrl-C (or a launcher's SIGINT) would not stop it.
 
 from __future__ import annotations
 
+import atexit
 import faulthandler
 import os
 import runpy
 import signal
 import sys
+
+
+def exit_at_once(code: int) -> None:
+    """End a command's process that has done its work: its exit handlers run (multiprocessing's
+    ends the daemon processes it started) and its streams are flushed, but the interpreter is
+    not torn down. Teardown only frees what exit frees anyway, and after numba's compiler has
+    run it takes about 0.25 s (llvmlite's), a tenth of a 1024x1024 `camo sim`. Whatever the
+    command wrote it closed itself."""
+    atexit._run_exitfuncs()
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except OSError:  # a closed pipe: what was left to say has nowhere to go
+        pass
+    os._exit(code)
 
 
 def stacks_on_faults() -> None:

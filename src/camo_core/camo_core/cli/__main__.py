@@ -1,7 +1,6 @@
-"""`python -m camo_core.cli`: the ROS-free tools (sim, bench sim)."""
-
-import sys
+"""`python -m camo_core.cli`: the ROS-free tools (sim, key, bench sim)."""
 
 from camo_core.cli.commands import main
+from camo_core.shutdown import exit_at_once
 
-sys.exit(main())
+exit_at_once(main())

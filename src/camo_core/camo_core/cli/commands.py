@@ -7,9 +7,7 @@ stderr and exit code 2, never a traceback.
 from __future__ import annotations
 
 import argparse
-import gc
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -245,10 +243,3 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args)
 
     return reported("camo", work)
-
-
-if __name__ == "__main__":
-    code = main()
-    # Exit without a last garbage collection over numba's and matplotlib's objects (0.2 s).
-    gc.freeze()
-    sys.exit(code)
