@@ -6,9 +6,9 @@ well-formed but wrong, plus a fake host announcement, a fake background and fake
     python tests/attacker.py RUN_ID SECONDS [FIRST-LAST ...]
 
 With tiles given it also publishes at once on the topics they would have (the names are no
-secret), as soon as the run's launcher has started. It prints "ready" (stderr) once its
-publishers exist, stops after SECONDS or on SIGTERM, and prints how many topics it attacked
-and messages it sent.
+secret), as soon as the run's launcher has started (it may be started first, and waits). It
+prints "ready" (stderr) once its publishers exist, stops after SECONDS or on SIGTERM, and
+prints how many topics it attacked and messages it sent.
 
     python tests/attacker.py RUN_ID SECONDS --replay IMAGE
 
@@ -193,6 +193,11 @@ def main() -> int:
         reliability=ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.TRANSIENT_LOCAL,
     )
+    # As soon as the run's launcher has started (its parameters appear), not before: a writer
+    # of them would make the launcher take its run for a live one of that id and refuse it.
+    deadline = time.monotonic() + seconds
+    while not node.count_publishers(f"/{run}/swarm/params") and time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.05)
     publishers: dict[str, tuple] = {}
     guessed = {f"/{run}/camo/hosts": Host, f"/{run}/camo/background": Image}
     guessed |= {f"/{run}/swarm/status": StatusArray, f"/{run}/swarm/params": String}

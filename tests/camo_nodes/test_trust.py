@@ -48,13 +48,8 @@ def test_a_run_under_attack_equals_the_simulator_and_reports_what_it_refused(tmp
     env.pop(KEY_FILE_ENV, None)
     if insider:
         env[KEY_FILE_ENV] = key
-    run = start_run(
-        *OPTIONS,
-        *["--procs", "2", "--run-id", "attacked", "--out", str(tmp_path / "run")],
-        *["--key-file", key],
-        domain_id=env["ROS_DOMAIN_ID"],
-    )
-    wait_for_line(run, "topics under")
+    # The stranger is there first, waiting for the run's launcher: a run of 120 steps can end
+    # before a stranger started after it is heard on a loaded machine (it did, at -n 3).
     attacker = subprocess.Popen(
         [sys.executable, str(ROOT / "tests" / "attacker.py"), "attacked", "60", "0-17", "18-35"],
         env=env,
@@ -63,6 +58,12 @@ def test_a_run_under_attack_equals_the_simulator_and_reports_what_it_refused(tmp
         text=True,
     )
     try:
+        run = start_run(
+            *OPTIONS,
+            *["--procs", "2", "--run-id", "attacked", "--out", str(tmp_path / "run")],
+            *["--key-file", key],
+            domain_id=env["ROS_DOMAIN_ID"],
+        )
         wait_for_line(attacker, "ready")
         out, err = finished(run, 240)
     finally:
