@@ -136,3 +136,39 @@ def test_bench_dynamic_times_a_change_against_a_switch_and_counts_false_rounds(t
     assert not (rounds["missed"] or rounds["other"] or rounds["incomplete"])
     assert "3 rounds, 3 equal to ./camo sim" in out.stderr
     assert figures["static"]["rounds"] == 1 and figures["static"]["per_minute"] == 0
+
+
+def test_a_benchmark_runs_its_swarms_in_the_domain_the_environment_sets():
+    """ROS_DOMAIN_ID, where set (a test's own domain): a benchmark picking one of its own could
+    share it with another run (the docs' bench dynamic did, with a test's); unset, one away
+    from domain 0; not a domain, one line."""
+    from camo_core.exceptions import UsageError
+    from camo_nodes.topics.startup import bench_domain
+
+    assert bench_domain(140, 40, {"ROS_DOMAIN_ID": " 7 "}) == 7
+    assert 140 <= bench_domain(140, 40, {}) < 180
+    with pytest.raises(UsageError, match=r"ROS_DOMAIN_ID must be an integer in 0\.\.232"):
+        bench_domain(140, 40, {"ROS_DOMAIN_ID": "300"})
+
+
+@pytest.mark.parametrize("scope", ["global", "local"])
+def test_bench_dynamic_whose_run_wrote_no_round_says_what_the_run_said_last(
+    scope, tmp_path, monkeypatch, capsys
+):
+    """A swarm that wrote no round (a loaded machine, a run cut short) is one line with what
+    the run said last, not a traceback."""
+    from camo_bringup import bench_dynamic
+
+    said = "camo run: 0 rounds done; watching\ncamo run: --duration 13.8 s is up\n"
+    monkeypatch.setattr(
+        bench_dynamic,
+        "launch",
+        lambda argv, domain, timeout: subprocess.CompletedProcess(argv, 0, "", said),
+    )
+    argv = ["--sides", "8", "--changes", "1", "--scope", scope, "--out", str(tmp_path / "b")]
+    assert bench_dynamic.main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == (
+        "camo bench dynamic: error: the continuous run wrote no round: camo run: 0 rounds "
+        "done; watching / camo run: --duration 13.8 s is up"
+    )

@@ -51,7 +51,7 @@ from camo_msgs.msg import Vote, Votes
 from camo_nodes.topics.names import RunTopics, tile_name
 from camo_nodes.topics.qos import history_qos
 from camo_nodes.topics.robot_messages import Columns
-from camo_nodes.topics.startup import LEAN_NODE, start_ros
+from camo_nodes.topics.startup import LEAN_NODE, bench_domain, start_ros
 from camo_nodes.transport import edge_of, listener_qos
 
 BARE_RUN = "bench_bare"
@@ -513,13 +513,13 @@ def main(argv: list[str] | None = None) -> int:
             )
         if not (0 <= args.loss < 1 and 0 <= args.noise <= 1):
             parser.error("--loss must be in [0, 1) and --noise in [0, 1]")
+        domain = bench_domain(180, 40)
     except CamoError as exc:
         print(f"camo bench ros: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     if args.bare_worker:
         print(json.dumps(bare_worker(*args.bare_worker)))
         return 0
-    domain = 180 + os.getpid() % 40
     rates = [
         compare(
             side,

@@ -47,6 +47,7 @@ from camo_core.exceptions import EXIT_USAGE, CamoError
 from camo_core.inputs.images import load_image
 from camo_core.inputs.numeric import integer
 from camo_core.results.summary import summary_bytes
+from camo_nodes.topics.startup import bench_domain
 
 SCENES = ("forest", "desert")
 # --scope local: the left half stays, the right half changes.
@@ -65,6 +66,12 @@ def sides(text: str) -> list[int]:
     if not values or not all(4 <= v <= 128 for v in values):
         raise CamoError(f"sides must be integers in 4..128 (got {text!r})")
     return values
+
+
+def said_last(ran: subprocess.CompletedProcess) -> str:
+    """What a run said last (its stderr's last lines, in one): why it has nothing to show."""
+    lines = ran.stderr.strip().splitlines()
+    return " / ".join(lines[-3:]) if lines else "it said nothing"
 
 
 def launch(argv: list[str], domain: int, timeout: float) -> subprocess.CompletedProcess:
@@ -127,7 +134,9 @@ def following(
         "--rows", str(side), "--cols", str(side), "--scope", scope,
         "--rho-meas", str(rho), "--out", str(out / "run"),
     ]  # fmt: skip
-    launch(argv, domain, timeout=120 + period * (changes + 4))
+    ran = launch(argv, domain, timeout=120 + period * (changes + 4))
+    if not (out / "run" / "rounds.csv").exists():
+        raise RuntimeError(f"the continuous run wrote no round: {said_last(ran)}")
     with open(out / "run" / "rounds.csv") as file:
         rows = list(csv.DictReader(file))
     frames = [int(r["frame"]) for r in rows]
@@ -177,10 +186,13 @@ def switched(
         *first, *then, "--rows", str(side), "--cols", str(side), "--scope", scope,
         "--rho-meas", str(rho), "--out", str(out / "run"),
     ]  # fmt: skip
-    launch(argv, domain, timeout=120 + 20 * changes)
+    ran = launch(argv, domain, timeout=120 + 20 * changes)
     delays = []
     for k in range(1, changes + 1):
-        timing = json.loads((out / "run" / f"round_{k}" / "timing.json").read_text())
+        path = out / "run" / f"round_{k}" / "timing.json"
+        if not path.exists():
+            raise RuntimeError(f"the --then run wrote no round {k}: {said_last(ran)}")
+        timing = json.loads(path.read_text())
         delays.append(timing["done_at"] - timing["projected_at"])
     return delays
 
@@ -266,10 +278,10 @@ def main(argv: list[str] | None = None) -> int:
             raise CamoError("--changes must be in 1..100 and --static-s in 0..86400")
         if not 0 <= args.rho_meas <= 1:
             raise CamoError(f"--rho-meas must be in [0, 1] (got {args.rho_meas})")
+        domain = bench_domain(140, 40)
     except CamoError as exc:
         print(f"camo bench dynamic: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
-    domain = 140 + os.getpid() % 40
     try:
         rows, static = measure(args, domain)
     except (RuntimeError, subprocess.TimeoutExpired) as exc:

@@ -27,6 +27,7 @@ from camo_core.cli.options import Parser
 from camo_core.exceptions import EXIT_USAGE, CamoError
 from camo_core.shm import ORPHAN_PREFIXES, SHM, stale_files
 from camo_core.shutdown import interrupt_on_signals
+from camo_nodes.topics.startup import bench_domain
 
 MODULES = ("camo_nodes.", "camo_projector.", "camo_bag.", "camo_droplet.")
 RESULT_KEYS = ("pattern", "votes", "mean_p", "final")
@@ -111,7 +112,7 @@ def soak(args: argparse.Namespace) -> dict:
     stale_before = {p.name for p in stale_files()}
     entries_before = shm_entries()
     entries: list[int] = []  # after each run: what it left (the next camo process removes it)
-    domain = 150 + os.getpid() % 30
+    domain = args.domain
     available = [available_mib()]
     runs, leaked, stale_new, differing = [], {}, set(), []
     for index in range(args.runs):
@@ -203,6 +204,7 @@ def main(argv: list[str] | None = None) -> int:
             parser.error("--runs must be in 1..10000, --side in 1..64 and --procs in 1..64")
         if not (10 <= args.steps <= 100_000 and 0 <= args.settle <= 60):
             parser.error("--steps must be in 10..100000 and --settle in 0..60")
+        args.domain = bench_domain(150, 30)
     except CamoError as exc:
         print(f"camo bench soak: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

@@ -15,6 +15,7 @@ import re
 import socket
 import sys
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import rclpy
@@ -407,6 +408,29 @@ def server_address(host: str, given: str) -> str:
         time.sleep(0.5)
 
 
+def inherited_domain(environ: Mapping[str, str]) -> int | None:
+    """The ROS_DOMAIN_ID the environment sets (None where it does not; UsageError if it is not
+    a domain id)."""
+    inherited = environ.get("ROS_DOMAIN_ID", "").strip()
+    if not inherited:
+        return None
+    whole = inherited.isascii() and inherited.isdigit() and len(inherited) <= 3
+    if not (whole and int(inherited) <= MAX_DOMAIN_ID):
+        raise UsageError(
+            f"ROS_DOMAIN_ID must be an integer in 0..{MAX_DOMAIN_ID} (got "
+            f"{shown(inherited)!r}): unset it or give --domain-id"
+        )
+    return int(inherited)
+
+
+def bench_domain(first: int, count: int, environ: Mapping[str, str] = os.environ) -> int:
+    """The ROS domain a benchmark runs its swarms in: the environment's ROS_DOMAIN_ID where it
+    sets one (a test's, or one chosen for it), else one of `count` domains from `first` that
+    its pid picks, away from domain 0's runs (UsageError if ROS_DOMAIN_ID is not a domain)."""
+    inherited = inherited_domain(environ)
+    return inherited if inherited is not None else first + os.getpid() % count
+
+
 def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, str]:
     """The environment a ROS process of ours runs in, from --network, --discovery-server and
     --domain-id (raises UsageError)."""
@@ -415,13 +439,7 @@ def network_env(args: argparse.Namespace, environ: dict[str, str]) -> dict[str, 
         read_key_file(args.key_file)  # missing, malformed or readable by others: one line
         env[KEY_FILE_ENV] = str(Path(args.key_file).resolve())
     if args.domain_id is None:
-        inherited = env.get("ROS_DOMAIN_ID", "").strip()
-        whole = inherited.isascii() and inherited.isdigit() and len(inherited) <= 3
-        if inherited and not (whole and int(inherited) <= MAX_DOMAIN_ID):
-            raise UsageError(
-                f"ROS_DOMAIN_ID must be an integer in 0..{MAX_DOMAIN_ID} (got "
-                f"{shown(inherited)!r}): unset it or give --domain-id"
-            )
+        inherited_domain(env)
     if args.network is None:
         inherited = env.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").strip().upper()
         if inherited and inherited not in DISCOVERY_RANGES:
