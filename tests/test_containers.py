@@ -81,6 +81,15 @@ def test_camos_image_simulates_and_runs_a_swarm_into_a_mounted_folder(images, tm
         "run", "--rm", "--entrypoint", "sh", IMAGE, "-c", "command -v gcc cc make || true"
     )
     assert files.stdout.strip() == ""  # no compiler, no build tools
+    # Every module of src/ is there compiled (`./camo setup`): the image's processes do not
+    # compile what they import, whether or not they may write bytecode.
+    uncompiled = podman(
+        "run", "--rm", "--entrypoint", "/opt/venv/bin/python", IMAGE, "-c",
+        "import importlib.util as u, pathlib\n"
+        "for p in sorted(pathlib.Path('/opt/camo/src').rglob('*.py')):\n"
+        "    if not pathlib.Path(u.cache_from_source(str(p))).exists(): print(p)",
+    )  # fmt: skip
+    assert uncompiled.stdout == ""
 
 
 def test_a_folder_the_image_cannot_write_is_one_line_naming_its_user(images, tmp_path):
