@@ -147,3 +147,30 @@ def test_a_keyed_16x16_run_under_a_flood_and_a_hijack_without_the_key_is_the_sim
     ran = assert_like_sim(tmp_path / "run", tmp_path / "sim", attacked=True)
     assert set(ran["rejected_messages"]["by_reason"]) == {NO_TAG}, ran["rejected_messages"]
     assert ran["rejected_messages"]["total"] > 100
+
+
+def test_a_run_takes_its_key_and_encryption_from_the_environment_as_its_processes_do(tmp_path):
+    """CAMO_KEY_FILE and CAMO_ENCRYPT=1, exported for a lab's hand-started workers, hold for
+    `./camo run` too (its --key-file's help says so; it made a key of its own and its workers
+    were strangers to it): --key-file still wins, --no-key takes none; unset, a new key."""
+    from pathlib import Path
+
+    from camo_bringup.run_config import build_parser, config_from
+    from camo_core.swarm.keys import ENCRYPT_ENV, new_key_file
+
+    def config(tag: str, *args: str, env: dict):
+        argv = [*args, "--out", str(tmp_path / tag)]
+        return config_from(build_parser().parse_args(argv), env).env
+
+    lab = new_key_file(tmp_path / "lab.key").path
+    plain = {k: v for k, v in os.environ.items() if k not in (KEY_FILE_ENV, ENCRYPT_ENV)}
+    exported = {**plain, KEY_FILE_ENV: str(lab), ENCRYPT_ENV: "1"}
+    ran = config("a", env=exported)
+    assert ran[KEY_FILE_ENV] == str(lab.resolve()) and ran[ENCRYPT_ENV] == "1"
+    given = new_key_file(tmp_path / "given.key").path
+    assert config("b", "--key-file", str(given), env=exported)[KEY_FILE_ENV] == str(given)
+    ran = config("c", "--no-key", env={**exported, ENCRYPT_ENV: "0"})
+    assert KEY_FILE_ENV not in ran and ENCRYPT_ENV not in ran
+    ran = config("d", env=plain)
+    assert Path(ran[KEY_FILE_ENV]) == (tmp_path / "d" / "run.key").resolve()
+    assert ENCRYPT_ENV not in ran

@@ -353,8 +353,10 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
     env.pop(KEY_FILE_ENV, None)
     env.pop(ENCRYPT_ENV, None)
     if not args.no_key:
-        env[KEY_FILE_ENV] = str(run_key(args.key_file, folder))
-    if args.encrypt:
+        # --key-file's, else the environment's (as for every other camo process), else new.
+        given = args.key_file or inherited.get(KEY_FILE_ENV, "").strip() or None
+        env[KEY_FILE_ENV] = str(run_key(given, folder))
+    if args.encrypt or inherited.get(ENCRYPT_ENV, "").strip() == "1":
         env[ENCRYPT_ENV] = "1"
     return RunConfig(
         params=params,
@@ -453,7 +455,7 @@ def worker_groups(config: RunConfig) -> list[list[int]]:
 
 
 def run_key(given: str | None, folder: Path) -> Path:
-    """The run's key file: --key-file's (checked), else a new random key in the run's folder."""
+    """The run's key file: the one given (checked), else a new random key in the run's folder."""
     if given:
         read_key_file(given)  # missing, malformed or readable by others: one line, now
         return Path(given).resolve()
