@@ -123,6 +123,14 @@ def test_the_step_protocol_loads_no_rclpy():
     assert out.stdout.strip() == "False", out.stderr
 
 
+def test_a_sweeps_own_process_and_the_sim_command_line_load_no_numba():
+    """numba's start (0.5 s of CPU) is paid where a grid is simulated: not by a sweep's own
+    process (its workers simulate), nor by a command refused for its input."""
+    code = "import sys, camo_sweep.cli, camo_core.cli.commands; print('numba' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "False", out.stderr
+
+
 @pytest.mark.parametrize("package", sorted(ALLOWED))
 def test_packages_meet_only_through_core_messages_and_the_topic_module(package):
     wrong = {

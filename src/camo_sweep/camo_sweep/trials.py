@@ -21,7 +21,6 @@ from camo_core.algorithm.params import CamoParams
 from camo_core.algorithm.patterns import PATTERN_NAMES
 from camo_core.algorithm.result import SUMMARY_KEYS, RunResult, mean_p, pattern_of
 from camo_core.algorithm.sensing import sense_colours, sense_image
-from camo_core.algorithm.simulator import simulate
 from camo_core.cli.options import image_from, params_from
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.results.summary import summary_bytes
@@ -98,6 +97,15 @@ def background_of(args: argparse.Namespace) -> tuple[str | None, str | None, flo
     return args.image, args.pattern, args.contrast
 
 
+def _simulator():
+    """The whole-grid simulator, imported where a trial is simulated: numba's start (0.5 s of
+    CPU) is not paid by a sweep's own process, which plans, checks and writes the table while
+    its workers simulate, nor by a sweep refused for its input."""
+    from camo_core.algorithm.simulator import simulate
+
+    return simulate
+
+
 def simulate_options(
     options: dict[str, Any], seed: int, sensed: tuple[np.ndarray, np.ndarray] | None = None
 ) -> RunResult:
@@ -107,7 +115,7 @@ def simulate_options(
     if sensed is None:
         sensed = _sensed(background_of(args), params.rows, params.cols, params.profile)
     _threads_for(params)
-    return simulate(params, sensed[0], raw_colours=sensed[1])
+    return _simulator()(params, sensed[0], raw_colours=sensed[1])
 
 
 def check_options(options: dict[str, Any]) -> None:
@@ -225,5 +233,5 @@ def ros_row(trial: Trial, reference: Reference, timeout: float) -> dict[str, Any
 
 def warm() -> str:
     """Compile the kernels in this process (a worker, before its first task)."""
-    simulate(CamoParams(rho_meas=0.1, rho_comm=0.1), np.full((8, 8), 100.0))
+    _simulator()(CamoParams(rho_meas=0.1, rho_comm=0.1), np.full((8, 8), 100.0))
     return "warm"
