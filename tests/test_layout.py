@@ -123,12 +123,14 @@ def test_the_step_protocol_loads_no_rclpy():
     assert out.stdout.strip() == "False", out.stderr
 
 
-def test_a_sweeps_own_process_and_the_sim_command_line_load_no_numba():
+def test_the_sweep_and_sim_command_lines_load_neither_numba_nor_dask_before_they_need_them():
     """numba's start (0.5 s of CPU) is paid where a grid is simulated: not by a sweep's own
-    process (its workers simulate), nor by a command refused for its input."""
-    code = "import sys, camo_sweep.cli, camo_core.cli.commands; print('numba' in sys.modules)"
+    process (its workers simulate), nor by a command refused for its input; Dask's import
+    (0.25 s) where a Dask cluster is used."""
+    code = "import sys, camo_sweep.cli, camo_core.cli.commands\n"
+    code += "print([m for m in ('numba', 'dask', 'distributed') if m in sys.modules])"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
-    assert out.stdout.strip() == "False", out.stderr
+    assert out.stdout.strip() == "[]", out.stderr
 
 
 @pytest.mark.parametrize("package", sorted(ALLOWED))

@@ -227,7 +227,7 @@ def cmd_sweep(argv: list[str]) -> int:
             progress=not args.quiet,
             planned=work,
         )
-    except engines.LOST_CLUSTER as exc:
+    except engines.lost_cluster() as exc:
         print(
             f"camo sweep: error: lost the Dask cluster ({type(exc).__name__}); every finished "
             f"trial is in {args.out}/trials/: the same command goes on from there",

@@ -26,20 +26,20 @@ SLURM_KEYS = ("queue", "account", "cores", "memory", "walltime", "max_jobs")
 ROS = "ros"  # the Dask worker resource a swarm trial takes one of
 
 
-def _lost_cluster() -> tuple[type[BaseException], ...]:
-    """What a Dask client raises when its scheduler or the connection to it goes away."""
-    from distributed.client import FutureCancelledError
-    from distributed.comm import CommClosedError
+def lost_cluster() -> tuple[type[BaseException], ...]:
+    """What a Dask client raises when its scheduler or the connection to it goes away: nothing
+    where Dask was never imported (no cluster to lose; a sweep refused for its input, or run
+    in-process, does not import it: 0.25 s)."""
+    if "distributed" not in sys.modules:
+        return ()
+    try:
+        from distributed.client import FutureCancelledError
+        from distributed.comm import CommClosedError
+    except ImportError:  # an older distributed: the names moved
+        from concurrent.futures import CancelledError
 
+        return (CancelledError,)
     return (FutureCancelledError, CommClosedError)
-
-
-try:
-    LOST_CLUSTER = _lost_cluster()
-except ImportError:  # an older distributed: the names moved
-    from concurrent.futures import CancelledError
-
-    LOST_CLUSTER = (CancelledError,)
 
 
 class InProcess:
