@@ -34,8 +34,14 @@ def start(*args: str) -> subprocess.Popen:
 
 
 def stop(proc: subprocess.Popen) -> None:
+    """SIGTERM, as a cluster is stopped (Dask closes its workers and lets go of their
+    semaphores in /dev/shm); SIGKILL only for one that does not end in 15 s."""
     if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGKILL)
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
     proc.wait(timeout=30)
 
 
