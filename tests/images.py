@@ -21,7 +21,8 @@ IMAGE = "localhost/camo:test"
 BUILD = "localhost/camo-build:test"  # the image's build stage: the README's set-up, done
 CONF = ROOT / "tests" / "containers.conf"
 # The README's packages that only the tests which build images use: not in the images.
-CONTAINER_TOOLS = ("podman", "runc", "debootstrap", "podman-compose")
+CONTAINER_TOOLS = ("podman", "runc", "netavark", "aardvark-dns", "debootstrap", "podman-compose")
+NETAVARK = "/usr/lib/podman/netavark"  # the network backend CONF names (Debian's path)
 MARKER_ENV = "CAMO_IMAGES_MARKER"  # where the controller's build says how it went
 
 
@@ -35,8 +36,9 @@ def readme_packages() -> list[str]:
 def build() -> str:
     """The base (debootstrap's, once a machine), then camo's image and its build stage, built
     with the README's apt-get line as PACKAGES by `./camo image`: "" once built, else why not."""
-    if not shutil.which("podman"):
-        return "the container tests need podman: apt-get install podman runc debootstrap"
+    if not shutil.which("podman") or not Path(NETAVARK).exists():
+        tools = " ".join(CONTAINER_TOOLS)
+        return f"the container tests need podman and its tools: apt-get install {tools}"
     env = {**os.environ, "CONTAINERS_CONF": str(CONF)}
     exists = subprocess.run(["podman", "image", "exists", BASE], env=env, capture_output=True)
     if exists.returncode != 0:

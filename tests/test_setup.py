@@ -79,6 +79,8 @@ def test_the_readmes_apt_get_line_holds_every_package_the_set_up_names():
     named = {"python3-venv", "python3-dev", *NEEDED}
     assert named <= packages, named - packages
     assert {"iproute2", "iptables", "nodejs", "npm", "podman", "debootstrap"} <= packages
+    # docker/compose.yaml's services find one another by name: netavark's DNS
+    assert {"netavark", "aardvark-dns"} <= packages
 
 
 def test_the_suite_caches_what_python_compiles_where_the_machine_says_not_to(tmp_path):
