@@ -131,9 +131,13 @@ def pytest_runtest_protocol(item, nextitem):
 # rewrites it), or for a test not there SLOW_GUESS s if it is marked slow, else FAST_GUESS.
 # (pytest-xdist's --dist loadgroup cannot do this with pytest 9.2: it renames items by setting
 # an attribute pytest no longer reads.)
+# The tests that use camo's images (tests/images.py, built by the controller as the session
+# starts: minutes on a machine whose podman store is empty) go out after the other long units,
+# before the tail of short tests: sent early, a worker waited minutes for the build.
 
 DURATIONS = Path(__file__).with_name("durations.json")
 SLOW_GUESS, FAST_GUESS = 5.0, 0.1
+SHORT = 2.0  # s: a unit shorter is in the tail
 MODULE_FIXTURE = re.compile(r"@pytest\.fixture\(scope=\"module\"")
 
 
@@ -170,7 +174,12 @@ def in_parallel_order(items: list) -> list:
         fallback = SLOW_GUESS if item.get_closest_marker("slow") else FAST_GUESS
         return seconds.get(item.nodeid, fallback)
 
-    ordered = sorted(units.values(), key=lambda unit: -sum(map(guess, unit)))
+    longest_first = sorted(units.values(), key=lambda unit: -sum(map(guess, unit)))
+    needs_images = [any("images" in i.fixturenames for i in unit) for unit in longest_first]
+    built = [unit for unit, needs in zip(longest_first, needs_images, strict=True) if needs]
+    others = [unit for unit, needs in zip(longest_first, needs_images, strict=True) if not needs]
+    tail = next((k for k, unit in enumerate(others) if sum(map(guess, unit)) < SHORT), len(others))
+    ordered = others[:tail] + built + others[tail:]
     return [item for unit in ordered for item in unit]
 
 
