@@ -277,6 +277,26 @@ def test_recording_named_topics_without_a_run_records_them_and_ends_on_ctrl_c(tm
     ]
 
 
+def test_stop_signals_after_the_bag_is_closed_leave_the_recorders_exit_status_zero(tmp_path):
+    """A launcher stops its recorder as the run ends, when the recorder may be ending by
+    itself: a SIGINT that reaches it while the interpreter tears down must not turn a
+    complete bag into a recording that failed (exit status: killed by SIGINT)."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "camo_bag.recorder_node", str(tmp_path / "bag"), "--topics", "/x"],
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain())},
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        wait_for_line(proc, "recording", timeout=60)
+        while proc.poll() is None:  # Ctrl-C, then again and again until it has exited
+            proc.send_signal(signal.SIGINT)
+            time.sleep(0.001)
+    finally:
+        _, err = finished(proc, 60)
+    assert proc.returncode == 0, err[-2000:]
+    assert "recorder_node: wrote 0 messages on 0 topics" in err
+
+
 def test_a_recorder_names_its_run_in_the_bag_before_discovery_shows_any_topic(tmp_path):
     """Killed before discovery showed the run's topics (a loaded machine), the recorder still
     leaves a bag that `bag info` calls the run's and incomplete, not a stranger's."""

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import socket
 import struct
 import sys
@@ -330,6 +331,12 @@ def main(argv: list[str] | None = None) -> int:
         executor.shutdown()
         code = 0 if node is None else finish(executor, node)
         rclpy.try_shutdown()
+        # The bag is closed and its exit status says how it went: a stop signal from now on
+        # (a launcher stopping the recorder that has just ended by itself) would otherwise
+        # meet Python's own handling again once the interpreter tears down, and end it as
+        # killed by the signal, a recording failed to its launcher.
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
     return code
 
 
