@@ -332,7 +332,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
     for then in args.then:
         images.append(background(then) if then in BACKGROUNDS else load_image(then))
         sense_image(images[-1], params.rows, params.cols, params.profile)
-    env = network_env(args, os.environ if environ is None else environ)
+    env = network_env(args, inherited)
     use_camo_dds_settings(env)
     deferred = deferred_discovery(env, params.count, bool(remote))
     topics = RunTopics(check_run_id(args.run_id) if args.run_id is not None else new_run_id())
