@@ -81,9 +81,10 @@ def test_an_error_in_a_forked_work_is_one_line_and_stop_ends_every_work(tmp_path
     with pytest.raises(CamoError, match=r"writing figure\.png and run\.gif failed"):
         Parallel(lambda: None, fails).wait("figure.png and run.gif")
     assert capfd.readouterr().err.strip() == "camo: error: OSError: disk full"
-    pid_file = tmp_path / "pid"
+    pid_file, written = tmp_path / "pid", tmp_path / "pid.tmp"  # whole once it is there
     hung = Parallel(
-        lambda: time.sleep(60), lambda: (pid_file.write_text(str(os.getpid())), time.sleep(60))
+        lambda: time.sleep(60),
+        lambda: (written.write_text(str(os.getpid())), written.rename(pid_file), time.sleep(60)),
     )
     deadline = time.monotonic() + 20
     while not pid_file.exists() and time.monotonic() < deadline:
