@@ -17,6 +17,7 @@ from support import (
     PROCESS,
     ROOT,
     SWARM,
+    TIMED,
     StatusListener,
     assert_like_sim,
     bad_value_outcomes,
@@ -247,6 +248,7 @@ KILLED_MARGIN = 3.0  # s: a stall, and reports' spacing (STATUS_PERIOD)
 
 
 @pytest.mark.slow(SWARM)
+@pytest.mark.alone(TIMED)
 def test_swarm_survives_two_robots_killed_during_consensus(tmp_path):
     out_dir = tmp_path / "run"
     domain_id = domain()
