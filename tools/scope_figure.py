@@ -13,8 +13,14 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
+import os
 import sys
 from pathlib import Path
+
+# One numba thread in each of the two processes the table is made in, on two cores: two
+# threads each waited on each other (about twice the CPU on a busy machine). Read as numba is
+# imported.
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import matplotlib
 
