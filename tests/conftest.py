@@ -131,13 +131,9 @@ def pytest_runtest_protocol(item, nextitem):
 # rewrites it), or for a test not there SLOW_GUESS s if it is marked slow, else FAST_GUESS.
 # (pytest-xdist's --dist loadgroup cannot do this with pytest 9.2: it renames items by setting
 # an attribute pytest no longer reads.)
-# The tests marked alone go out first, one after another: each leaves the other worker idle
-# while it runs, and waits until the other worker's test has ended before it starts, which
-# spread among the long units cost a long test's length each time; at the start both workers
-# reach them together, and the core they leave idle builds the images. The tests that use
-# camo's images (tests/images.py, built by the controller as the session starts: minutes on a
-# machine whose podman store is empty) go out after the other long units, before the tail of
-# short tests: sent early, a worker waited minutes for the build.
+# The tests that use camo's images (tests/images.py, built by the controller as the session
+# starts: minutes on a machine whose podman store is empty) go out after the other long units,
+# before the tail of short tests: sent early, a worker waited minutes for the build.
 
 DURATIONS = Path(__file__).with_name("durations.json")
 SLOW_GUESS, FAST_GUESS = 5.0, 0.1
@@ -168,8 +164,7 @@ def unit_of(nodeid: str) -> str:
 
 
 def in_parallel_order(items: list) -> list:
-    """The items by unit: the units with a test marked alone, then the others longest first
-    (those needing the images before the short tail); a unit's tests in their own order."""
+    """The items by unit, longest unit first (a unit's tests in their own order)."""
     seconds = known_durations()
     units: dict[str, list] = {}
     for item in items:
@@ -180,12 +175,11 @@ def in_parallel_order(items: list) -> list:
         return seconds.get(item.nodeid, fallback)
 
     longest_first = sorted(units.values(), key=lambda unit: -sum(map(guess, unit)))
-    alone = [unit for unit in longest_first if any(i.get_closest_marker("alone") for i in unit)]
-    rest = [unit for unit in longest_first if unit not in alone]
-    built = [unit for unit in rest if any("images" in i.fixturenames for i in unit)]
-    others = [unit for unit in rest if unit not in built]
+    needs_images = [any("images" in i.fixturenames for i in unit) for unit in longest_first]
+    built = [unit for unit, needs in zip(longest_first, needs_images, strict=True) if needs]
+    others = [unit for unit, needs in zip(longest_first, needs_images, strict=True) if not needs]
     tail = next((k for k, unit in enumerate(others) if sum(map(guess, unit)) < SHORT), len(others))
-    ordered = alone + others[:tail] + built + others[tail:]
+    ordered = others[:tail] + built + others[tail:]
     return [item for unit in ordered for item in unit]
 
 

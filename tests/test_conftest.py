@@ -12,17 +12,15 @@ class Item:
     nodeid: str
     slow: bool = False
     fixturenames: list[str] = field(default_factory=list)
-    alone: bool = False
 
     def get_closest_marker(self, name: str):
-        return name if getattr(self, name, False) else None
+        return name if name == "slow" and self.slow else None
 
 
-def test_alone_tests_go_out_first_then_longest_first_and_those_needing_images_before_the_tail(
+def test_units_go_out_longest_first_and_those_needing_images_before_the_short_tail(
     monkeypatch,
 ):
     took = {"t/a.py::long": 40.0, "t/a.py::mid": 9.0, "t/c.py::image_long": 30.0}
-    took |= {"t/d.py::alone_short": 3.0, "t/d.py::alone_long": 20.0}
     monkeypatch.setattr(conftest, "known_durations", lambda: took)
     items = [
         Item("t/a.py::short"),
@@ -31,15 +29,10 @@ def test_alone_tests_go_out_first_then_longest_first_and_those_needing_images_be
         Item("t/b.py::slow_unknown", slow=True),
         Item("t/c.py::image_unknown", slow=True, fixturenames=["images"]),
         Item("t/a.py::long"),
-        Item("t/d.py::alone_short", slow=True, alone=True),
-        Item("t/d.py::alone_long", slow=True, alone=True),
     ]
     order = [item.nodeid for item in conftest.in_parallel_order(items)]
-    # The tests marked alone first, back to back (the other worker idles while each runs).
     # The images are built as the session starts: their tests wait behind every long unit.
     assert order == [
-        "t/d.py::alone_long",
-        "t/d.py::alone_short",
         "t/a.py::long",
         "t/a.py::mid",
         "t/b.py::slow_unknown",
