@@ -102,3 +102,22 @@ def test_cached_kernels_of_other_tables_are_built_again(tmp_path):
     for out in outs:
         assert out.returncode == 0, out.stderr[-2000:]
         assert out.stdout.split() == ["True", "True"], out.stdout
+
+
+def test_a_small_grid_simulates_on_one_numba_thread_and_a_large_one_on_all():
+    import numba
+
+    from camo_core.algorithm.simulator import ONE_THREAD_ROBOTS
+
+    threads: dict[int, set[int]] = {}
+    for rows, cols in ((8, 8), (128, 128), (129, 128)):
+        seen = threads.setdefault(rows * cols, set())
+        result = simulate(
+            CamoParams(rows=rows, cols=cols, consensus_steps=2, formation_steps=1),
+            np.full((rows, cols), 100.0),
+            observe=lambda *_, seen=seen: seen.add(numba.get_num_threads()),
+        )
+        assert result.final.shape == (rows, cols)
+        assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS  # as it was after it
+    assert 128 * 128 == ONE_THREAD_ROBOTS
+    assert threads == {64: {1}, 128 * 128: {1}, 129 * 128: {numba.config.NUMBA_NUM_THREADS}}

@@ -28,10 +28,6 @@ from camo_core.schema import with_role
 from camo_sweep.spec import Trial, defaults, sim_args
 from camo_sweep.table import Layout, rows_table
 
-# Up to this many robots a trial's kernels run on one thread: a small grid gains nothing from
-# numba's threads and loses much to their start-up when the cores are busy (an 8x8 trial takes
-# 0.9 ms on one thread, 12-35 ms on two threads of a loaded 2-core machine).
-ONE_THREAD_CELLS = 128 * 128
 RESULT_COLUMNS = (
     "chosen_pattern",
     "correct",
@@ -114,7 +110,6 @@ def simulate_options(
     params = params_from(args)
     if sensed is None:
         sensed = _sensed(background_of(args), params.rows, params.cols, params.profile)
-    _threads_for(params)
     return _simulator()(params, sensed[0], raw_colours=sensed[1])
 
 
@@ -124,14 +119,6 @@ def check_options(options: dict[str, Any]) -> None:
     if namespace(options, 0).layout:
         raise UsageError("sweeps run on the grid: --layout is for ./camo sim and run, for now")
     params_from(namespace(options, 0))
-
-
-def _threads_for(params: CamoParams) -> None:
-    import numba
-
-    wanted = 1 if params.count <= ONE_THREAD_CELLS else numba.config.NUMBA_NUM_THREADS
-    if numba.get_num_threads() != wanted:
-        numba.set_num_threads(wanted)
 
 
 def reference_of(options: dict[str, Any]) -> Reference:

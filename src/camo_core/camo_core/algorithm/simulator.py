@@ -10,8 +10,10 @@ order as the per-robot rules, so the results are bit-identical (tests check it).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
+import numba
 import numpy as np
 
 from camo_core.algorithm import kernels, orientation, rng
@@ -24,6 +26,11 @@ from camo_core.algorithm.result import RunResult, p_stats
 from camo_core.algorithm.sensing import apply_colour_noise, apply_noise
 
 PAD = 2  # slots reach two cells away
+# Up to this many robots the kernels run on one thread: numba's threads gain a small grid
+# nothing and cost it much when the cores are busy (an 8x8 grid took 0.9 ms on one thread,
+# 12-35 ms on two of a loaded 2-core machine; twenty 32x32 runs beside two busy processes
+# 0.29 CPU-s on two threads, 0.11 on one).
+ONE_THREAD_ROBOTS = 128 * 128
 
 Progress = Callable[[str, int, int], None]
 # Shown every step: ("consensus", k, p before consensus step k), once ("chosen", 0, each
@@ -82,6 +89,34 @@ def simulate(
     result knows how far the colours shown are from those sensed); `modes`: the run's
     variations (modes.modes_of(params) unless given); `previous`: the grid's last round, in a
     later round of a --scope local run (robots that saw no change keep what they showed)."""
+    with kernel_threads(params.count):
+        return _simulate(
+            params, raw_sensed, exempt, progress, observe, raw_colours, modes, previous
+        )
+
+
+@contextmanager
+def kernel_threads(robots: int) -> Iterator[None]:
+    """numba's threads for a grid of `robots`: one up to ONE_THREAD_ROBOTS, else all of them
+    (NUMBA_NUM_THREADS); as they were afterwards."""
+    before = numba.get_num_threads()
+    numba.set_num_threads(1 if robots <= ONE_THREAD_ROBOTS else numba.config.NUMBA_NUM_THREADS)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
+
+def _simulate(
+    params: CamoParams,
+    raw_sensed: np.ndarray,
+    exempt: np.ndarray | None,
+    progress: Progress | None,
+    observe: Observer | None,
+    raw_colours: np.ndarray | None,
+    modes: Modes | None,
+    previous: Previous | None,
+) -> RunResult:
     start = time.perf_counter()
     modes = modes or modes_of(params)
     rows, cols = params.rows, params.cols
