@@ -100,7 +100,8 @@ def kernel_threads(robots: int) -> Iterator[None]:
     """numba's threads for a grid of `robots`: one up to ONE_THREAD_ROBOTS, else all of them
     (NUMBA_NUM_THREADS); as they were afterwards."""
     before = numba.get_num_threads()
-    numba.set_num_threads(1 if robots <= ONE_THREAD_ROBOTS else numba.config.NUMBA_NUM_THREADS)
+    every = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]  # set as numba loads
+    numba.set_num_threads(1 if robots <= ONE_THREAD_ROBOTS else every)
     try:
         yield
     finally:
