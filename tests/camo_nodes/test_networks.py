@@ -110,14 +110,14 @@ def test_the_discovery_server_stops_on_ctrl_c_even_with_sigint_ignored_by_its_st
             pytest.fail("the discovery server ran on after SIGINT")
 
 
-def split_run(net: TwoHosts, tmp_path, env: dict[str, str]) -> tuple:
+def split_run(net: TwoHosts, tmp_path, env: dict[str, str], options=OPTIONS) -> tuple:
     """The launcher with half the robots on host a, a worker with the rest on host b."""
     half = ROWS * COLS // 2
     network = ["--network", "subnet"]
     network += ["--key-file", str(new_key_file(tmp_path / "faults.key").path)]  # both hosts
     launcher = net.popen(
         "a",
-        [sys.executable, "-m", "camo_bringup.launcher", *OPTIONS, "--procs", "1"]
+        [sys.executable, "-m", "camo_bringup.launcher", *options, "--procs", "1"]
         + ["--remote-cells", f"{half}-{ROWS * COLS - 1}", "--run-id", "faults"]
         + ["--out", str(tmp_path / "run"), *network],
         env,
@@ -131,12 +131,12 @@ def split_run(net: TwoHosts, tmp_path, env: dict[str, str]) -> tuple:
     return launcher, worker
 
 
-def equals_the_simulator(tmp_path, launcher, worker) -> None:
+def equals_the_simulator(tmp_path, launcher, worker, options=OPTIONS) -> None:
     _, said = finished(launcher, 300)
     assert launcher.returncode == 0, said[-3000:]
     assert worker.wait(timeout=60) == 0, worker.stderr.read()[-2000:]
     assert "Traceback" not in said
-    sim = run_camo("sim", *OPTIONS, "--out", str(tmp_path / "sim"))
+    sim = run_camo("sim", *options, "--out", str(tmp_path / "sim"))
     assert sim.returncode == 0, sim.stderr
     assert_like_sim(tmp_path / "run", tmp_path / "sim")
     timing = json.loads((tmp_path / "run" / "timing.json").read_text())
@@ -147,8 +147,12 @@ def equals_the_simulator(tmp_path, launcher, worker) -> None:
 def test_a_partition_of_five_seconds_mid_consensus_leaves_the_result_equal_to_the_simulator(
     tmp_path,
 ):
+    # Consensus long enough (400 steps, seconds) for a progress line, a second apart, to fall
+    # in it: with the profile's 35 steps it lasted a third of a second, and the run could end
+    # without a line saying consensus (it did, in CI).
+    options = [*OPTIONS, "--consensus-steps", "400"]
     with TwoHosts() as net:
-        launcher, worker = split_run(net, tmp_path, environment())
+        launcher, worker = split_run(net, tmp_path, environment(), options)
         deadline = time.monotonic() + 180
         while "consensus" not in launcher.stderr.readline():  # its progress line
             assert launcher.poll() is None and time.monotonic() < deadline
@@ -159,7 +163,7 @@ def test_a_partition_of_five_seconds_mid_consensus_leaves_the_result_equal_to_th
         assert net.traffic("a") == before  # nothing crossed
         net.mend()
         assert launcher.poll() is None  # the cut fell within the run
-        equals_the_simulator(tmp_path, launcher, worker)
+        equals_the_simulator(tmp_path, launcher, worker, options)
 
 
 LOSSY, WHY_NOT = lossy_available()
