@@ -3,6 +3,7 @@ topic, and each round it starts equals the simulator on its frame with its seed.
 
 import csv
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -104,8 +105,11 @@ class Camera:
 @pytest.mark.alone(TIMED)
 def test_a_continuous_swarm_follows_a_camera_of_its_own_one_round_a_scene(tmp_path):
     # A camera that waits for no one, four scenes in turn, a run of a given length: a round
-    # for each scene and no other (no false round, none missed, none superseded), each on a
-    # frame of its scene, equal to ./camo sim there with its seed, done within 5 s.
+    # for each scene and no other (no false round, none missed), each on a frame of its scene,
+    # equal to ./camo sim there with its seed, done within 5 s. Robots that notice one change a
+    # frame apart, before the first one's hellos reach them, start two rounds of which the
+    # later supersedes the other (docs/algorithm.md §6; seen in CI, one frame apart): a round
+    # superseded by any but a round of the next two frames would be a false one.
     import cv2
 
     domain_id = domain()
@@ -123,7 +127,10 @@ def test_a_continuous_swarm_follows_a_camera_of_its_own_one_round_a_scene(tmp_pa
     assert proc.returncode == 0, err[-3000:]
     rounds = rounds_of(run)
     assert [r["pattern"] for r in rounds] == ["vertical", "horizontal", "mottled", "vertical"]
-    assert [r["complete"] for r in rounds] == ["1"] * 4 and "superseded" not in err, err[-3000:]
+    assert [r["complete"] for r in rounds] == ["1"] * 4, err[-3000:]
+    written = [int(row["frame"]) for row in rounds]
+    for frame in map(int, re.findall(r"the round of frame (\d+) was superseded", err)):
+        assert any(0 < later - frame <= 2 for later in written), err[-3000:]
     for k, row in enumerate(rounds):
         summary = json.loads((run / f"round_{k}" / "summary.json").read_text())
         assert cam.sent[summary["background_sha256"]][0] == k  # a frame it sent of scene k
