@@ -1,11 +1,13 @@
 """`camo bench ros`: the bare rclpy exchange it compares against, and its options; `camo bench
 dynamic`, a continuous swarm against --then switches."""
 
+import signal
 import subprocess
 import sys
+import time
 
 import pytest
-from support import COMPUTE, ROOT, SWARM, TIMED, domain
+from support import COMPUTE, PROCESS, ROOT, SWARM, TIMED, domain
 
 
 @pytest.mark.slow(SWARM)
@@ -36,6 +38,39 @@ def test_the_packed_bare_exchange_crosses_processes_in_arrays():
     # from the arrays.
     packed = bare_exchange(4, 20, 2, domain(), packed=True)
     assert 0 < packed["setup_s"] < packed["wall_s"] and 0 < packed["steps_per_s"] < 100_000
+
+
+@pytest.mark.slow(PROCESS)
+def test_a_bare_process_that_hangs_is_one_line_with_its_stacks_and_none_is_left(capfd):
+    from camo_bringup.bench import worker_reports
+
+    # One process reports and ends; one hangs, as a process stuck in DDS would.
+    code = (
+        "import sys, time; from camo_core.shutdown import stacks_on_faults; stacks_on_faults(); "
+        "print('{}', flush=True); time.sleep(float(sys.argv[1]))"
+    )
+    workers = [
+        subprocess.Popen([sys.executable, "-c", code, wait], stdout=subprocess.PIPE, text=True)
+        for wait in ("0", "600")
+    ]
+    started = time.monotonic()
+    with pytest.raises(RuntimeError) as failed:
+        worker_reports(workers, "the bare exchange at 4x4", 3.0)
+    assert time.monotonic() - started < 20
+    assert str(failed.value) == (
+        "the bare exchange at 4x4: process 1 did not end in 3 s (its threads' stacks are on "
+        "stderr)"
+    )
+    assert [w.returncode for w in workers] == [0, -signal.SIGKILL]  # none is left
+    assert 'File "<string>", line 1 in <module>' in capfd.readouterr().err  # the hung one's
+
+
+def test_a_bare_process_that_fails_is_one_line():
+    from camo_bringup.bench import worker_reports
+
+    worker = subprocess.Popen([sys.executable, "-c", "exit(3)"], stdout=subprocess.PIPE, text=True)
+    with pytest.raises(RuntimeError, match=r"^the bare exchange at 4x4: process 0 failed \(exit"):
+        worker_reports([worker], "the bare exchange at 4x4", 30.0)
 
 
 def test_bench_runs_are_longer_on_small_grids_and_reject_absurd_step_counts():

@@ -26,8 +26,10 @@ keyed (the default) and encrypted, alternating, and the ratios to the run withou
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
+import signal
 import statistics
 import subprocess
 import sys
@@ -56,6 +58,9 @@ from camo_nodes.transport import edge_of, listener_qos
 
 BARE_RUN = "bench_bare"
 PACKED_RUN = "bench_packed"
+# s a bare process waits for its peers, set-up to last step, before it gives up; its parent
+# waits that and as long again for set-up and exit, then has its stacks written and kills it.
+BARE_BUDGET = 300.0
 
 
 def bare_worker(side: int, steps: int, block: int, procs: int, packed: int = 0) -> dict:
@@ -101,7 +106,7 @@ def bare_worker(side: int, steps: int, block: int, procs: int, packed: int = 0) 
         node.create_subscription(wire, topic, on_votes if packed else on_vote, listener_qos())
     executor = EventsExecutor()
     executor.add_node(node)
-    deadline = time.monotonic() + 300
+    deadline = time.monotonic() + BARE_BUDGET
     while time.monotonic() < deadline and (
         writers["edge"].get_subscription_count() < len(peers)
         or sum(s.get_publisher_count() for s in node.subscriptions) < len(peers)
@@ -130,10 +135,51 @@ def bare_worker(side: int, steps: int, block: int, procs: int, packed: int = 0) 
     linger = time.monotonic() + 2  # serve our history to slower peers a little longer
     while time.monotonic() < linger:
         executor.spin_once(timeout_sec=0.05)
+    # Executor first, then the node (as the swarm's hosts do): the EventsExecutor must let go
+    # of the node's handles before they are destroyed.
     executor.shutdown()
+    executor.remove_node(node)
     node.destroy_node()
     rclpy.shutdown()
     return {"started": started, "matched": matched, "done": done, "complete": done < deadline}
+
+
+def worker_reports(workers: list[subprocess.Popen], what: str, limit: float) -> list[dict]:
+    """The last line of each worker's output, as JSON, once all have ended. A worker that has
+    not ended within `limit` s has its threads' stacks written to stderr (SIGUSR1,
+    camo_core.shutdown) and is killed, with the others: a hang is a one-line error, its
+    stacks on stderr, and no process is left behind."""
+    end = time.monotonic() + limit
+    reports = []
+    try:
+        for k, worker in enumerate(workers):
+            try:
+                out, _ = worker.communicate(timeout=max(end - time.monotonic(), 0.0))
+            except subprocess.TimeoutExpired:
+                raise RuntimeError(
+                    f"{what}: process {k} did not end in {limit:g} s (its threads' stacks are "
+                    "on stderr)"
+                ) from None
+            lines = (out or "").strip().splitlines()
+            if worker.returncode != 0 or not lines:
+                raise RuntimeError(f"{what}: process {k} failed (exit code {worker.returncode})")
+            reports.append(json.loads(lines[-1]))
+    except RuntimeError:
+        _end_all(workers)
+        raise
+    return reports
+
+
+def _end_all(workers: list[subprocess.Popen]) -> None:
+    alive = [w for w in workers if w.poll() is None]
+    for how in (signal.SIGUSR1, signal.SIGKILL):
+        for worker in alive:
+            with contextlib.suppress(ProcessLookupError):
+                worker.send_signal(how)
+        if how == signal.SIGUSR1 and alive:
+            time.sleep(1.0)  # the stacks are written
+    for worker in workers:
+        worker.communicate()
 
 
 def bare_exchange(side: int, steps: int, procs: int, domain: int, packed: bool = False) -> dict:
@@ -154,10 +200,11 @@ def bare_exchange(side: int, steps: int, procs: int, domain: int, packed: bool =
         )
         for k in range(min(procs, side * side))
     ]
-    reports = [json.loads(w.communicate(timeout=900)[0].strip().splitlines()[-1]) for w in workers]
+    what = f"the bare exchange at {side}x{side}"
+    reports = worker_reports(workers, what, 2 * BARE_BUDGET)
     exited = time.monotonic()
     if not all(r["complete"] for r in reports):
-        raise RuntimeError(f"the bare exchange at {side}x{side} did not finish")
+        raise RuntimeError(f"{what} did not finish")
     start = max(r["matched"] for r in reports)
     end = max(r["done"] for r in reports)
     return {
@@ -443,6 +490,49 @@ def print_report(args, rates, whole, large, keys, added) -> None:
         )
 
 
+def measure(args: argparse.Namespace, domain: int) -> tuple:
+    """Every figure `camo bench ros` prints: rates, whole runs, large runs, keys, extras."""
+    rates = [
+        compare(
+            side,
+            args.procs,
+            domain,
+            args.out / "rate",
+            args.steps or default_steps(side),
+            args.repeat,
+            packed=True,
+            loss=args.loss,
+        )
+        for side in args.rate_sides
+    ]
+    whole = [
+        compare(side, args.procs, domain, args.out / "whole", None, args.repeat, loss=args.loss)
+        for side in args.sides
+    ]
+    links = [[]] + ([lossy(args.loss, args.noise)] if args.loss else [])
+    large = [
+        large_run(side, domain, args.out / "large" / f"{side}_{k}", extra)
+        for side in args.large_sides
+        for k, extra in enumerate(links)
+    ]
+    keys = None
+    if args.keyed_side:
+        side = args.keyed_side
+        steps = args.steps or default_steps(side)
+        keys = key_cost(side, args.procs, domain, args.out / "keys", steps, args.repeat)
+    # What recording, and a live view with no client connected, add to a run.
+    extras = {
+        "recording": (args.record_side, "record", lambda out: ["--record", str(out / "bag")]),
+        "live view": (args.view_side, "view", lambda out: ["--foxglove", "0"]),
+    }
+    added = {
+        what: added_cost(side, args.procs, domain, args.out / folder, args.repeat, extra)
+        for what, (side, folder, extra) in extras.items()
+        if side
+    }
+    return rates, whole, large, keys, added
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = Parser(prog="camo bench ros", description=__doc__.splitlines()[0])
     parser.add_argument("--json", action="store_true", help="print one JSON object")
@@ -520,44 +610,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.bare_worker:
         print(json.dumps(bare_worker(*args.bare_worker)))
         return 0
-    rates = [
-        compare(
-            side,
-            args.procs,
-            domain,
-            args.out / "rate",
-            args.steps or default_steps(side),
-            args.repeat,
-            packed=True,
-            loss=args.loss,
-        )
-        for side in args.rate_sides
-    ]
-    whole = [
-        compare(side, args.procs, domain, args.out / "whole", None, args.repeat, loss=args.loss)
-        for side in args.sides
-    ]
-    links = [[]] + ([lossy(args.loss, args.noise)] if args.loss else [])
-    large = [
-        large_run(side, domain, args.out / "large" / f"{side}_{k}", extra)
-        for side in args.large_sides
-        for k, extra in enumerate(links)
-    ]
-    keys = None
-    if args.keyed_side:
-        side = args.keyed_side
-        steps = args.steps or default_steps(side)
-        keys = key_cost(side, args.procs, domain, args.out / "keys", steps, args.repeat)
-    # What recording, and a live view with no client connected, add to a run.
-    extras = {
-        "recording": (args.record_side, "record", lambda out: ["--record", str(out / "bag")]),
-        "live view": (args.view_side, "view", lambda out: ["--foxglove", "0"]),
-    }
-    added = {
-        what: added_cost(side, args.procs, domain, args.out / folder, args.repeat, extra)
-        for what, (side, folder, extra) in extras.items()
-        if side
-    }
+    try:
+        rates, whole, large, keys, added = measure(args, domain)
+    except RuntimeError as exc:  # a run that failed or hung: what and why, in one line
+        print(f"camo bench ros: error: {exc}", file=sys.stderr)
+        return 1
     if args.json:
         print(json.dumps({"rates": rates, "whole": whole, "large": large, "keys": keys, **added}))
     else:
