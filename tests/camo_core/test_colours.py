@@ -201,6 +201,21 @@ def test_distinct_rows_map_every_row_to_an_equal_one_and_refuse_hash_collisions(
 
 
 @pytest.mark.slow(COMPUTE)
+@pytest.mark.parametrize("count", [1, 2, 700, 2047, 2048, 9000])
+def test_keys_are_found_by_table_or_search_alike(count):
+    rng = np.random.default_rng(count)
+    distinct = np.sort(np.unique_values(rng.integers(0, 2**64, count, np.uint64)))
+    key = distinct[rng.integers(0, len(distinct), 20_000)]
+    assert np.array_equal(colours._index_of(distinct, key), np.searchsorted(distinct, key))
+
+
+def test_keys_alike_in_every_slice_the_table_tries_are_searched():
+    # For two keys the table would use 6 bits: the top ones, the lowest, those from bit 29.
+    distinct = np.array([5, 5 | 1 << 40], np.uint64)
+    key = distinct[[1, 0, 1, 1]]
+    assert colours._index_of(distinct, key).tolist() == [1, 0, 1, 1]
+
+
 def test_on_colour_photographs_colours_come_well_closer_than_as_many_greys():
     """The issue's target: at 32x32 the mean colour distance with --colours 4 is under 0.6x
     that of --levels 4, on each photograph; more colours come closer still."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -67,16 +68,17 @@ def sensed_overrides(
 
 
 def cmd_sim(args: argparse.Namespace) -> int:
-    from camo_core.algorithm.perrobot import run_per_robot  # numba: only for what simulates
-    from camo_core.algorithm.simulator import simulate
-
     params = params_from(args)
     modes = modes_of(params)
-    image, label = image_from(args)
+    # The background is read and sensed in a thread while numba loads the kernels (a third of
+    # a second on one core, the other idle): OpenCV lets go of the GIL as it decodes and resizes.
+    with ThreadPoolExecutor(1) as pool:
+        sensing = pool.submit(_sensed_background, args, params, modes)
+        from camo_core.algorithm.perrobot import run_per_robot  # numba: only for what simulates
+        from camo_core.algorithm.simulator import simulate
+
+        image, label, (raw, raw_colours) = sensing.result()
     exempt = None
-    if args.sensed and not modes.layout.grid:  # the mode, not a flag: from a file too
-        raise UsageError("--sensed names grid cells: it does not go with a layout")
-    raw, raw_colours = modes.layout.sense(image, params.profile)
     overrides = sensed_overrides(args.sensed, params.rows, params.cols)
     if overrides:
         # Real readings: they replace the image's value and get no simulated noise.
@@ -124,6 +126,14 @@ def cmd_sim(args: argparse.Namespace) -> int:
         f"figure.png and run.gif; simulated {how}in {result.elapsed_s:.3f} s"
     )
     return 0
+
+
+def _sensed_background(args: argparse.Namespace, params: CamoParams, modes: Modes) -> tuple:
+    """The background, its label and what the robots sense of it (greys, colours)."""
+    image, label = image_from(args)
+    if args.sensed and not modes.layout.grid:  # the mode, not a flag: from a file too
+        raise UsageError("--sensed names grid cells: it does not go with a layout")
+    return image, label, modes.layout.sense(image, params.profile)
 
 
 def previous_round(folder: str, params: CamoParams, modes: Modes) -> Previous:

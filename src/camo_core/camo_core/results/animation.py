@@ -51,18 +51,18 @@ def write_animation(
     """run.gif of a round; `sensed` (greys, or colours x 3) and `dead` per robot, `marks` (name -> rows x cols, as
     figures.run_figure takes them) say which robots carry a mark, with their legend."""
     frames = snapshots.shown()
-    grey = np.nan_to_num(np.asarray(sensed, float), nan=128.0)  # or colours (... x 3)
-    coloured = grey.size == 3 * snapshots.params.count
+    sensed = np.asarray(sensed)
+    coloured = sensed.size == 3 * snapshots.params.count
+    # Only the cells a frame shows (a large grid's every few robots): greys, or colours (x 3).
+    grey = np.nan_to_num(np.asarray(snapshots.cells(sensed), float), nan=128.0)
     fig, (left, right) = plt.subplots(1, 2, figsize=(6.4, 3.9), dpi=80)
     params = snapshots.params
     positions = snapshots.modes.layout.positions
     if positions is None:
         if coloured:
-            left.imshow(snapshots.cells(grey) / 255.0, interpolation="nearest")
+            left.imshow(grey / 255.0, interpolation="nearest")
         else:
-            left.imshow(
-                snapshots.cells(grey), cmap="gray", vmin=0, vmax=255, interpolation="nearest"
-            )
+            left.imshow(grey, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
         shown = right.imshow(frames[0][1], interpolation="nearest", animated=True)
     else:  # each robot a disc at its position, recoloured frame by frame
         draw_discs(left, positions, grey)

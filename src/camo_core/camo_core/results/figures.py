@@ -167,11 +167,12 @@ def _chosen_panel(ax, result: RunResult) -> None:
     none = (chosen < 0) | (chosen >= CODES)
     if result.alive is not None:
         none |= ~result.alive
-    rgb = colours[np.where(none, CODES, chosen)]
+    codes = np.where(none, CODES, chosen)
     if result.positions is not None:
-        draw_discs(ax, result.positions, rgb * 255)
-    else:
-        _grid_panel(ax, rgb * 255)
+        draw_discs(ax, result.positions, colours[codes] * 255)
+    else:  # the cells a panel shows picked first: a large grid's colours are not all worked out
+        shown, extent = _shown(codes.astype(np.uint8), nearest=True)
+        ax.imshow(np.clip(colours[shown] * 255 / 255.0, 0, 1), interpolation="nearest", **extent)
     counts = result.selection_counts
     named = [(k, n) for k, n in zip(result.codes, counts, strict=True) if counts[n]]
     handles = [matplotlib.patches.Patch(color=colours[k], label=label_of(n)) for k, n in named]

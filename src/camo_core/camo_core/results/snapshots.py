@@ -65,18 +65,27 @@ class Snapshots:
         """Per robot values as the grid a frame shows (every `stride`-th robot)."""
         values = np.asarray(values)
         rows, cols = self.params.rows, self.params.cols
-        shape = (rows, cols) if values.size == rows * cols else (rows, cols, -1)
-        return values.reshape(shape)[:: self.stride, :: self.stride]
+        if values.shape[:2] != (rows, cols):  # by robot id: as the grid
+            shape = (rows, cols) if values.size == rows * cols else (rows, cols, -1)
+            values = values.reshape(shape)
+        # Strided as it is: reshaping a view (a wider p's first columns) would copy it whole.
+        return values[:: self.stride, :: self.stride]
 
     def __call__(self, phase: str, step: int, values: np.ndarray) -> None:
         if step not in self.wanted[phase]:
             return
         if phase == "consensus":
-            p = self.cells(values)
-            known = ~np.isnan(p).any(axis=-1)
+            # Gathered into one block first: on a large grid's strided view each step below
+            # costs several times as much (a 1024x1024 run spent 0.12 s of 0.48 here).
+            p = np.ascontiguousarray(self.cells(values))
+            nan = np.isnan(p)
             # A tensor's direction, or the mix of the pattern colours a p holds.
             paint = tensor_rgb if self.modes.descriptor.oriented else (lambda p: p @ PALETTE)
-            rgb = np.where(known[..., None], paint(np.nan_to_num(p)), UNKNOWN)
+            if not nan.any():  # every robot's p known: the same colours, without NaN's passes
+                rgb = paint(p)
+            else:
+                known = ~nan.any(axis=-1)
+                rgb = np.where(known[..., None], paint(np.nan_to_num(p)), UNKNOWN)
             total, order = self.consensus_steps, 0
         elif phase == "chosen":  # each robot's pattern in its colour
             codes = self.cells(values).astype(np.int64)
