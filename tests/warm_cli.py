@@ -143,8 +143,7 @@ def run(args: list[str], cwd: Path):
 
 def warm() -> None:
     """What every `camo` command's process imports, done once (numba's kernels excepted)."""
-    import numba  # noqa: F401 - the package; its compiler starts in the child
-
+    import camo_core.algorithm.jit  # numba, as camo loads it; its compiler starts in the child
     import camo_core.cli.commands
     import camo_core.results.animation  # matplotlib
     import camo_core.results.figures  # noqa: F401

@@ -121,3 +121,22 @@ def test_a_small_grid_simulates_on_one_numba_thread_and_a_large_one_on_all():
         assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS  # as it was after it
     assert 128 * 128 == ONE_THREAD_ROBOTS
     assert threads == {64: {1}, 128 * 128: {1}, 129 * 128: {numba.config.NUMBA_NUM_THREADS}}
+
+
+@pytest.mark.slow(PROCESS)
+def test_loading_the_kernels_leaves_scipy_unloaded_and_whole():
+    # numba's probe for SciPy's BLAS (an import of scipy.linalg) is skipped: the kernels call
+    # none. SciPy imports whole afterwards, and a simulation runs.
+    code = (
+        "import sys\n"
+        "from camo_core.algorithm.simulator import simulate\n"
+        "from camo_core.algorithm.params import CamoParams\n"
+        "import numpy as np\n"
+        "assert 'scipy.linalg' not in sys.modules, 'scipy.linalg was imported'\n"
+        "simulate(CamoParams(rows=4, cols=4), np.full((4, 4), 90.0))\n"
+        "import scipy.linalg.cython_blas, scipy.linalg\n"
+        "print(scipy.linalg.det(np.eye(2)))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "1.0"

@@ -11,9 +11,9 @@ from __future__ import annotations
 import hashlib
 
 import numpy as np
-from numba import njit, prange
 
 from camo_core.algorithm import orientation, rng
+from camo_core.algorithm.jit import njit, prange
 from camo_core.algorithm.orientation import KNIGHT_FALLBACKS, OFFSETS, ORIENTED, RELAY_PATHS
 from camo_core.algorithm.patterns import HORIZONTAL, MOTTLED, VERTICAL
 from camo_core.algorithm.rules import DIAGONAL_FALLBACKS, OPPOSITE_CARDINAL

@@ -4,9 +4,9 @@ bins (docs/algorithm.md, colours), compiled by numba; imported only by runs with
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
 from camo_core.algorithm.colours import BINS, LLOYD_ROUNDS
+from camo_core.algorithm.jit import njit
 
 
 @njit(cache=True)

@@ -13,11 +13,11 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
-import numba
 import numpy as np
 
 from camo_core.algorithm import kernels, orientation, rng
 from camo_core.algorithm.grid import NEIGHBOR_OFFSETS, NUM_SLOTS
+from camo_core.algorithm.jit import numba
 from camo_core.algorithm.modes import Modes, modes_of
 from camo_core.algorithm.modes.palettes import GridPalette
 from camo_core.algorithm.modes.scopes import Previous
