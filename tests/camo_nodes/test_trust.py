@@ -26,7 +26,9 @@ from camo_nodes.topics.runs import setup_from
 from camo_nodes.trust import BackgroundCheck, Hosts, Rejections, merged
 
 OPTIONS = ["--pattern", "forest", "--rows", "6", "--cols", "6", "--seed", "2"]
-OPTIONS += ["--rho-comm", "0.1", "--consensus-steps", "120"]
+# 400 steps (a few seconds): the stranger's writers must be matched by the run's readers before
+# it ends; with 120 a run once ended first on a loaded machine and refused nothing.
+OPTIONS += ["--rho-comm", "0.1", "--consensus-steps", "400"]
 SETUP = {
     "run": "r",
     "params": {"rows": 6, "cols": 6},
