@@ -198,6 +198,7 @@ def test_a_table_part_that_is_not_a_sweeps_is_named_in_one_line(tmp_path):
         (["--axis", "rho_comm=0.1", "--scheduler", "tcp://127.0.0.1:notaport"], "cannot reach"),
         (["--axis", "rho_comm=0.1", "--batch-s", "inf"], "--batch-s: invalid float value"),
         (["--axis", "rho_comm=0.1", "--slurm"], "needs SLURM's sbatch"),
+        (["--axis", "rows=4", "--ros-timeout", "9"], "--ros-timeout is for --driver ros (this"),
     ],
 )
 def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, said):
@@ -316,3 +317,15 @@ def test_a_trials_reference_leaves_out_every_parameter_declared_as_noise(monkeyp
     assert noisy == {"rho_meas", "rho_comm"}
     monkeypatch.setattr(trials, "NOISE", ("seed",))  # as if seed were declared noise
     assert trials.reference_options(options) == {k: v for k, v in options.items() if k != "seed"}
+
+
+def test_the_ros_drivers_options_go_with_the_ros_driver_only():
+    from camo_core.exceptions import UsageError
+    from camo_sweep.cli import build_parser, check_driver_options
+
+    parser = build_parser()
+    both = parser.parse_args(["--ros-per-worker", "2", "--ros-timeout", "9"])
+    check_driver_options(parser, both, "ros")  # the driver given here or by the sweep's file
+    check_driver_options(parser, parser.parse_args([]), "sim")
+    with pytest.raises(UsageError, match=r"^--ros-per-worker and --ros-timeout are for --dri"):
+        check_driver_options(parser, both, "sim")

@@ -179,8 +179,23 @@ def make_engine(args, spec: SweepSpec):
 LISTED_SLOWLY = 100_000  # trials: listing this many (and the table's) takes seconds or more
 
 
+ROS_ONLY = ("--ros-per-worker", "--ros-timeout")
+
+
+def check_driver_options(parser: Parser, args, driver: str) -> None:
+    """The ros driver's options, in a sweep of the simulator: given by mistake (without
+    --driver ros), they would change nothing and say nothing."""
+    given = [flag for flag in ROS_ONLY if parser.given(args, flag)]
+    if given and driver != "ros":
+        verb = "is" if len(given) == 1 else "are"
+        raise UsageError(
+            f"{' and '.join(given)} {verb} for --driver ros (this sweep's driver is {driver})"
+        )
+
+
 def cmd_sweep(argv: list[str]) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     check_numbers(args)
     data = spec_from_yaml(args.file) if args.file else None
     if args.print_job_script:
@@ -193,6 +208,7 @@ def cmd_sweep(argv: list[str]) -> int:
     if args.out is None:
         raise UsageError("the following arguments are required: --out")
     spec = build_spec(data, args.axis, args.set, args.trials, args.seed, args.driver)
+    check_driver_options(parser, args, spec.driver)
     spec.refuse_more_than(args.max_trials, "--max-trials")
     if spec.count() >= LISTED_SLOWLY and not args.quiet:  # listing 10^7 trials takes minutes
         print(f"camo sweep: listing {spec.count():,} trials before it starts", file=sys.stderr)
