@@ -39,6 +39,21 @@ def test_emulator_command_line_rejects_bad_options(tmp_path):
     assert len(out.stderr.strip().splitlines()) == 1
 
 
+def test_an_image_smaller_than_the_arena_is_said_as_sim_says_it(tmp_path):
+    import cv2
+    import numpy as np
+
+    from camo_core.inputs.images import ImageError
+
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), np.zeros((6, 40), np.uint8))  # 40 wide, 6 high
+    args = emulator.build_parser().parse_args(
+        ["--link", str(tmp_path / "x"), "--image", str(small)]
+    )
+    with pytest.raises(ImageError, match=r"small.png of 40x6 pixels is smaller than the 8x8 rob"):
+        emulator.emulator_from(args)
+
+
 @pytest.mark.parametrize(
     "options, said",
     [

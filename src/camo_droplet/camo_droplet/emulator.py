@@ -31,7 +31,7 @@ import numpy as np
 
 from camo_core.algorithm.backgrounds import BACKGROUNDS, background
 from camo_core.algorithm.params import CamoParams
-from camo_core.algorithm.sensing import block_means
+from camo_core.algorithm.sensing import block_means, check_covers
 from camo_core.cli.options import Combination, Parser, a_path, add_options, options_of
 from camo_core.exceptions import CamoError, UsageError
 from camo_core.inputs.files import shown
@@ -273,8 +273,8 @@ def emulator_from(args: argparse.Namespace) -> DropletEmulator:
     image = (
         load_image(args.image) if args.image is not None else background(args.pattern or "forest")
     )
-    if image.shape[0] < arena.rows or image.shape[1] < arena.cols:
-        raise UsageError(f"the image is smaller than the {arena.rows}x{arena.cols} arena")
+    what = f"image {shown(args.image)}" if args.image is not None else "the built-in image"
+    check_covers(image.shape[1], image.shape[0], arena.rows, arena.cols, what)  # as sim says it
     if args.led_log is not None:  # appended to at every LED command: a folder would fail then
         log = Path(args.led_log)
         if log.exists() and not log.is_file():
