@@ -53,6 +53,10 @@ def test_a_bare_process_that_hangs_is_one_line_with_its_stacks_and_none_is_left(
         subprocess.Popen([sys.executable, "-c", code, wait], stdout=subprocess.PIPE, text=True)
         for wait in ("0", "600")
     ]
+    # Under load either may take seconds to start: the one that ends has ended, and the one that
+    # hangs has its stacks' handler, before the 3 s begin.
+    workers[0].wait(timeout=120)
+    assert workers[1].stdout.readline().strip() == "{}"
     started = time.monotonic()
     with pytest.raises(RuntimeError) as failed:
         worker_reports(workers, "the bare exchange at 4x4", 3.0)
