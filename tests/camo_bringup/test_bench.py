@@ -69,12 +69,19 @@ def test_a_bare_process_that_hangs_is_one_line_with_its_stacks_and_none_is_left(
     assert 'File "<string>", line 1 in <module>' in capfd.readouterr().err  # the hung one's
 
 
-def test_a_bare_process_that_fails_is_one_line():
+def test_a_bare_process_that_fails_ends_the_others_at_once_in_one_line():
     from camo_bringup.bench import worker_reports
 
-    worker = subprocess.Popen([sys.executable, "-c", "exit(3)"], stdout=subprocess.PIPE, text=True)
-    with pytest.raises(RuntimeError, match=r"^the bare exchange at 4x4: process 0 failed \(exit"):
-        worker_reports([worker], "the bare exchange at 4x4", 30.0)
+    # Process 0 would wait for its failed peer for its whole budget: it is not waited for.
+    workers = [
+        subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+        for code in ("import time; time.sleep(600)", "exit(3)")
+    ]
+    started = time.monotonic()
+    with pytest.raises(RuntimeError, match=r"^the bare exchange at 4x4: process 1 failed \(exit"):
+        worker_reports(workers, "the bare exchange at 4x4", 300.0)
+    assert time.monotonic() - started < 60
+    assert workers[0].returncode in (-signal.SIGUSR1, -signal.SIGKILL)  # ended, not left
 
 
 def test_bench_runs_are_longer_on_small_grids_and_reject_absurd_step_counts():

@@ -145,22 +145,28 @@ def bare_worker(side: int, steps: int, block: int, procs: int, packed: int = 0) 
 
 
 def worker_reports(workers: list[subprocess.Popen], what: str, limit: float) -> list[dict]:
-    """The last line of each worker's output, as JSON, once all have ended. A worker that has
-    not ended within `limit` s has its threads' stacks written to stderr (SIGUSR1,
-    camo_core.shutdown) and is killed, with the others: a hang is a one-line error, its
-    stacks on stderr, and no process is left behind."""
+    """The last line of each worker's output, as JSON, once all have ended. A worker that
+    fails ends them all at once (its peers would wait for it for their whole budget); one that
+    has not ended within `limit` s has its threads' stacks written to stderr (SIGUSR1,
+    camo_core.shutdown) and is killed, with the others: either is one line, and no process is
+    left behind. (Each says one short line: its pipe never fills while it is polled.)"""
     end = time.monotonic() + limit
-    reports = []
     try:
-        for k, worker in enumerate(workers):
-            try:
-                out, _ = worker.communicate(timeout=max(end - time.monotonic(), 0.0))
-            except subprocess.TimeoutExpired:
+        while None in [w.poll() for w in workers]:  # each polled: its returncode is set
+            failed = [k for k, w in enumerate(workers) if w.returncode not in (None, 0)]
+            if failed:
+                code = workers[failed[0]].returncode
+                raise RuntimeError(f"{what}: process {failed[0]} failed (exit code {code})")
+            if time.monotonic() > end:
+                hung = next(k for k, w in enumerate(workers) if w.returncode is None)
                 raise RuntimeError(
-                    f"{what}: process {k} did not end in {limit:g} s (its threads' stacks are "
-                    "on stderr)"
-                ) from None
-            lines = (out or "").strip().splitlines()
+                    f"{what}: process {hung} did not end in {limit:g} s (its threads' stacks "
+                    "are on stderr)"
+                )
+            time.sleep(0.05)
+        reports = []
+        for k, worker in enumerate(workers):
+            lines = (worker.communicate()[0] or "").strip().splitlines()
             if worker.returncode != 0 or not lines:
                 raise RuntimeError(f"{what}: process {k} failed (exit code {worker.returncode})")
             reports.append(json.loads(lines[-1]))
