@@ -29,7 +29,6 @@ LEVELS_PER_CHANNEL = 4  # sRGB bins per channel
 BIN_WIDTH = 256 // LEVELS_PER_CHANNEL
 BINS = LEVELS_PER_CHANNEL**3
 SIZE = 4 * BINS  # the averaged vector: the histogram, then the bins' sums of L*, a*, b*
-LLOYD_ROUNDS = 20  # k-means iterations from each start; a palette settles within a few
 GREY_TOLERANCE = 1e-6  # channels this close are one grey (CIELAB round trips of greys)
 
 RGB = tuple[int, int, int]
@@ -80,7 +79,7 @@ def palette(vector: Sequence[float] | np.ndarray, k: int) -> np.ndarray:
     """kmeans.palette_lab of one robot's vector (any sequence of floats)."""
     from camo_core.algorithm.kmeans import palette_lab  # numba: only --colours needs it
 
-    return palette_lab(np.asarray(vector, dtype=np.float64), k)
+    return palette_lab(np.asarray(vector, dtype=np.float64), k, BINS)
 
 
 # ---- what a robot shows ---------------------------------------------------------------------

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from camo_core.algorithm.colours import BINS, LLOYD_ROUNDS
 from camo_core.algorithm.jit import njit
+
+LLOYD_ROUNDS = 20  # k-means iterations from each start; a palette settles within a few
 
 
 @njit(cache=True)
@@ -92,13 +93,14 @@ def _lloyd(points, weights, sums, centres):
 
 
 @njit(cache=True)
-def palette_lab(vector, k):
-    """The K palette colours (K x 3, CIELAB, darkest first) from one robot's averaged vector:
+def palette_lab(vector, k, bins):
+    """The K palette colours (K x 3, CIELAB, darkest first) from one robot's averaged vector
+    (the shares of its `bins` colour bins, then their sums of L*, a* and b*):
     k-means over the bins' mean colours weighted by their shares, from two starts (lightness
     quantiles, then bins far apart); the start whose palette leaves the smaller weighted squared
     error is kept, the first on a tie."""
     n = 0
-    for b in range(BINS):
+    for b in range(bins):
         if vector[b] > 0.0:
             n += 1
     if n == 0:  # nothing averaged (cannot happen in a run): mid grey
@@ -109,11 +111,11 @@ def palette_lab(vector, k):
     sums = np.empty((n, 3))
     weights = np.empty(n)
     i = 0
-    for b in range(BINS):
+    for b in range(bins):
         if vector[b] > 0.0:
             weights[i] = vector[b]
             for ch in range(3):
-                sums[i, ch] = vector[BINS * (1 + ch) + b]
+                sums[i, ch] = vector[bins * (1 + ch) + b]
                 points[i, ch] = sums[i, ch] / weights[i]
             i += 1
     first, first_error = _lloyd(points, weights, sums, _start_by_lightness(points, weights, k))
