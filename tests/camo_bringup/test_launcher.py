@@ -175,6 +175,15 @@ def test_a_local_swarm_equals_the_simulator_with_loss_across_processes(tmp_path,
     assert_like_sim(tmp_path / "rendered", tmp_path / "sim")
 
 
+def test_a_run_on_a_named_discovery_server_that_hears_nobody_says_where_to_look():
+    server, hint, after = "10.0.0.5:11811", launcher.discovery_hint, launcher.HINT_AFTER
+    assert hint(None, 10 * after, False) is None  # no server named: nothing
+    assert hint(server, after - 1, False) is None  # not yet
+    assert hint(server, 10 * after, True) is None  # a robot heard a neighbour
+    said = hint(server, after, False)
+    assert said is not None and f"is a discovery server running at {server}?" in said
+
+
 @pytest.mark.slow(SWARM)
 def test_run_rejects_bad_options_in_one_line(tmp_path):
     out = camo_run("--procs", "0", "--out", str(tmp_path))

@@ -227,3 +227,20 @@ def test_every_option_of_monitor_with_a_bad_value_is_one_line_and_exit_2(
     options, problems = bad_values_of_a_ros_tool(command, [], monkeypatch, capsys)
     assert len(options) >= 4
     assert problems == []
+
+
+def test_a_robot_past_discovery_is_one_that_reported_a_later_phase():
+    from camo_core.algorithm.params import CamoParams
+    from camo_core.swarm.robot_io import DISCOVERY, SENSING
+    from camo_nodes.monitor_node import MonitorNode
+    from camo_nodes.topics.names import RunTopics
+
+    with ros_context() as context:
+        params = CamoParams(rows=2, cols=2)
+        monitor = MonitorNode(params, RunTopics("monitor_test"), context=context)
+        hosting_all(monitor, 4)
+        monitor._on_status(*status(sender_id=1, phase=DISCOVERY, step=0, round=0))
+        assert not monitor.past_discovery(0)  # heard, but still searching
+        monitor._on_status(*status(sender_id=2, phase=SENSING, step=0, round=0))
+        assert monitor.past_discovery(0)
+        monitor.destroy_node()

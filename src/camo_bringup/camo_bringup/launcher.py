@@ -41,6 +41,22 @@ from camo_nodes.monitor_node import MonitorNode
 from camo_nodes.topics import keyed
 
 TEARDOWN_LIMIT = 60.0  # s; stopping, writing and the result take 25 s at most
+HINT_AFTER = 20.0  # s with no robot past discovery before a run on a named server says so
+
+
+def discovery_hint(server: str | None, waited: float, past_discovery: bool) -> str | None:
+    """What a run on a discovery server the user named (ROS_DISCOVERY_SERVER,
+    --discovery-server) says once none of its robots has heard a neighbour in HINT_AFTER s: a
+    server that does not run leaves every process searching, and the run waiting, without a
+    word of why."""
+    if server is None or past_discovery or waited < HINT_AFTER:
+        return None
+    return (
+        f"no robot has heard a neighbour in {waited:.0f} s: is a discovery server running at "
+        f"{server}? (`./camo discovery-server --port PORT` on that machine; docs/swarm.md)"
+    )
+
+
 EXIT_RECORDING = 3  # the run finished, its recording failed (a full disk): the bag is cut short
 
 
@@ -49,12 +65,21 @@ def run_round(session: Session, index: int, group: ProcessGroup) -> float:
     monitor = session.monitor
     last_print = 0.0
     all_voted = None
+    config = session.config
+    named = config.env.get("ROS_DISCOVERY_SERVER") if config.deferred is None else None
+    started, hinted = time.monotonic(), False
     while not monitor.complete(index):
         # Everything that arrives in 0.1 s, then the (numpy) checks below: they cost more than
         # a status, and a burst of statuses must not wait behind them.
         session.spin_for(0.1)
         if all_voted is None and monitor.all_voted(index):
             all_voted = time.monotonic()
+        if named and not hinted:
+            waited = time.monotonic() - started
+            hint = discovery_hint(named, waited, monitor.past_discovery(index))
+            if hint:
+                print(f"camo run: {hint}", file=sys.stderr)
+                hinted = True
         if time.monotonic() - last_print > 1.0:
             print(f"camo run: {monitor.progress_line(index)}", file=sys.stderr)
             last_print = time.monotonic()

@@ -44,7 +44,7 @@ from camo_core.results.record import Backgrounds, RoundRecord, Rounds
 from camo_core.results.snapshots import Snapshots
 from camo_core.results.summary import write_summary
 from camo_core.shutdown import StopFlag
-from camo_core.swarm.robot_io import CONSENSUS, PHASE_NAMES
+from camo_core.swarm.robot_io import CONSENSUS, DISCOVERY, PHASE_NAMES
 from camo_core.swarm.run_setup import RunSetup
 from camo_core.swarm.status_rows import RowsError, StatusRows
 from camo_core.swarm.validation import rows_problems
@@ -294,6 +294,11 @@ class MonitorNode(Node):
 
     def dead(self, round_index: int = 0) -> np.ndarray:
         return self.rounds[round_index].dead(self.lost)
+
+    def past_discovery(self, round_index: int = 0) -> bool:
+        """Some robot has heard its neighbours (it reported a later phase, or finished)."""
+        record = self.rounds[round_index]
+        return bool((record.phase > DISCOVERY).any() or record.finished.any())
 
     def all_voted(self, round_index: int = 0) -> bool:
         """Every live robot has voted and entered consensus."""
