@@ -36,7 +36,8 @@ def test_the_packed_bare_exchange_crosses_processes_in_arrays():
 
     # It finishes only once each process has had every remote vote its robots need, unpacked
     # from the arrays.
-    packed = bare_exchange(4, 20, 2, domain(), packed=True)
+    # A minute's budget: a process that hangs fails the test in two, its stacks on stderr.
+    packed = bare_exchange(4, 20, 2, domain(), packed=True, budget=60)
     assert 0 < packed["setup_s"] < packed["wall_s"] and 0 < packed["steps_per_s"] < 100_000
 
 

@@ -60,12 +60,14 @@ BARE_RUN = "bench_bare"
 PACKED_RUN = "bench_packed"
 # s a bare process waits for its peers, set-up to last step, before it gives up; its parent
 # waits that and as long again for set-up and exit, then has its stacks written and kills it.
-BARE_BUDGET = 300.0
+BARE_BUDGET = 300
 
 
-def bare_worker(side: int, steps: int, block: int, procs: int, packed: int = 0) -> dict:
+def bare_worker(
+    side: int, steps: int, block: int, procs: int, packed: int = 0, budget: int = BARE_BUDGET
+) -> dict:
     """One process of the bare exchange (block `block` of `procs`; `packed`: one Votes per
-    topic and step); its timings."""
+    topic and step; `budget`: seconds it waits for its peers); its timings."""
     started = time.monotonic()
     params = CamoParams(rows=side, cols=side, consensus_steps=steps)
     blocks = split_cells(list(range(side * side)), procs)
@@ -106,7 +108,7 @@ def bare_worker(side: int, steps: int, block: int, procs: int, packed: int = 0) 
         node.create_subscription(wire, topic, on_votes if packed else on_vote, listener_qos())
     executor = EventsExecutor()
     executor.add_node(node)
-    deadline = time.monotonic() + BARE_BUDGET
+    deadline = time.monotonic() + budget
     while time.monotonic() < deadline and (
         writers["edge"].get_subscription_count() < len(peers)
         or sum(s.get_publisher_count() for s in node.subscriptions) < len(peers)
@@ -188,8 +190,11 @@ def _end_all(workers: list[subprocess.Popen]) -> None:
         worker.communicate()
 
 
-def bare_exchange(side: int, steps: int, procs: int, domain: int, packed: bool = False) -> dict:
-    """The bare exchange in `procs` processes: set-up, steps per second, launch to exit."""
+def bare_exchange(
+    side: int, steps: int, procs: int, domain: int, packed: bool = False, budget: int = BARE_BUDGET
+) -> dict:
+    """The bare exchange in `procs` processes: set-up, steps per second, launch to exit
+    (`budget`: the seconds each waits for its peers; twice that, and they are ended)."""
     env = {
         **os.environ,
         "ROS_DOMAIN_ID": str(domain),
@@ -199,7 +204,7 @@ def bare_exchange(side: int, steps: int, procs: int, domain: int, packed: bool =
     command = [sys.executable, "-m", "camo_bringup.bench", "--bare-worker", str(side), str(steps)]
     workers = [
         subprocess.Popen(
-            [*command, str(k), str(procs), str(int(packed))],
+            [*command, str(k), str(procs), str(int(packed)), str(budget)],
             env=env,
             stdout=subprocess.PIPE,
             text=True,
@@ -207,7 +212,7 @@ def bare_exchange(side: int, steps: int, procs: int, domain: int, packed: bool =
         for k in range(min(procs, side * side))
     ]
     what = f"the bare exchange at {side}x{side}"
-    reports = worker_reports(workers, what, 2 * BARE_BUDGET)
+    reports = worker_reports(workers, what, 2 * budget)
     exited = time.monotonic()
     if not all(r["complete"] for r in reports):
         raise RuntimeError(f"{what} did not finish")
@@ -597,7 +602,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--out", type=Path, default=Path("results") / time.strftime("bench-ros-%Y%m%d-%H%M%S")
     )
-    parser.add_argument("--bare-worker", nargs=5, type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--bare-worker", nargs=6, type=int, help=argparse.SUPPRESS)
     try:
         args = parser.parse_args(argv)
         if not ((args.steps is None or 20 <= args.steps <= 100_000) and 1 <= args.repeat <= 100):
