@@ -140,3 +140,25 @@ def test_loading_the_kernels_leaves_scipy_unloaded_and_whole():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip() == "1.0"
+
+
+def test_the_probes_module_is_refused_to_the_thread_loading_numba_only(tmp_path, monkeypatch):
+    import importlib
+    import threading
+
+    from camo_core.algorithm.jit import _NotForThisThread
+
+    (tmp_path / "camo_probe_stand_in.py").write_text("VALUE = 7\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    refusal = _NotForThisThread("camo_probe_stand_in")
+    monkeypatch.setattr(sys, "meta_path", [refusal, *sys.meta_path])
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module("camo_probe_stand_in")  # this thread: refused
+    found = []
+    other = threading.Thread(
+        target=lambda: found.append(importlib.import_module("camo_probe_stand_in"))
+    )
+    other.start()
+    other.join()
+    assert [module.VALUE for module in found] == [7]  # another thread: imported as usual
+    sys.modules.pop("camo_probe_stand_in", None)  # imported from a folder of this test only
