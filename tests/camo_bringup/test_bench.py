@@ -32,7 +32,7 @@ def test_a_comparison_measures_the_bare_exchange_and_the_swarm_with_and_without_
 
 @pytest.mark.slow(COMPUTE)
 def test_the_packed_bare_exchange_crosses_processes_in_arrays():
-    from camo_bringup.bench import bare_exchange
+    from camo_bringup.bare_exchange import bare_exchange
 
     # It finishes only once each process has had every remote vote its robots need, unpacked
     # from the arrays.
@@ -43,7 +43,7 @@ def test_the_packed_bare_exchange_crosses_processes_in_arrays():
 
 @pytest.mark.slow(PROCESS)
 def test_a_bare_process_that_hangs_is_one_line_with_its_stacks_and_none_is_left(capfd):
-    from camo_bringup.bench import worker_reports
+    from camo_bringup.bare_exchange import worker_reports
 
     # One process reports and ends; one hangs, as a process stuck in DDS would.
     code = (
@@ -71,7 +71,7 @@ def test_a_bare_process_that_hangs_is_one_line_with_its_stacks_and_none_is_left(
 
 
 def test_a_bare_process_that_fails_ends_the_others_at_once_in_one_line():
-    from camo_bringup.bench import worker_reports
+    from camo_bringup.bare_exchange import worker_reports
 
     # Process 0 would wait for its failed peer for its whole budget: it is not waited for.
     workers = [

@@ -41,6 +41,7 @@ from camo_nodes.monitor_node import MonitorNode
 from camo_nodes.topics import keyed
 
 TEARDOWN_LIMIT = 60.0  # s; stopping, writing and the result take 25 s at most
+EXIT_RECORDING = 3  # the run finished, its recording failed (a full disk): the bag is cut short
 HINT_AFTER = 20.0  # s with no robot past discovery before a run on a named server says so
 
 
@@ -55,9 +56,6 @@ def discovery_hint(server: str | None, waited: float, past_discovery: bool) -> s
         f"no robot has heard a neighbour in {waited:.0f} s: is a discovery server running at "
         f"{server}? (`./camo discovery-server --port PORT` on that machine; docs/swarm.md)"
     )
-
-
-EXIT_RECORDING = 3  # the run finished, its recording failed (a full disk): the bag is cut short
 
 
 def run_round(session: Session, index: int, group: ProcessGroup) -> float:
