@@ -213,7 +213,7 @@ LOOKUP_BITS = 22  # the largest table _index_of builds: 4M entries, 16 MB
 def _index_of(distinct: np.ndarray, key: np.ndarray) -> np.ndarray:
     """Where each key (a hash, uniformly spread) is in `distinct` (sorted, holding every key).
     A binary search of each of a million keys takes 50 ms; a table indexed by some of a key's
-    bits takes 10, where the distinct keys differ in those bits: tried on three slices of the
+    bits takes 2, where the distinct keys differ in those bits: tried on three slices of the
     bits, for up to about two thousand distinct keys (nearly always one of them fits)."""
     bits = min(LOOKUP_BITS, 2 * len(distinct).bit_length() + 2)
     if len(distinct) ** 2 < 1 << bits:  # a collision in a slice is unlikely

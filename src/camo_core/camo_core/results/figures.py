@@ -170,9 +170,8 @@ def _chosen_panel(ax, result: RunResult) -> None:
     codes = np.where(none, CODES, chosen)
     if result.positions is not None:
         draw_discs(ax, result.positions, colours[codes] * 255)
-    else:  # the cells a panel shows picked first: a large grid's colours are not all worked out
-        shown, extent = _shown(codes.astype(np.uint8), nearest=True)
-        ax.imshow(np.clip(colours[shown] * 255 / 255.0, 0, 1), interpolation="nearest", **extent)
+    else:
+        _grid_panel(ax, codes, palette=colours * 255)
     counts = result.selection_counts
     named = [(k, n) for k, n in zip(result.codes, counts, strict=True) if counts[n]]
     handles = [matplotlib.patches.Patch(color=colours[k], label=label_of(n)) for k, n in named]
@@ -186,9 +185,15 @@ def label_of(name: str) -> str:
     return f"stripes at {angle}°" if angle else kind
 
 
-def _grid_panel(ax, values: np.ndarray) -> None:
-    """A grid of greys (rows x cols) or colours (rows x cols x 3, sRGB), 0..255, a cell each."""
-    shown, extent = _shown(np.asarray(values, dtype=float), nearest=True)
+def _grid_panel(ax, values: np.ndarray, palette: np.ndarray | None = None) -> None:
+    """A grid of greys (rows x cols) or colours (rows x cols x 3, sRGB), 0..255, a cell each.
+    With a `palette` (n x 3, sRGB 0..255) values are indices into it, looked up once the cells
+    a panel shows are picked: a large grid's colours are not all worked out."""
+    if palette is None:
+        shown, extent = _shown(np.asarray(values, dtype=float), nearest=True)
+    else:
+        picked, extent = _shown(np.asarray(values, dtype=np.uint16), nearest=True)
+        shown = np.asarray(palette, dtype=float)[picked]
     if shown.ndim == 3:
         ax.imshow(np.clip(shown / 255.0, 0, 1), interpolation="nearest", **extent)
     else:
