@@ -65,3 +65,23 @@ def test_a_large_swarm_is_shown_by_every_kth_robot():
     (_, rgb), *_ = snapshots.shown()
     assert snapshots.stride == 3 and rgb.shape == (200, 100, 3)
     assert np.array_equal(rgb[..., 0], np.where(state[::3, ::3] == 1, 0.0, 1.0))
+
+
+def test_a_frame_given_as_bytes_draws_the_pixels_its_floats_would():
+    # run.gif's frames are handed to matplotlib as bytes (quicker to draw): the picture must
+    # be the one matplotlib makes of the floats, a panel smaller and larger than the frame.
+    import matplotlib.pyplot as plt
+
+    from camo_core.results.animation import _rgba_bytes
+
+    rgb = np.random.default_rng(5).random((256, 256, 3))
+    rgb[:8] = [0.0, 1.0, 0.5]  # the ends of the range and a half
+    for inches in (3.2, 8.0):
+        drawn = []
+        for frame in (rgb, _rgba_bytes(rgb)):
+            fig, ax = plt.subplots(figsize=(inches, inches), dpi=80)
+            ax.imshow(frame, interpolation="nearest")
+            fig.canvas.draw()
+            drawn.append(np.asarray(fig.canvas.buffer_rgba()).copy())
+            plt.close(fig)
+        assert np.array_equal(drawn[0], drawn[1])

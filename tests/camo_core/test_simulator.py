@@ -124,17 +124,20 @@ def test_a_small_grid_simulates_on_one_numba_thread_and_a_large_one_on_all():
 
 
 @pytest.mark.slow(PROCESS)
-def test_loading_the_kernels_leaves_scipy_unloaded_and_whole():
-    # numba's probe for SciPy's BLAS (an import of scipy.linalg) is skipped: the kernels call
-    # none. SciPy imports whole afterwards, and a simulation runs.
+def test_loading_the_kernels_leaves_scipy_coverage_and_cffi_unloaded_and_whole():
+    # numba's probe for SciPy's BLAS (an import of scipy.linalg) is skipped, as are its hooks
+    # for coverage and cffi: the kernels use none. Each imports whole afterwards, and a
+    # simulation runs.
     code = (
         "import sys\n"
         "from camo_core.algorithm.simulator import simulate\n"
         "from camo_core.algorithm.params import CamoParams\n"
         "import numpy as np\n"
-        "assert 'scipy.linalg' not in sys.modules, 'scipy.linalg was imported'\n"
+        "for name in ('scipy.linalg', 'coverage', 'cffi'):\n"
+        "    assert name not in sys.modules, name + ' was imported'\n"
         "simulate(CamoParams(rows=4, cols=4), np.full((4, 4), 90.0))\n"
-        "import scipy.linalg.cython_blas, scipy.linalg\n"
+        "import scipy.linalg.cython_blas, scipy.linalg, coverage, cffi\n"
+        "assert cffi.FFI() and coverage.Coverage\n"
         "print(scipy.linalg.det(np.eye(2)))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

@@ -59,6 +59,7 @@ def write_animation(
     params = snapshots.params
     positions = snapshots.modes.layout.positions
     if positions is None:
+        frames = [(text, _rgba_bytes(rgb)) for text, rgb in frames]
         if coloured:
             left.imshow(grey / 255.0, interpolation="nearest")
         else:
@@ -97,6 +98,7 @@ def write_animation(
     canvas = cast("FigureCanvasAgg", fig.canvas)  # matplotlib.use("Agg") above
     canvas.draw()
     still = canvas.copy_from_bbox(fig.bbox)
+    size = canvas.get_width_height()
     images = []
     for text, rgb in frames:
         canvas.restore_region(still)
@@ -107,15 +109,25 @@ def write_animation(
         caption.set_text(text)
         for artist in (shown, *on_top):
             fig.draw_artist(artist)
-        pixels = np.asarray(canvas.buffer_rgba())[..., :3]
+        # RGBA to RGB by PIL, from the canvas's own buffer: no copy of a strided array.
+        frame = Image.frombuffer("RGBA", size, canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
         images.append(
-            Image.fromarray(pixels).quantize(colors=255, method=Image.Quantize.FASTOCTREE)
+            frame.convert("RGB").quantize(colors=255, method=Image.Quantize.FASTOCTREE)
         )
     plt.close(fig)
     path = Path(path)
     duration = round(FRAME_S * 1000)
     images[0].save(path, save_all=True, append_images=images[1:], duration=duration, loop=0)
     return path
+
+
+def _rgba_bytes(rgb: np.ndarray) -> np.ndarray:
+    """A frame's RGB (0..1) as the bytes matplotlib would make of it (x 255, truncated), with
+    alpha: an image of bytes is drawn without matplotlib's passes over floats, frame by frame."""
+    rgba = np.empty((*rgb.shape[:-1], 4), np.uint8)
+    np.multiply(rgb, 255, out=rgba[..., :3], casting="unsafe")
+    rgba[..., 3] = 255
+    return rgba
 
 
 MAX_JOINED = 20  # rounds a joined GIF shows at most: the latest
