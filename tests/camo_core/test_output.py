@@ -17,6 +17,19 @@ def test_a_forked_writer_is_waited_for_and_its_file_is_whole(tmp_path):
     assert path.read_text() == "x" * 100_000
 
 
+def test_forked_works_draw_without_collecting_garbage_and_leave_the_parents_collector_on(
+    tmp_path,
+):
+    import gc
+
+    def says(name: str):
+        return lambda: (tmp_path / name).write_text(str(gc.isenabled()))
+
+    Parallel(says("first"), says("second")).wait("both")
+    assert [(tmp_path / n).read_text() for n in ("first", "second")] == ["False", "False"]
+    assert gc.isenabled()
+
+
 def test_an_error_in_the_forked_writer_is_one_line_in_its_parent(capfd):
     def fails() -> None:
         raise ValueError("no disk")
