@@ -222,6 +222,18 @@ def write_durations() -> None:
 
 
 @pytest.fixture(autouse=True)
+def leaves_the_environment_as_it_found_it():
+    """A test that changes os.environ (in this process: a command's main run here, say) and
+    leaves it so changes the tests after it in this worker: what their processes inherit, and
+    whether tests/warm_cli.py may run their commands. Its teardown fails, naming the names."""
+    before = warm_cli.environment()
+    yield
+    after = warm_cli.environment()
+    changed = sorted(k for k in before.keys() | after.keys() if before.get(k) != after.get(k))
+    assert not changed, f"the test left os.environ changed: {', '.join(changed)}"
+
+
+@pytest.fixture(autouse=True)
 def whole_outputs(monkeypatch):
     """Every process a test runs keeps its whole output for the report of a failure
     (support.run_keeping_output; processes started with Popen: support.finished)."""

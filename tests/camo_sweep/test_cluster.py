@@ -9,7 +9,7 @@ import sys
 import time
 
 import pytest
-from support import CLUSTER, ROOT, SWARM, finished, sweep
+from support import CLUSTER, ROOT, SWARM, environment_kept, finished, sweep
 from support import sweep_table as table
 
 from camo_sweep.table import parts
@@ -144,7 +144,8 @@ def _square(x: int) -> int:
 def test_a_local_cluster_listens_on_loopback_and_keeps_few_tasks_in_flight():
     from camo_sweep.engines import local_engine
 
-    engine = local_engine(1)
+    with environment_kept():  # one thread a worker: what its processes inherit, not ours
+        engine = local_engine(1)
     try:
         assert engine.client.scheduler.address.startswith("tcp://127.0.0.1:")
         assert engine.cluster.dashboard_link.startswith("http://127.0.0.1:")
