@@ -70,17 +70,22 @@ def test_a_large_swarm_is_shown_by_every_kth_robot():
 def test_a_frame_given_as_bytes_draws_the_pixels_its_floats_would():
     # run.gif's frames are handed to matplotlib as bytes (quicker to draw): the picture must
     # be the one matplotlib makes of the floats, a panel smaller and larger than the frame.
+    import warnings
+
     import matplotlib.pyplot as plt
 
     from camo_core.results.animation import _rgba_bytes
 
     rgb = np.random.default_rng(5).random((256, 256, 3))
     rgb[:8] = [0.0, 1.0, 0.5]  # the ends of the range and a half
+    rgb[8:12] = [-0.25, 1.5, 1.0 + 1e-9]  # beyond them: matplotlib clips floats
     for inches in (3.2, 8.0):
         drawn = []
         for frame in (rgb, _rgba_bytes(rgb)):
             fig, ax = plt.subplots(figsize=(inches, inches), dpi=80)
-            ax.imshow(frame, interpolation="nearest")
+            with warnings.catch_warnings():  # what matplotlib says of the clipped floats
+                warnings.simplefilter("ignore", UserWarning)
+                ax.imshow(frame, interpolation="nearest")
             fig.canvas.draw()
             drawn.append(np.asarray(fig.canvas.buffer_rgba()).copy())
             plt.close(fig)

@@ -122,10 +122,11 @@ def write_animation(
 
 
 def _rgba_bytes(rgb: np.ndarray) -> np.ndarray:
-    """A frame's RGB (0..1) as the bytes matplotlib would make of it (x 255, truncated), with
-    alpha: an image of bytes is drawn without matplotlib's passes over floats, frame by frame."""
+    """A frame's RGB (0..1) as the bytes matplotlib would make of it (clipped to 0..1, x 255,
+    truncated), with alpha: an image of bytes is drawn without matplotlib's passes over
+    floats, frame by frame."""
     rgba = np.empty((*rgb.shape[:-1], 4), np.uint8)
-    np.multiply(rgb, 255, out=rgba[..., :3], casting="unsafe")
+    np.multiply(np.clip(rgb, 0.0, 1.0), 255, out=rgba[..., :3], casting="unsafe")
     rgba[..., 3] = 255
     return rgba
 
