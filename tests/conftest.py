@@ -225,7 +225,8 @@ def write_durations() -> None:
 def leaves_the_environment_as_it_found_it():
     """A test that changes os.environ (in this process: a command's main run here, say) and
     leaves it so changes the tests after it in this worker: what their processes inherit, and
-    whether tests/warm_cli.py may run their commands. Its teardown fails, naming the names."""
+    whether tests/warm_cli.py may run their commands (`mock.patch.dict(os.environ)` around code
+    that sets it restores it). Its teardown fails, naming the names."""
     before = warm_cli.environment()
     yield
     after = warm_cli.environment()

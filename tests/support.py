@@ -156,20 +156,6 @@ def domain() -> int:
 
 
 @contextmanager
-def environment_kept():
-    """os.environ as it was, after what runs inside: a command's code run in this process that
-    sets its own (ROS's network settings, Dask workers' threads). tests/conftest.py fails a
-    test that leaves it changed."""
-    saved = dict(os.environ)
-    try:
-        yield
-    finally:
-        for name in set(os.environ) - set(saved):
-            del os.environ[name]
-        os.environ.update(saved)
-
-
-@contextmanager
 def ros_context(domain_id: int | None = None):
     """An rclpy context of the caller's own (in a domain of its own unless given), shut down on
     leaving."""

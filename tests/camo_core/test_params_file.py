@@ -4,13 +4,15 @@ and anything at all fed to the reader (and then to rcl) ends in a one-line error
 from __future__ import annotations
 
 import json
+import os
 import re
+from unittest import mock
 
 import pytest
 import yaml
 from hypothesis import event, given, settings
 from hypothesis import strategies as st
-from support import PROCESS, SWARM, environment_kept
+from support import PROCESS, SWARM
 
 from camo_core.cli.params_file import ParamsFileError, check_params_file, check_ros_args
 from camo_core.exceptions import UsageError
@@ -181,7 +183,7 @@ def test_anything_in_a_params_file_ends_in_one_line_or_a_start(tmp_path_factory,
         event("refused by the reader")
         return
     try:
-        with environment_kept():  # start_ros sets ROS's network settings for this process
+        with mock.patch.dict(os.environ):  # start_ros sets ROS's network settings here
             start_ros("robot_node", ["robot_node", "--ros-args", "--params-file", str(path)])
     except SystemExit as exc:
         event("refused by rcl")

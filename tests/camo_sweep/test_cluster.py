@@ -7,9 +7,10 @@ import socket
 import subprocess
 import sys
 import time
+from unittest import mock
 
 import pytest
-from support import CLUSTER, ROOT, SWARM, environment_kept, finished, sweep
+from support import CLUSTER, ROOT, SWARM, finished, sweep
 from support import sweep_table as table
 
 from camo_sweep.table import parts
@@ -144,7 +145,7 @@ def _square(x: int) -> int:
 def test_a_local_cluster_listens_on_loopback_and_keeps_few_tasks_in_flight():
     from camo_sweep.engines import local_engine
 
-    with environment_kept():  # one thread a worker: what its processes inherit, not ours
+    with mock.patch.dict(os.environ):  # one thread a worker: its processes', not ours
         engine = local_engine(1)
     try:
         assert engine.client.scheduler.address.startswith("tcp://127.0.0.1:")
