@@ -100,3 +100,25 @@ def test_the_suite_caches_what_python_compiles_where_the_machine_says_not_to(tmp
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
     written = {p.name.split(".")[0] for p in cache.rglob("*.pyc")}
     assert {"test_rng", "rng"} <= written, sorted(written)[:20]
+
+
+@pytest.mark.parametrize("given", [None, "2"])
+def test_camos_processes_load_blas_on_one_thread_unless_told_otherwise(given):
+    """A process ./camo starts loads NumPy's and SciPy's OpenBLAS without its pool of threads
+    (one per other core, each spinning a tenth of a CPU-second as it loads: every process paid
+    it); a number the user gives is kept."""
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    code = "import os, numpy, scipy.linalg; print(len(os.listdir('/proc/self/task')))"
+    done = subprocess.run(
+        [str(ROOT / "camo"), "python", "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    # A pool of n threads is n - 1 besides the process's own, for each of the two libraries.
+    wanted = 1 if given is None else 1 + 2 * (min(int(given), os.cpu_count() or 1) - 1)
+    assert int(done.stdout) == wanted
