@@ -81,3 +81,18 @@ def test_a_run_whose_options_would_lose_or_ignore_something_is_refused_first(
     with pytest.raises(UsageError, match=said.replace("{tmp}", str(tmp_path))):
         config_from(build_parser().parse_args(["--rows", "3", "--cols", "3", *argv]), environ)
     assert not (tmp_path / "x").exists() and (tmp_path / "figure.png").exists()
+
+
+@pytest.mark.parametrize("given", [None, "4"])
+def test_the_swarms_processes_load_blas_on_one_thread_however_the_launcher_started(
+    tmp_path, given
+):
+    """Started outside ./camo (`ros2 run`), the launcher still starts its robot processes with
+    OpenBLAS on one thread (its pool spins a tenth of a CPU-second in every process as it loads);
+    a number the user gives is theirs."""
+    from camo_bringup.run_config import config_from
+
+    environ = {"OPENBLAS_NUM_THREADS": given} if given else {}
+    argv = ["--rows", "3", "--cols", "3", "--no-key", "--out", str(tmp_path / "out")]
+    env = config_from(build_parser().parse_args(argv), environ).env
+    assert env["OPENBLAS_NUM_THREADS"] == (given or "1")

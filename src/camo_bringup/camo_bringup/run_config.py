@@ -332,8 +332,7 @@ def config_from(args: argparse.Namespace, environ: dict[str, str] | None = None)
     for then in args.then:
         images.append(background(then) if then in BACKGROUNDS else load_image(then))
         sense_image(images[-1], params.rows, params.cols, params.profile)
-    env = network_env(args, inherited)
-    use_camo_dds_settings(env)
+    env = processes_env(args, inherited)
     deferred = deferred_discovery(env, params.count, bool(remote))
     topics = RunTopics(check_run_id(args.run_id) if args.run_id is not None else new_run_id())
     if args.no_projector:
@@ -415,6 +414,16 @@ def default_procs(robots: int) -> int:
 
 # From this many robots on, a run on this machine defers discovery (docs/swarm.md, "Set-up").
 DEFER_FROM = 4097
+
+
+def processes_env(args: argparse.Namespace, inherited: dict[str, str]) -> dict[str, str]:
+    """The environment of the run's processes: the network's (--domain-id, --network, ...),
+    camo's Fast DDS settings, and OpenBLAS without its pool of spinning threads (./camo's
+    `activate` says why) however this launcher was started (`ros2 run`, say)."""
+    env = network_env(args, inherited)
+    use_camo_dds_settings(env)
+    env.setdefault("OPENBLAS_NUM_THREADS", "1")
+    return env
 
 
 def deferred_discovery(env: dict[str, str], robots: int, remote: bool) -> str | None:
